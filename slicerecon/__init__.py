@@ -20,7 +20,7 @@ from .errors import (
     OptionError,
     SlicereconError,
 )
-from .sections import AXIS_NAMES, Contour, CrossSections, Projection, Projections, Volume
+from .sections import AXIS_NAMES, Box, Contour, CrossSections, Projection, Projections, Volume
 
 __version__ = "0.1.0"
 
@@ -28,6 +28,7 @@ logging.getLogger(__name__).addHandler(logging.NullHandler())
 
 __all__ = [
     "AXIS_NAMES",
+    "Box",
     "Contour",
     "CrossSections",
     "DependencyError",

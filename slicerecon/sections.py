@@ -33,6 +33,7 @@ __all__ = [
     "axis_index",
     "in_plane_axes",
     "Volume",
+    "Box",
     "Contour",
     "CrossSections",
     "Projection",
@@ -266,6 +267,79 @@ class Volume:
             f"Volume(shape={self.shape}, spacing=({sp}) mm, "
             f"foreground={int(np.count_nonzero(self.mask))} voxels)"
         )
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned cuboid of voxels on a grid: ``mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]``.
+
+    Parameters
+    ----------
+    lo : tuple of int
+        First voxel index along x, y, z (inclusive).
+    hi : tuple of int
+        One past the last voxel index along x, y, z (exclusive).
+
+    Notes
+    -----
+    Voxel centres sit at integer indices, so in continuous index coordinates
+    the box spans ``[lo - 0.5, hi - 0.5]`` along each axis.
+    """
+
+    lo: tuple[int, int, int]
+    hi: tuple[int, int, int]
+
+    def __post_init__(self) -> None:
+        lo = tuple(int(v) for v in self.lo)
+        hi = tuple(int(v) for v in self.hi)
+        if len(lo) != 3 or len(hi) != 3:
+            raise GeometryError(f"a box needs 3 lower and 3 upper bounds (got {lo}, {hi})")
+        if any(h <= low for low, h in zip(lo, hi, strict=True)):
+            raise GeometryError(f"box upper bounds must exceed lower bounds (got {lo}, {hi})")
+        object.__setattr__(self, "lo", lo)
+        object.__setattr__(self, "hi", hi)
+
+    @classmethod
+    def of_mask(cls, mask: ArrayLike) -> Box:
+        """The tightest box around the foreground of a 3-D mask."""
+        lo, hi = Volume(np.asarray(mask)).bounding_box_vox()
+        return cls(tuple(lo), tuple(hi))  # type: ignore[arg-type]
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """Box size in voxels along x, y, z."""
+        a, b, c = (h - low for low, h in zip(self.lo, self.hi, strict=True))
+        return a, b, c
+
+    @property
+    def n_voxels(self) -> int:
+        """Number of voxels inside the box."""
+        return int(np.prod(self.shape))
+
+    @property
+    def slices(self) -> tuple[slice, slice, slice]:
+        """Index slices selecting the box from a grid-shaped array."""
+        a, b, c = (slice(low, h) for low, h in zip(self.lo, self.hi, strict=True))
+        return a, b, c
+
+    def intersect(self, other: Box) -> Box | None:
+        """The common box of two boxes, or None when they do not overlap."""
+        lo = tuple(max(a, b) for a, b in zip(self.lo, other.lo, strict=True))
+        hi = tuple(min(a, b) for a, b in zip(self.hi, other.hi, strict=True))
+        if any(h <= low for low, h in zip(lo, hi, strict=True)):
+            return None
+        return Box(lo, hi)  # type: ignore[arg-type]
+
+    def contains_index(self, ijk: ArrayLike) -> NDArray[np.bool_]:
+        """Whether (possibly fractional) indices, ndarray of shape (..., 3), lie in the box."""
+        pts = np.asarray(ijk, dtype=np.float64)
+        lo = np.asarray(self.lo) - 0.5
+        hi = np.asarray(self.hi) - 0.5
+        return np.all((pts >= lo) & (pts <= hi), axis=-1)
+
+    def to_dict(self) -> dict[str, list[int]]:
+        """JSON-ready form ``{"lo": [...], "hi": [...]}`` (voxel indices, hi exclusive)."""
+        return {"lo": list(self.lo), "hi": list(self.hi)}
 
 
 class Contour(NamedTuple):
@@ -545,7 +619,7 @@ class Projections:
     def __post_init__(self) -> None:
         views = tuple(self.views)
         if len(views) != 3 or [v.axis for v in views] != [0, 1, 2]:
-            raise GeometryError("Projections needs exactly one view along each of x, y, z, in order")
+            raise GeometryError("Projections needs one view along each of x, y, z, in order")
         object.__setattr__(self, "views", views)
 
     def __getitem__(self, axis: int | str) -> Projection:

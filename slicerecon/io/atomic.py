@@ -1,0 +1,45 @@
+"""Atomic file output: write to a temporary file beside the target, then rename.
+
+An interrupted run therefore never leaves a half-written mesh, mask or table
+under the final name, and an existing file is only replaced by a complete one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+__all__ = ["atomic_path"]
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path to write to; rename it onto ``path`` on success.
+
+    The temporary file lives in the target's directory (so the rename is atomic
+    on POSIX) and keeps the target's suffixes (so writers that pick a format by
+    extension, such as nibabel or trimesh, still do). On an exception the
+    temporary file is removed and ``path`` is left untouched.
+
+    Examples
+    --------
+    >>> with atomic_path(out / "mesh.stl") as tmp:  # doctest: +SKIP
+    ...     mesh.export(tmp)
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    suffix = "".join(target.suffixes)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".tmp{suffix}",
+                                    dir=target.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise
