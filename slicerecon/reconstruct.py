@@ -1,0 +1,394 @@
+"""The reconstruction pipeline: input → sections + projections → plan → mesh → metrics.
+
+This module composes the library; it holds no geometry of its own. The command
+line (``slicerecon run``) and the batch pipelines fill a
+:class:`ReconstructConfig` and call :func:`run_case`; library users call
+:func:`reconstruct` with explicit arguments.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from .errors import OptionError
+from .sections import CrossSections, Projections, Volume, axis_index
+
+__all__ = [
+    "ReconstructConfig",
+    "Reconstruction",
+    "PLANNERS",
+    "METHODS",
+    "PROJECTION_SOURCES",
+    "MESH_FORMATS",
+    "prepare_inputs",
+    "reconstruct",
+    "run_case",
+]
+
+logger = logging.getLogger(__name__)
+
+PLANNERS = ("heuristic", "none")
+METHODS = ("loft", "sdf")
+PROJECTION_SOURCES = ("auto", "gt", "sections")
+MESH_FORMATS = ("stl", "ply", "obj")
+DEFAULT_SLICES = 16
+
+
+@dataclass(frozen=True)
+class ReconstructConfig:
+    """Options of one reconstruction run (what ``slicerecon run`` fills in)."""
+
+    slices: int | None = None
+    """Keep N evenly spaced planes of a dense input (default 16 when neither
+    ``slices`` nor ``every`` is given)."""
+    every: int | None = None
+    """Keep every K-th plane of a dense input instead of ``slices``."""
+    axis: str = "z"
+    """Grid axis the section planes are perpendicular to (x, y or z)."""
+    planner: str = "heuristic"
+    """How the shape is partitioned into cuboid parts: ``heuristic`` (the
+    paper's expert) or ``none`` (one part: the no-projection baseline)."""
+    method: str = "loft"
+    """How each part is reconstructed: ``loft`` (contour lofting) or ``sdf``
+    (signed-distance interpolation + marching cubes)."""
+    projections: str = "auto"
+    """Where the orthographic projections come from: ``gt`` (the dense input,
+    the paper's prior), ``sections`` (derived from the sections alone) or
+    ``auto`` (``gt`` for dense inputs, ``sections`` for sparse ones)."""
+    smooth: bool = False
+    """Taubin-smooth the merged mesh."""
+    mesh_format: str = "stl"
+    """Output mesh format: stl, ply or obj."""
+    label: int | None = None
+    """Label value / segment number to keep (default: all non-zero)."""
+    roi: str | None = None
+    """RTSTRUCT ROI name or number."""
+    allow_irregular: bool = False
+    """Accept DICOM series with uneven slice spacing."""
+    max_parts: int = 8
+    """Upper bound on the number of cuboid parts a planner may make."""
+    n_points: int = 50_000
+    """Surface samples per mesh for the distance metrics."""
+    seed: int = 0
+    """Seed of every random choice (surface sampling)."""
+
+    def __post_init__(self) -> None:
+        if self.slices is not None and self.every is not None:
+            raise OptionError("give --slices or --every, not both")
+        if self.slices is not None and self.slices < 2:
+            raise OptionError(f"--slices must be at least 2 (got {self.slices})")
+        if self.every is not None and self.every < 1:
+            raise OptionError(f"--every must be at least 1 (got {self.every})")
+        axis_index(self.axis)
+        for name, value, choices in (
+            ("planner", self.planner, PLANNERS),
+            ("method", self.method, METHODS),
+            ("projections", self.projections, PROJECTION_SOURCES),
+            ("format", self.mesh_format, MESH_FORMATS),
+        ):
+            if value not in choices:
+                raise OptionError(f"--{name} must be one of {', '.join(choices)} (got {value!r})")
+        if self.max_parts < 1:
+            raise OptionError(f"max_parts must be >= 1 (got {self.max_parts})")
+
+
+@dataclass
+class Reconstruction:
+    """The result of :func:`reconstruct`.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        Watertight surface in world mm.
+    plan : Plan
+        The cuboid parts (and the cuts that made them).
+    sections, projections
+        The inputs the reconstruction used.
+    timings : dict of str to float
+        Seconds spent per stage.
+    """
+
+    mesh: trimesh.Trimesh
+    plan: Any
+    sections: CrossSections
+    projections: Projections
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+@contextmanager
+def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
+
+
+def _sparse_volume_to_sections(volume: Volume, axis: int) -> CrossSections:
+    from .sampling import sample_sections
+
+    planes = volume.occupied_planes(axis)
+    full = sample_sections(volume, every=1, axis=axis)
+    keep = np.flatnonzero(np.isin(full.indices.astype(np.int64), planes))
+    return full.select(keep)
+
+
+def looks_sparse(volume: Volume, axis: int) -> bool:
+    """Guess whether a mask annotates only some planes along ``axis``.
+
+    A mask is taken as sparse when at least three planes hold foreground and
+    more than half of the planes between the first and the last of them are
+    empty (a dense organ mask has no empty planes inside its extent).
+    """
+    planes = volume.occupied_planes(axis)
+    if planes.size < 3:
+        return False
+    span = int(planes[-1] - planes[0] + 1)
+    return (span - planes.size) > 0.5 * span
+
+
+def prepare_inputs(
+    data: Volume | CrossSections,
+    *,
+    slices: int | None = None,
+    every: int | None = None,
+    axis: int | str = "z",
+    projections: str = "auto",
+) -> tuple[CrossSections, Projections, Volume | None]:
+    """Turn a loaded input into cross-sections, projections and (maybe) ground truth.
+
+    A dense volume is cropped to its foreground (plus a margin), sampled at
+    ``slices`` / ``every`` planes and kept as ground truth. A volume that
+    annotates only some planes (see :func:`looks_sparse`) and contour inputs
+    are used as they are, without ground truth.
+
+    Returns
+    -------
+    sections : CrossSections
+    projections : Projections
+    ground_truth : Volume or None
+    """
+    from .sampling import projections_from_sections, projections_from_volume, sample_sections
+
+    if projections not in PROJECTION_SOURCES:
+        raise OptionError(f"projections must be one of {PROJECTION_SOURCES} (got {projections!r})")
+    ax = axis_index(axis)
+    truth: Volume | None = None
+    if isinstance(data, Volume):
+        volume = data.crop(pad=3)
+        if looks_sparse(volume, ax):
+            logger.info("the mask annotates only some planes: using them as sections")
+            sections = _sparse_volume_to_sections(volume, ax)
+        else:
+            if slices is None and every is None:
+                slices = min(DEFAULT_SLICES, volume.occupied_planes(ax).size)
+            sections = sample_sections(volume, n=slices, every=every, axis=ax)
+            truth = volume
+    else:
+        sections = data
+        if slices is not None or every is not None:
+            raise OptionError("--slices/--every apply to dense masks; this input is already sparse")
+    sections.require_foreground()
+    source = projections
+    if source == "auto":
+        source = "gt" if truth is not None else "sections"
+    if source == "gt":
+        if truth is None:
+            raise OptionError(
+                "--projections gt needs a dense mask as input; use --projections sections"
+            )
+        proj = projections_from_volume(truth)
+    else:
+        proj = projections_from_sections(sections)
+    return sections, proj, truth
+
+
+def planning_occupancy(sections: CrossSections, projections: Projections) -> np.ndarray:
+    """The 3-D occupancy a planner sees: the projections' visual hull, exact on the planes.
+
+    Returns
+    -------
+    ndarray of shape ``sections.grid_shape``, bool
+    """
+    from .partition.hull import visual_hull
+
+    hull = visual_hull(projections, sections.grid_shape)
+    if sections.is_on_grid:
+        view = np.moveaxis(hull, sections.axis, 0)
+        view[np.round(sections.indices).astype(np.int64)] = sections.masks
+    return hull
+
+
+def reconstruct(
+    sections: CrossSections,
+    projections: Projections,
+    *,
+    planner: str = "heuristic",
+    method: str = "loft",
+    smooth: bool = False,
+    max_parts: int = 8,
+) -> Reconstruction:
+    """Reconstruct a watertight surface from cross-sections and projections.
+
+    Parameters
+    ----------
+    sections : CrossSections
+        The planar cross-sections.
+    projections : Projections
+        Orthographic silhouettes on the same grid (from the dense mask or
+        derived from the sections).
+    planner : {"heuristic", "none"}
+        Partition planner.
+    method : {"loft", "sdf"}
+        Per-part surface method.
+    smooth : bool
+        Taubin-smooth the merged mesh.
+    max_parts : int
+        Upper bound on the number of parts.
+
+    Returns
+    -------
+    Reconstruction
+    """
+    from .partition.planner import plan_partition
+    from .surface.part import part_voxels, reconstruct_parts
+
+    if planner not in PLANNERS:
+        raise OptionError(f"planner must be one of {', '.join(PLANNERS)} (got {planner!r})")
+    if method not in METHODS:
+        raise OptionError(f"method must be one of {', '.join(METHODS)} (got {method!r})")
+    timings: dict[str, float] = {}
+    with _timed(timings, "plan"):
+        occupancy = planning_occupancy(sections, projections)
+
+        def part_reconstruction(box):  # type: ignore[no-untyped-def]
+            return part_voxels(sections, box)
+
+        plan = plan_partition(
+            occupancy, planner=planner, reconstruct=part_reconstruction, max_parts=max_parts
+        )
+    with _timed(timings, "surface"):
+        boxes = [part.box for part in plan.parts]
+        mesh = reconstruct_parts(
+            sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none"
+        )
+    return Reconstruction(mesh, plan, sections, projections, timings)
+
+
+def _write_json(path: Path, payload: dict[str, Any]) -> None:
+    from .io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(payload, indent=2, sort_keys=False) + "\n")
+
+
+def run_case(
+    input_path: str | os.PathLike[str],
+    outdir: str | os.PathLike[str],
+    config: ReconstructConfig,
+    *,
+    ground_truth: str | os.PathLike[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Reconstruct one case and write its outputs.
+
+    Writes ``mesh.<format>`` (world mm), ``plan.json``, ``metrics.json`` (when
+    ground truth is known: a dense input, or ``ground_truth``) and
+    ``preview.png`` into ``outdir``; every file is written atomically.
+
+    Returns
+    -------
+    dict
+        A summary: output paths, metrics (or None), timings, part count.
+    """
+    from .io import load_input
+    from .io.mesh import write_mesh
+    from .metrics import evaluate
+    from .preview import write_preview
+
+    def say(stage: str) -> None:
+        if progress is not None:
+            progress(stage)
+
+    out = Path(outdir)
+    timings: dict[str, float] = {}
+    say("read")
+    with _timed(timings, "read"):
+        data = load_input(
+            input_path,
+            label=config.label,
+            roi=_roi(config.roi),
+            allow_irregular=config.allow_irregular,
+        )
+    with _timed(timings, "sections"):
+        sections, projections, truth = prepare_inputs(
+            data,
+            slices=config.slices,
+            every=config.every,
+            axis=config.axis,
+            projections=config.projections,
+        )
+    if ground_truth is not None:
+        with _timed(timings, "read"):
+            gt_data = load_input(ground_truth, label=config.label)
+        if not isinstance(gt_data, Volume):
+            raise OptionError("--gt must be a dense mask or a closed mesh, not contours")
+        truth = gt_data
+    say("reconstruct")
+    result = reconstruct(
+        sections,
+        projections,
+        planner=config.planner,
+        method=config.method,
+        smooth=config.smooth,
+        max_parts=config.max_parts,
+    )
+    timings.update(result.timings)
+    metrics = None
+    if truth is not None:
+        say("evaluate")
+        with _timed(timings, "metrics"):
+            metrics = evaluate(result.mesh, truth, n_points=config.n_points, seed=config.seed)
+    say("write")
+    with _timed(timings, "write"):
+        mesh_path = write_mesh(result.mesh, out / f"mesh.{config.mesh_format}")
+        plan = result.plan.to_dict(affine=sections.affine)
+        plan["sections"] = {
+            "axis": "xyz"[sections.axis],
+            "n_planes": sections.n_planes,
+            "plane_indices": sections.indices.tolist(),
+            "positions_mm": sections.positions.tolist(),
+        }
+        plan["projections"] = projections.source
+        plan["config"] = asdict(config)
+        _write_json(out / "plan.json", plan)
+        if metrics is not None:
+            _write_json(out / "metrics.json", metrics.to_dict())
+        write_preview(out / "preview.png", result, truth)
+    summary: dict[str, Any] = {
+        "input": str(input_path),
+        "mesh": str(mesh_path),
+        "parts": len(result.plan.parts),
+        "planes": sections.n_planes,
+        "watertight": bool(result.mesh.is_watertight),
+        "metrics": None if metrics is None else metrics.to_dict(),
+        "timings_s": {k: round(v, 4) for k, v in timings.items()},
+    }
+    return summary
+
+
+def _roi(roi: str | None) -> int | str | None:
+    if roi is None:
+        return None
+    return int(roi) if roi.strip().lstrip("-").isdigit() else roi
