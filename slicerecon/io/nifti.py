@@ -1,0 +1,311 @@
+"""NIfTI label maps: read one label as a :class:`~slicerecon.sections.Volume`, write masks.
+
+Reading keeps ``img.affine`` exactly as nibabel resolves it (the sform when its
+code is non-zero, else the qform, else the pixdim scaling), so voxel index →
+world millimetres is the same as in 3D Slicer, ITK-SNAP or FSLeyes. Writing
+stores the volume's affine in both the sform and the qform with code 1
+(``NIFTI_XFORM_SCANNER_ANAT``), as dcm2niix does; NIfTI-1 keeps the affine in
+float32, so a round trip preserves it to about 1e-7 relative.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import nibabel as nib
+import numpy as np
+from numpy.typing import DTypeLike, NDArray
+
+from ..errors import EmptyMaskError, FormatError, InputError, LabelError, OptionError
+from ..sections import Volume
+from .atomic import atomic_path
+
+__all__ = ["NiftiInfo", "nifti_labels", "read_nifti", "write_nifti"]
+
+logger = logging.getLogger(__name__)
+
+_XFORM_SCANNER_ANAT = 1
+"""NIfTI xform code written to sform and qform: scanner-based anatomical coordinates."""
+
+
+@dataclass(frozen=True, eq=False)
+class NiftiInfo:
+    """What a NIfTI label map holds, read for ``slicerecon info``.
+
+    Attributes
+    ----------
+    path : Path
+        The file.
+    shape : tuple of int
+        Grid shape ``(I, J, K)`` (a singleton 4th dimension is dropped).
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm, as nibabel resolves it.
+    spacing : ndarray of shape (3,)
+        Voxel size along the grid axes, mm.
+    axcodes : tuple of str
+        Anatomical direction each grid axis points to, e.g. ``("R", "A", "S")``.
+    dtype : str
+        On-disk data type after scaling.
+    labels : dict of int to int
+        Each non-zero label value and its number of voxels.
+    """
+
+    path: Path
+    shape: tuple[int, int, int]
+    affine: NDArray[np.float64]
+    spacing: NDArray[np.float64]
+    axcodes: tuple[str, str, str]
+    dtype: str
+    labels: dict[int, int]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (lists and plain numbers)."""
+        return {
+            "path": str(self.path),
+            "shape": list(self.shape),
+            "affine": self.affine.tolist(),
+            "spacing_mm": self.spacing.tolist(),
+            "axcodes": "".join(self.axcodes),
+            "dtype": self.dtype,
+            "labels": {str(k): v for k, v in self.labels.items()},
+        }
+
+
+def _load(path: str | os.PathLike[str]) -> tuple[Path, nib.Nifti1Pair]:
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"NIfTI file not found: {p}")
+    if p.is_dir():
+        raise InputError(f"{p} is a directory, not a NIfTI file (.nii / .nii.gz)")
+    try:
+        img = nib.load(p)
+    except Exception as exc:  # nibabel raises many types for damaged files
+        raise FormatError(
+            f"cannot read {p} as NIfTI ({exc.__class__.__name__}: {_first_line(exc)}); "
+            "the file is corrupt, truncated or not a .nii/.nii.gz image"
+        ) from exc
+    if not isinstance(img, nib.Nifti1Pair):
+        raise FormatError(
+            f"{p} is a {type(img).__name__}, not a NIfTI image; convert it to .nii/.nii.gz"
+        )
+    return p, img
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else "no details"
+
+
+def _grid_shape(p: Path, img: nib.Nifti1Pair) -> tuple[int, int, int]:
+    """The 3-D grid shape of ``img``; 4-D and higher only with singleton extra dims."""
+    shape = tuple(int(n) for n in img.shape)
+    if len(shape) < 3:
+        raise InputError(
+            f"{p} is a {len(shape)}-D image (shape {shape}); a 3-D label map is needed"
+        )
+    extra = shape[3:]
+    if any(n != 1 for n in extra):
+        raise InputError(
+            f"{p} is a {len(shape)}-D image (shape {shape}) holding "
+            f"{int(np.prod(extra))} volumes; extract the one 3-D label map to use "
+            "(e.g. with nibabel.funcs.four_to_three or fslroi) and pass that"
+        )
+    return shape[0], shape[1], shape[2]
+
+
+def _read_labels(p: Path, img: nib.Nifti1Pair) -> NDArray[Any]:
+    """The voxel values of ``img`` as a 3-D array, checked to be an integer label map."""
+    shape = _grid_shape(p, img)
+    try:
+        data = np.asanyarray(img.dataobj)
+    except Exception as exc:  # truncated data, bad gzip stream, impossible header
+        raise FormatError(
+            f"cannot read the voxel data of {p} ({exc.__class__.__name__}: "
+            f"{_first_line(exc)}); the file is corrupt or truncated"
+        ) from exc
+    data = data.reshape(shape)
+    kind = data.dtype.kind
+    if kind == "f":
+        finite = np.isfinite(data)
+        if not finite.all():
+            raise LabelError(
+                f"{p} is not a label map: it holds NaN or infinite values; "
+                "pass an integer label map (segmentation), not an intensity image"
+            )
+        fractional = data != np.round(data)
+        if fractional.any():
+            example = float(data[fractional].flat[0])
+            raise LabelError(
+                f"{p} is not a label map: it holds non-integer values (e.g. {example:g}); "
+                "pass an integer label map, or threshold the image into a mask first"
+            )
+    elif kind not in "biu":
+        raise LabelError(f"{p} is not a label map: its voxels have data type {data.dtype}")
+    return data
+
+
+def _label_counts(data: NDArray[Any]) -> dict[int, int]:
+    """Non-zero label values of an integer-valued array and their voxel counts."""
+    if data.dtype.kind in "bu" and data.dtype.itemsize <= 2:
+        counts = np.bincount(data.ravel().astype(np.int64))
+        values = np.flatnonzero(counts)
+        counts = counts[values]
+    else:
+        values, counts = np.unique(data, return_counts=True)
+    return {int(v): int(c) for v, c in zip(values, counts, strict=True) if v != 0}
+
+
+def read_nifti(path: str | os.PathLike[str], *, label: int | None = None) -> Volume:
+    """Read one label (or every non-zero voxel) of a NIfTI label map.
+
+    Parameters
+    ----------
+    path : path-like
+        A ``.nii`` or ``.nii.gz`` file (NIfTI-1 or NIfTI-2) holding a 3-D label
+        map; a 4-D image whose 4th dimension is 1 is accepted.
+    label : int, optional
+        Label value to keep. Default: every non-zero voxel is foreground.
+
+    Returns
+    -------
+    Volume
+        Mask of shape ``(I, J, K)`` with the image's affine (voxel index → world mm).
+
+    Raises
+    ------
+    InputError
+        If the file is missing, not 3-D, or a true 4-D series.
+    FormatError
+        If the file is corrupt, truncated or not NIfTI.
+    LabelError
+        If ``label`` is absent (the message lists the labels present) or the
+        image is not a label map (non-integer or non-finite values).
+    EmptyMaskError
+        If the image (or the selected label) holds no foreground voxel.
+    OptionError
+        If ``label`` is not an integer.
+    """
+    if label is not None and (isinstance(label, bool) or not isinstance(label, int | np.integer)):
+        raise OptionError(f"label must be an integer label value (got {label!r})")
+    p, img = _load(path)
+    data = _read_labels(p, img)
+    if label is None:
+        mask = data != 0
+        if not mask.any():
+            raise EmptyMaskError(f"{p} is empty: every voxel is 0, there is nothing to reconstruct")
+    else:
+        mask = data == label
+        if not mask.any():
+            present = _label_counts(data)
+            if not present:
+                raise EmptyMaskError(
+                    f"{p} is empty: every voxel is 0, so label {label} is absent too"
+                )
+            listed = ", ".join(str(v) for v in list(present)[:20])
+            more = f" (and {len(present) - 20} more)" if len(present) > 20 else ""
+            raise LabelError(
+                f"label {label} is absent from {p}; labels present: {listed}{more}. "
+                "Pick one of these"
+            )
+    volume = Volume(mask, img.affine)
+    logger.info(
+        "read %s: %s, label %s, %d foreground voxels",
+        p, "x".join(str(n) for n in volume.shape),
+        "any non-zero" if label is None else label, int(np.count_nonzero(mask)),
+    )
+    return volume
+
+
+def nifti_labels(path: str | os.PathLike[str]) -> NiftiInfo:
+    """Describe a NIfTI label map: grid, geometry and the voxel count of each label.
+
+    Parameters
+    ----------
+    path : path-like
+        A ``.nii`` or ``.nii.gz`` label map.
+
+    Returns
+    -------
+    NiftiInfo
+        Shape, affine, spacing (mm), orientation codes, data type and label counts
+        (an all-zero image gives an empty ``labels`` dict).
+
+    Raises
+    ------
+    InputError, FormatError, LabelError
+        As :func:`read_nifti`.
+    """
+    p, img = _load(path)
+    data = _read_labels(p, img)
+    affine = np.asarray(img.affine, dtype=np.float64)
+    i, j, k = nib.aff2axcodes(affine)
+    return NiftiInfo(
+        path=p,
+        shape=(int(data.shape[0]), int(data.shape[1]), int(data.shape[2])),
+        affine=affine,
+        spacing=np.linalg.norm(affine[:3, :3], axis=0),
+        axcodes=(str(i), str(j), str(k)),
+        dtype=str(data.dtype),
+        labels=_label_counts(data),
+    )
+
+
+def write_nifti(
+    volume: Volume, path: str | os.PathLike[str], *, dtype: DTypeLike = np.uint8
+) -> Path:
+    """Write a volume's mask as a 0/1 NIfTI-1 image with the volume's affine.
+
+    Parameters
+    ----------
+    volume : Volume
+        The mask and its geometry.
+    path : path-like
+        Target file ending in ``.nii`` or ``.nii.gz`` (gzip-compressed). Parent
+        directories are created; the file appears atomically (complete or not at all).
+    dtype : numpy dtype, optional
+        Integer or float voxel type on disk (default ``uint8``).
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    InputError
+        If ``volume`` is not a Volume.
+    OptionError
+        If the suffix is not ``.nii`` / ``.nii.gz`` or ``dtype`` is not numeric.
+
+    Notes
+    -----
+    sform and qform both hold the affine with code 1 (scanner anatomical). A
+    qform cannot hold shear; for a sheared affine it holds the nearest
+    rotation, and readers use the exact sform. Units are set to millimetres.
+    """
+    if not isinstance(volume, Volume):
+        raise InputError(f"write_nifti needs a Volume (got {type(volume).__name__})")
+    p = Path(path)
+    if not p.name.lower().endswith((".nii", ".nii.gz")):
+        raise OptionError(f"NIfTI output must end in .nii or .nii.gz (got {p.name!r})")
+    try:
+        out_dtype = np.dtype(dtype)
+    except TypeError as exc:
+        raise OptionError(f"dtype must be a numpy integer or float type (got {dtype!r})") from exc
+    if out_dtype.kind not in "iuf":
+        raise OptionError(f"dtype must be a numpy integer or float type (got {out_dtype})")
+
+    affine = np.asarray(volume.affine, dtype=np.float64)
+    img = nib.Nifti1Image(volume.mask.astype(out_dtype), affine)
+    img.header.set_data_dtype(out_dtype)
+    img.header.set_xyzt_units(xyz="mm")
+    img.set_sform(affine, code=_XFORM_SCANNER_ANAT)
+    img.set_qform(affine, code=_XFORM_SCANNER_ANAT, strip_shears=True)
+    with atomic_path(p) as tmp:
+        nib.save(img, tmp)
+    logger.info("wrote %s (%s, %s)", p, "x".join(str(n) for n in volume.shape), out_dtype)
+    return p

@@ -1,0 +1,291 @@
+"""DICOM RT Structure Set (RTSTRUCT): the closed planar contours of one ROI.
+
+An RTSTRUCT lists its regions of interest in StructureSetROISequence
+(ROINumber, ROIName) and their contours in ROIContourSequence: each item names
+its ROI by ReferencedROINumber and holds a ContourSequence whose items carry a
+ContourGeometricType and ContourData, a flat list ``x1, y1, z1, x2, ...`` in
+DICOM patient coordinates (LPS, mm). Only CLOSED_PLANAR contours bound areas;
+POINT, OPEN_PLANAR and OPEN_NONPLANAR ones are skipped with a warning.
+
+Coordinates stay in LPS mm (nothing is flipped), like the DICOM image readers,
+so a reconstruction overlays the images the structure set was drawn on. With
+the image series (``image_dir``) the contours are rasterized on its voxel grid;
+without it, on a grid built from the contours alone
+(:func:`slicerecon.io.polygons.sections_from_polygons`). See
+``docs/formats_contours.md``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import (
+    EmptyMaskError,
+    FormatError,
+    InputError,
+    LabelError,
+    OptionError,
+    SlicereconError,
+)
+from ..sections import CrossSections
+from .polygons import sections_from_polygons
+
+__all__ = ["list_rois", "read_rtstruct"]
+
+logger = logging.getLogger(__name__)
+
+_PARSE_ERRORS: tuple[type[BaseException], ...] = (
+    OSError,
+    EOFError,
+    ValueError,
+    TypeError,
+    KeyError,
+    IndexError,
+    AttributeError,
+    NotImplementedError,
+    OverflowError,
+)
+
+
+def _read_dataset(path: str | os.PathLike[str]) -> tuple[Any, Path]:
+    """The RTSTRUCT dataset, or InputError / FormatError."""
+    import pydicom
+    from pydicom.errors import InvalidDicomError
+
+    errors: tuple[type[BaseException], ...] = (InvalidDicomError, *_PARSE_ERRORS)
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"RTSTRUCT file not found: {p}")
+    if not p.is_file():
+        raise InputError(f"{p} is a directory; pass the RTSTRUCT file itself")
+    try:
+        ds = pydicom.dcmread(p, stop_before_pixels=True)
+    except errors as exc:
+        raise FormatError(
+            f"{p} is corrupt or not a DICOM file ({type(exc).__name__}: {exc})"
+        ) from exc
+    modality = str(ds.get("Modality", "") or "")
+    if modality != "RTSTRUCT" or "StructureSetROISequence" not in ds:
+        raise FormatError(
+            f"{p} is not a DICOM RTSTRUCT (Modality {modality or 'missing'}"
+            + ("" if "StructureSetROISequence" in ds else ", no StructureSetROISequence")
+            + "); pass an RT Structure Set file"
+        )
+    return ds, p
+
+
+def _rois(ds: Any, path: Path) -> list[tuple[int, str]]:
+    out = []
+    for n, item in enumerate(ds.StructureSetROISequence):
+        try:
+            number = int(item.ROINumber)
+        except _PARSE_ERRORS as exc:
+            raise FormatError(
+                f"{path}: StructureSetROISequence[{n}] has no valid ROINumber"
+            ) from exc
+        out.append((number, str(item.get("ROIName", "") or "")))
+    return out
+
+
+def list_rois(path: str | os.PathLike[str]) -> list[tuple[int, str]]:
+    """The regions of interest of an RTSTRUCT.
+
+    Parameters
+    ----------
+    path : path-like
+        An RTSTRUCT file.
+
+    Returns
+    -------
+    list of (int, str)
+        ``(ROINumber, ROIName)`` in the file's order (name ``""`` when absent).
+
+    Raises
+    ------
+    InputError
+        Missing file.
+    FormatError
+        Not a DICOM RTSTRUCT.
+    """
+    ds, p = _read_dataset(path)
+    return _rois(ds, p)
+
+
+def _listing(rois: list[tuple[int, str]]) -> str:
+    return ", ".join(f"{number}: {name or '(no name)'}" for number, name in rois)
+
+
+def _choose_roi(rois: list[tuple[int, str]], roi: int | str | None, path: Path) -> tuple[int, str]:
+    if not rois:
+        raise EmptyMaskError(f"{path} holds no ROI (its StructureSetROISequence is empty)")
+    if roi is None:
+        if len(rois) == 1:
+            return rois[0]
+        raise LabelError(
+            f"{path} holds {len(rois)} ROIs ({_listing(rois)}); choose one by number or name"
+        )
+    if isinstance(roi, bool) or not isinstance(roi, int | np.integer | str):
+        raise OptionError(f"roi must be an ROI number or name (got {roi!r})")
+    if isinstance(roi, str):
+        matches = [r for r in rois if r[1] == roi] or [
+            r for r in rois if r[1].strip().casefold() == roi.strip().casefold()
+        ]
+        if not matches and roi.strip().lstrip("-").isdigit():
+            matches = [r for r in rois if r[0] == int(roi)]
+        if len(matches) > 1:
+            raise LabelError(
+                f"ROI name {roi!r} names several ROIs in {path} ({_listing(matches)}); "
+                "choose one by number"
+            )
+    else:
+        matches = [r for r in rois if r[0] == int(roi)]
+    if not matches:
+        raise LabelError(f"ROI {roi!r} is not in {path}; its ROIs are: {_listing(rois)}")
+    return matches[0]
+
+
+def _contour_points(item: Any, where: str, path: Path) -> NDArray[np.float64]:
+    try:
+        data = np.asarray([float(v) for v in item.ContourData], dtype=np.float64)
+    except _PARSE_ERRORS as exc:
+        raise FormatError(f"{path}: {where} has no valid ContourData ({exc})") from exc
+    if data.size % 3 or not np.all(np.isfinite(data)):
+        raise FormatError(
+            f"{path}: {where}: ContourData must hold finite x, y, z triplets "
+            f"(got {data.size} values)"
+        )
+    points = data.reshape(-1, 3)
+    declared = item.get("NumberOfContourPoints")
+    if declared is not None and int(declared) != points.shape[0]:
+        logger.warning(
+            "%s: %s declares %d points but ContourData holds %d; using ContourData",
+            path, where, int(declared), points.shape[0],
+        )
+    return points
+
+
+def _roi_polygons(
+    ds: Any, number: int, name: str, path: Path
+) -> tuple[list[NDArray[np.float64]], list[str], set[str]]:
+    """Closed planar polygons of ROI ``number``, their names, referenced image UIDs."""
+    label = f"ROI {number} ({name or 'no name'})"
+    items = [
+        item for item in ds.get("ROIContourSequence", [])
+        if "ReferencedROINumber" in item and int(item.ReferencedROINumber) == number
+    ]
+    contours = [c for item in items for c in item.get("ContourSequence", [])]
+    if not contours:
+        raise EmptyMaskError(f"{path}: {label} has no contours")
+    polygons: list[NDArray[np.float64]] = []
+    names: list[str] = []
+    image_uids: set[str] = set()
+    skipped: dict[str, int] = {}
+    for n, contour in enumerate(contours):
+        where = f"{label} contour {n}"
+        kind = str(contour.get("ContourGeometricType", "") or "").strip().upper()
+        if kind != "CLOSED_PLANAR":
+            skipped[kind or "(missing type)"] = skipped.get(kind or "(missing type)", 0) + 1
+            continue
+        points = _contour_points(contour, where, path)
+        if points.shape[0] > 1 and np.array_equal(points[0], points[-1]):
+            points = points[:-1]
+        if points.shape[0] < 3:
+            logger.warning("%s: %s has %d points, too few to enclose an area; skipped",
+                           path, where, points.shape[0])
+            continue
+        polygons.append(points)
+        names.append(where)
+        for ref in contour.get("ContourImageSequence", []):
+            uid = str(ref.get("ReferencedSOPInstanceUID", "") or "")
+            if uid:
+                image_uids.add(uid)
+    for kind, count in skipped.items():
+        logger.warning("%s: %s: skipped %d %s contours (only CLOSED_PLANAR bound an area)",
+                       path, label, count, kind)
+    if not polygons:
+        raise EmptyMaskError(f"{path}: {label} has no closed planar contour")
+    return polygons, names, image_uids
+
+
+def read_rtstruct(
+    path: str | os.PathLike[str],
+    *,
+    roi: int | str | None = None,
+    image_dir: str | os.PathLike[str] | None = None,
+    pixel_spacing: float | None = None,
+) -> CrossSections:
+    """Read the closed planar contours of one ROI of an RTSTRUCT as cross-sections.
+
+    Parameters
+    ----------
+    path : path-like
+        An RTSTRUCT file.
+    roi : int or str, optional
+        ROINumber, or ROIName (exact, else case- and space-insensitive; a
+        string of digits that names no ROI is taken as a number). Default: the
+        only ROI of the file.
+    image_dir : path-like, optional
+        Directory of the image series the structure set refers to. The
+        contours are then rasterized on its voxel grid
+        (:func:`slicerecon.io.dicom.dicom_series_geometry`) and the plane
+        indices are slice numbers of that series.
+    pixel_spacing : float, optional
+        In-plane pixel size, mm, of the grid built from the contours when no
+        ``image_dir`` is given (default: longest in-plane extent / 256).
+        Ignored, with a warning, with ``image_dir``.
+
+    Returns
+    -------
+    CrossSections
+        One plane per contoured slice position, in LPS mm geometry. Contours
+        of one plane are combined by the even-odd rule (a contour inside
+        another is a hole).
+
+    Raises
+    ------
+    InputError
+        Missing file.
+    FormatError
+        Not an RTSTRUCT, or malformed ContourData.
+    LabelError
+        ``roi`` absent, or not given while the file has several ROIs (the
+        message lists ``number: name`` pairs).
+    EmptyMaskError
+        The ROI has no closed planar contour.
+    GeometryError
+        Contours not on parallel planes, or not fitting the image grid.
+    """
+    ds, p = _read_dataset(path)
+    number, name = _choose_roi(_rois(ds, p), roi, p)
+    polygons, names, image_uids = _roi_polygons(ds, number, name, p)
+    reference = None
+    if image_dir is not None:
+        from .dicom import dicom_series_geometry
+
+        affine, shape, series_uids = dicom_series_geometry(image_dir)
+        if image_uids and not image_uids & set(series_uids):
+            logger.warning(
+                "%s: ROI %d refers to none of the images in %s; its contours are placed "
+                "on that grid by their coordinates anyway", p, number, image_dir,
+            )
+        reference = (affine, shape)
+        if pixel_spacing is not None:
+            logger.warning("pixel_spacing ignored: the grid of %s is used", image_dir)
+            pixel_spacing = None
+    try:
+        sections = sections_from_polygons(
+            polygons, pixel_spacing=pixel_spacing, reference=reference, polygon_names=names
+        )
+    except OptionError:
+        raise
+    except SlicereconError as exc:
+        raise type(exc)(f"{p}: {exc}") from exc
+    logger.info("%s: ROI %d (%s): %d contours on %d planes",
+                p, number, name, len(polygons), sections.n_planes)
+    return sections

@@ -1,0 +1,250 @@
+"""The cut action: a segment between two corner points of one projection.
+
+A cut lives in the image plane of one view (the projection along grid axis
+``view``; rows and columns run along the two other grid axes, increasing). Its
+end points are corner points in continuous pixel coordinates (half-integers,
+see :mod:`slicerecon.corners`). The straight line through them, extruded along
+the viewing axis, divides the voxel grid into two open half-spaces; the
+smaller non-empty one (by voxel count of the remaining region) is the part
+``W`` that the cut separates. ``docs/method_partition.md`` states the rules.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import GeometryError, InputError, OptionError
+from ..sections import in_plane_axes
+
+__all__ = ["Cut", "view_shapes", "snap_action", "cut_to_action", "side_image", "split"]
+
+logger = logging.getLogger(__name__)
+
+Point = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Cut:
+    """A segment ``p1 -> p2`` in the image plane of one view.
+
+    Parameters
+    ----------
+    view : int
+        Grid axis the view looks along (0, 1, 2 = x, y, z).
+    p1, p2 : tuple of float
+        End points ``(row, col)`` in continuous pixel coordinates of that view
+        (pixel ``(r, c)`` covers ``[r - .5, r + .5] x [c - .5, c + .5]``).
+        They must differ. The order does not change what the cut does.
+    """
+
+    view: int
+    p1: Point
+    p2: Point
+
+    def __post_init__(self) -> None:
+        if isinstance(self.view, bool) or int(self.view) not in (0, 1, 2):
+            raise OptionError(f"a cut's view must be 0, 1 or 2 (got {self.view!r})")
+        p1 = tuple(float(v) for v in self.p1)
+        p2 = tuple(float(v) for v in self.p2)
+        if len(p1) != 2 or len(p2) != 2:
+            raise GeometryError(f"cut end points need 2 coordinates (got {self.p1}, {self.p2})")
+        if not np.all(np.isfinite(p1 + p2)):
+            raise GeometryError("cut end points hold NaN or infinite values")
+        if p1 == p2:
+            raise GeometryError(f"a cut needs two distinct end points (both are {p1})")
+        object.__setattr__(self, "view", int(self.view))
+        object.__setattr__(self, "p1", p1)
+        object.__setattr__(self, "p2", p2)
+
+    @property
+    def image_axes(self) -> tuple[int, int]:
+        """Grid axes along the view's rows and columns."""
+        return in_plane_axes(self.view)
+
+    def canonical(self) -> Cut:
+        """The same cut with its end points in lexicographic order (``p1 < p2``)."""
+        if self.p1 <= self.p2:
+            return self
+        return Cut(self.view, self.p2, self.p1)
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready form ``{"view": int, "p1": [r, c], "p2": [r, c]}`` (pixel coordinates)."""
+        return {"view": self.view, "p1": list(self.p1), "p2": list(self.p2)}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, object]) -> Cut:
+        """Inverse of :meth:`to_dict`."""
+        try:
+            return cls(int(data["view"]), tuple(data["p1"]), tuple(data["p2"]))  # type: ignore[arg-type,call-overload]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"not a cut record: {data!r} ({exc})") from exc
+
+
+def view_shapes(
+    grid_shape: Sequence[int],
+) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:
+    """Image shapes ``(M, N)`` of the three views of a grid of shape ``(I, J, K)``."""
+    shape = tuple(int(s) for s in grid_shape)
+    if len(shape) != 3 or min(shape) < 1:
+        raise GeometryError(f"grid_shape must be three positive sizes (got {grid_shape})")
+    a, b, c = ((shape[p], shape[q]) for p, q in (in_plane_axes(v) for v in range(3)))
+    return a, b, c
+
+
+def _check_action(action: ArrayLike) -> NDArray[np.float64]:
+    act = np.asarray(action, dtype=np.float64)
+    if act.shape != (5,):
+        raise OptionError(f"an action is 5 numbers (x1, y1, x2, y2, c) (got shape {act.shape})")
+    if not np.all(np.isfinite(act)):
+        raise OptionError(f"an action holds NaN or infinite values: {act.tolist()}")
+    return np.clip(act, 0.0, 1.0)
+
+
+def _check_shapes(image_shapes: Sequence[Sequence[int]]) -> list[tuple[int, int]]:
+    shapes = [tuple(int(s) for s in shp) for shp in image_shapes]
+    if len(shapes) != 3 or any(len(s) != 2 or min(s) < 1 for s in shapes):
+        raise OptionError(f"image_shapes must be three (M, N) sizes (got {image_shapes})")
+    return shapes  # type: ignore[return-value]
+
+
+def _nearest(points: NDArray[np.float64], target: NDArray[np.float64]) -> Point:
+    """The point nearest to ``target``; ties go to the first in order."""
+    d2 = np.sum((points - target) ** 2, axis=1)
+    r, c = points[int(np.argmin(d2))]
+    return float(r), float(c)
+
+
+def snap_action(
+    action: ArrayLike,
+    corners: Sequence[ArrayLike],
+    image_shapes: Sequence[Sequence[int]],
+) -> Cut | None:
+    """Turn a policy action into a cut between two corner points.
+
+    Parameters
+    ----------
+    action : ndarray of shape (5,)
+        ``(x1, y1, x2, y2, c)`` in ``[0, 1]`` (values outside are clipped).
+        ``view = min(int(3 c), 2)``; ``(x, y)`` maps to the pixel point
+        ``(x M - 0.5, y N - 0.5)`` of that view (the inverse of
+        :func:`slicerecon.corners.pad_corners`), which is snapped to the
+        nearest corner (Euclidean, ties to the first corner in order).
+    corners : sequence of 3 ndarrays of shape (K_a, 2)
+        Corner points of each view, continuous pixel coordinates.
+    image_shapes : sequence of 3 tuples of int
+        ``(M, N)`` of each view (see :func:`view_shapes`).
+
+    Returns
+    -------
+    Cut or None
+        None for a degenerate action: the chosen view has no corner, or both
+        ends snap to the same corner.
+    """
+    act = _check_action(action)
+    shapes = _check_shapes(image_shapes)
+    if len(corners) != 3:
+        raise OptionError(f"corners must hold one array per view (got {len(corners)})")
+    view = min(int(3.0 * act[4]), 2)
+    pts = np.asarray(corners[view], dtype=np.float64).reshape(-1, 2)
+    if pts.shape[0] == 0:
+        return None
+    scale = np.asarray(shapes[view], dtype=np.float64)
+    p1 = _nearest(pts, act[0:2] * scale - 0.5)
+    p2 = _nearest(pts, act[2:4] * scale - 0.5)
+    if p1 == p2:
+        return None
+    return Cut(view, p1, p2)
+
+
+def cut_to_action(cut: Cut, image_shapes: Sequence[Sequence[int]]) -> NDArray[np.float64]:
+    """The action that :func:`snap_action` maps back to ``cut`` (given the same corners).
+
+    Parameters
+    ----------
+    cut : Cut
+        A cut whose end points are corner points.
+    image_shapes : sequence of 3 tuples of int
+        ``(M, N)`` of each view.
+
+    Returns
+    -------
+    ndarray of shape (5,)
+        ``((r1 + .5) / M, (c1 + .5) / N, (r2 + .5) / M, (c2 + .5) / N, (view + .5) / 3)``.
+    """
+    shapes = _check_shapes(image_shapes)
+    m, n = shapes[cut.view]
+    (r1, c1), (r2, c2) = cut.p1, cut.p2
+    act = np.array(
+        [(r1 + 0.5) / m, (c1 + 0.5) / n, (r2 + 0.5) / m, (c2 + 0.5) / n, (cut.view + 0.5) / 3.0]
+    )
+    return np.clip(act, 0.0, 1.0)
+
+
+def side_image(cut: Cut, image_shape: Sequence[int]) -> NDArray[np.int8]:
+    """Which side of the cut line each pixel centre of the view lies on.
+
+    Parameters
+    ----------
+    cut : Cut
+    image_shape : tuple of int
+        ``(M, N)`` of the cut's view.
+
+    Returns
+    -------
+    ndarray of shape (M, N), int8
+        ``+1`` / ``-1`` for pixel centres strictly left / right of the line
+        through the canonical (lexicographically ordered) end points, ``0`` on
+        the line.
+    """
+    m, n = (int(s) for s in image_shape)
+    can = cut.canonical()
+    (r1, c1), (r2, c2) = can.p1, can.p2
+    rows = np.arange(m, dtype=np.float64)[:, np.newaxis]
+    cols = np.arange(n, dtype=np.float64)[np.newaxis, :]
+    # Exact for half-integer end points and integer centres (small integers in float64).
+    cross = (r2 - r1) * (cols - c1) - (c2 - c1) * (rows - r1)
+    return np.sign(cross).astype(np.int8)
+
+
+def split(remaining: ArrayLike, cut: Cut) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """Separate the smaller side of the remaining region along a cut.
+
+    Parameters
+    ----------
+    remaining : ndarray of shape (I, J, K), bool
+        The region not yet assigned to a part.
+    cut : Cut
+        The cut; its line, extruded along ``cut.view``, splits the grid.
+
+    Returns
+    -------
+    (W, rest) : tuple of ndarrays of shape (I, J, K), bool
+        ``W`` is the remaining voxels strictly on the side with fewer of them;
+        ``rest = remaining & ~W`` keeps the other side and every voxel whose
+        centre lies exactly on the line. Equal counts: ``W`` is the ``+1``
+        side of :func:`side_image`.
+    None
+        When either open side holds no remaining voxel (the cut removes
+        nothing).
+    """
+    region = np.asarray(remaining)
+    if region.ndim != 3 or region.dtype != np.bool_:
+        raise InputError(
+            f"remaining must be a 3-D boolean array (got {region.ndim}-D {region.dtype})"
+        )
+    a, b = cut.image_axes
+    sides = side_image(cut, (region.shape[a], region.shape[b]))
+    column_counts = np.count_nonzero(region, axis=cut.view)  # (M, N) voxels per pixel
+    n_pos = int(column_counts[sides > 0].sum())
+    n_neg = int(column_counts[sides < 0].sum())
+    if n_pos == 0 or n_neg == 0:
+        return None
+    keep = 1 if n_pos <= n_neg else -1
+    w = region & np.expand_dims(sides == keep, axis=cut.view)
+    logger.debug("split: view %d, sides %d / %d voxels", cut.view, n_pos, n_neg)
+    return w, region & ~w

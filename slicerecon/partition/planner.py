@@ -1,0 +1,253 @@
+"""Partition planners: turn an occupancy grid into cuboid parts (``plan.json``).
+
+A planner is a function registered in :data:`PLANNERS`; :func:`plan_partition`
+looks it up by name. ``"none"`` is the paper's no-projection baseline (one part,
+the bounding box of the shape); ``"heuristic"`` runs the heuristic expert to the
+end of an episode. A learned planner is added with one more registry entry.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InputError, OptionError
+from ..sections import Box
+from .cuts import Cut
+from .heuristic import expert_cut
+from .state import Part, PartitionState, Reconstruct
+
+__all__ = ["PlanPart", "Plan", "PLANNERS", "plan_partition", "planner_names"]
+
+logger = logging.getLogger(__name__)
+
+
+class PlanPart(NamedTuple):
+    """One part of a plan.
+
+    Attributes
+    ----------
+    box : Box
+        Voxel box (reconstruction domain of the part).
+    cut : Cut or None
+        The cut that separated the part; None for a leftover or single part.
+    voxels : int
+        Voxels of the occupancy the part took.
+    """
+
+    box: Box
+    cut: Cut | None
+    voxels: int
+
+
+def _box_corners_mm(box: Box, affine: NDArray[np.float64]) -> list[list[float]]:
+    lo = np.asarray(box.lo, dtype=np.float64) - 0.5
+    hi = np.asarray(box.hi, dtype=np.float64) - 0.5
+    ijk = np.array([[(lo, hi)[s][ax] for ax, s in enumerate(bits)] for bits in np.ndindex(2, 2, 2)])
+    world = ijk @ affine[:3, :3].T + affine[:3, 3]
+    return world.tolist()
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The cuboid parts a planner chose.
+
+    Parameters
+    ----------
+    planner : str
+        Name of the planner that made it.
+    parts : tuple of PlanPart
+        The parts in the order they were cut; their boxes cover the occupancy.
+    grid_shape : tuple of int
+        ``(I, J, K)`` of the grid the boxes index.
+    """
+
+    planner: str
+    parts: tuple[PlanPart, ...]
+    grid_shape: tuple[int, int, int]
+
+    @property
+    def boxes(self) -> tuple[Box, ...]:
+        """The parts' boxes."""
+        return tuple(p.box for p in self.parts)
+
+    def covers(self, occupancy: ArrayLike) -> bool:
+        """Whether every foreground voxel of ``occupancy`` lies in some part's box."""
+        occ = np.asarray(occupancy, dtype=bool)
+        covered = np.zeros(occ.shape, dtype=bool)
+        for box in self.boxes:
+            covered[box.slices] = True
+        return bool(not np.any(occ & ~covered))
+
+    def to_dict(self, affine: ArrayLike | None = None) -> dict[str, Any]:
+        """JSON-ready form for ``plan.json``.
+
+        Parameters
+        ----------
+        affine : ndarray of shape (4, 4), optional
+            Voxel→world affine; when given, each part also has ``"corners_mm"``
+            (the 8 corners of its box, ``[lo - .5, hi - .5]`` in index space,
+            mapped to world mm, in ``np.ndindex(2, 2, 2)`` order) and
+            ``"min_mm"``/``"max_mm"`` (their world-axis-aligned extent).
+
+        Returns
+        -------
+        dict
+            ``{"planner", "grid_shape", "parts": [{"box": {"lo", "hi"}, "cut",
+            "voxels", ...}]}``; boxes in voxel indices with ``hi`` exclusive,
+            cuts in pixel coordinates of their view (or null).
+        """
+        aff = None if affine is None else np.asarray(affine, dtype=np.float64)
+        if aff is not None and aff.shape != (4, 4):
+            raise OptionError(f"affine must be a 4x4 matrix (got shape {aff.shape})")
+        parts = []
+        for part in self.parts:
+            entry: dict[str, Any] = {
+                "box": part.box.to_dict(),
+                "cut": None if part.cut is None else part.cut.to_dict(),
+                "voxels": int(part.voxels),
+            }
+            if aff is not None:
+                corners = _box_corners_mm(part.box, aff)
+                entry["corners_mm"] = corners
+                entry["min_mm"] = np.min(corners, axis=0).tolist()
+                entry["max_mm"] = np.max(corners, axis=0).tolist()
+            parts.append(entry)
+        return {"planner": self.planner, "grid_shape": list(self.grid_shape), "parts": parts}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Plan:
+        """Inverse of :meth:`to_dict` (world-mm fields are ignored)."""
+        try:
+            parts = tuple(
+                PlanPart(
+                    Box(tuple(p["box"]["lo"]), tuple(p["box"]["hi"])),
+                    None if p["cut"] is None else Cut.from_dict(p["cut"]),
+                    int(p["voxels"]),
+                )
+                for p in data["parts"]
+            )
+            shape = tuple(int(s) for s in data["grid_shape"])
+            return cls(str(data["planner"]), parts, shape)  # type: ignore[arg-type]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(
+                f"not a plan record ({exc}); expected the output of Plan.to_dict"
+            ) from exc
+
+
+PlannerFn = Callable[..., list[Part]]
+"""``planner(occupancy, *, reconstruct, max_parts, min_remaining, lam) -> list of Part``."""
+
+
+def _plan_none(
+    occupancy: NDArray[np.bool_],
+    *,
+    reconstruct: Reconstruct | None,
+    max_parts: int,
+    min_remaining: float,
+    lam: float,
+) -> list[Part]:
+    """One part: the bounding box of the whole occupancy (the no-projection baseline)."""
+    state = PartitionState(occupancy, reconstruct=reconstruct, lam=lam, max_steps=0)
+    return state.finish()
+
+
+def _plan_heuristic(
+    occupancy: NDArray[np.bool_],
+    *,
+    reconstruct: Reconstruct | None,
+    max_parts: int,
+    min_remaining: float,
+    lam: float,
+) -> list[Part]:
+    """Apply the expert's best cut until the episode ends or no cut is useful, then finish."""
+    state = PartitionState(
+        occupancy,
+        reconstruct=reconstruct,
+        lam=lam,
+        max_steps=max_parts - 1,
+        min_remaining=min_remaining,
+    )
+    while not state.done:
+        cut = expert_cut(state)
+        if cut is None:
+            break
+        state.apply_cut(cut)
+    return state.finish()
+
+
+PLANNERS: dict[str, PlannerFn] = {
+    "none": _plan_none,
+    "heuristic": _plan_heuristic,
+}
+"""Registered planners by name. Register a new one with ``PLANNERS["name"] = function``."""
+
+
+def planner_names() -> list[str]:
+    """Names accepted by :func:`plan_partition`, sorted."""
+    return sorted(PLANNERS)
+
+
+def plan_partition(
+    occupancy: ArrayLike,
+    *,
+    planner: str = "heuristic",
+    reconstruct: Reconstruct | None = None,
+    max_parts: int = 8,
+    min_remaining: float = 0.02,
+    lam: float = 1.0,
+) -> Plan:
+    """Partition an occupancy grid into cuboid parts.
+
+    Parameters
+    ----------
+    occupancy : ndarray of shape (I, J, K), bool
+        The shape (ground truth, or the visual hull of the projections).
+    planner : str, optional
+        A name in :data:`PLANNERS`: ``"none"`` or ``"heuristic"``.
+    reconstruct : callable, optional
+        ``reconstruct(box) -> bool array of box.shape``, used for the reward's
+        reconstruction term (see :class:`~slicerecon.partition.state.PartitionState`).
+    max_parts : int, optional
+        At most this many parts (``max_parts - 1`` cuts plus the leftover part).
+    min_remaining : float, optional
+        Stop cutting when fewer than this fraction of the voxels remain.
+    lam : float, optional
+        Reward weight of the reconstruction term.
+
+    Returns
+    -------
+    Plan
+        Parts whose boxes cover every voxel of ``occupancy``.
+
+    Raises
+    ------
+    OptionError
+        For an unknown planner name or ``max_parts < 1``.
+    EmptyMaskError
+        If the occupancy is empty.
+    """
+    name = str(planner).strip().lower()
+    if name not in PLANNERS:
+        raise OptionError(
+            f"unknown planner {planner!r}; choose one of: {', '.join(planner_names())}"
+        )
+    if isinstance(max_parts, bool) or int(max_parts) < 1:
+        raise OptionError(f"max_parts must be >= 1 (got {max_parts})")
+    occ = np.asarray(occupancy)
+    parts = PLANNERS[name](
+        occ,
+        reconstruct=reconstruct,
+        max_parts=int(max_parts),
+        min_remaining=float(min_remaining),
+        lam=float(lam),
+    )
+    shape = tuple(int(s) for s in occ.shape)
+    plan = Plan(name, tuple(PlanPart(p.box, p.cut, p.mask_voxels) for p in parts), shape)  # type: ignore[arg-type]
+    logger.info("planner %s: %d parts", name, len(plan.parts))
+    return plan

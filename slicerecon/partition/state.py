@@ -1,0 +1,289 @@
+"""Episode bookkeeping of the partition process (numpy; the RL environment mirrors it).
+
+One episode partitions a shape ``O`` (a boolean occupancy grid) into parts:
+each step applies one cut to the remaining region ``R``, separates the part
+``W_i`` (:func:`~slicerecon.partition.cuts.split`) and scores it with the
+paper's reward ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)``.
+``docs/method_partition.md`` states the rules.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..corners import harris_corners, pad_corners
+from ..errors import EmptyMaskError, GeometryError, InputError, OptionError
+from ..sections import Box
+from .cuts import Cut, snap_action, split, view_shapes
+
+__all__ = ["Part", "StepResult", "PartitionState", "iou", "NOOP_REWARD"]
+
+logger = logging.getLogger(__name__)
+
+NOOP_REWARD: float = 0.0
+"""Reward of a step whose action is degenerate or removes nothing (the step still counts)."""
+
+Reconstruct = Callable[[Box], NDArray[np.bool_]]
+
+
+class Part(NamedTuple):
+    """One cuboid part of a partition.
+
+    Attributes
+    ----------
+    box : Box
+        Bounding box of the part's voxels ``W`` (its reconstruction domain).
+    mask_voxels : int
+        ``|W|``, the number of voxels the part took from the remaining region.
+    reward : float
+        ``IoU(W, O) + lam * IoU(S, W)`` (first term only without a reconstructor).
+    cut : Cut or None
+        The cut that separated it; None for the leftover part of ``finish()``.
+    """
+
+    box: Box
+    mask_voxels: int
+    reward: float
+    cut: Cut | None
+
+
+class StepResult(NamedTuple):
+    """What one :meth:`PartitionState.step` did.
+
+    Attributes
+    ----------
+    part : Part or None
+        The new part; None for a no-op step.
+    reward : float
+        The part's reward, or :data:`NOOP_REWARD`.
+    done : bool
+        Whether the episode is over (call :meth:`PartitionState.finish`).
+    info : dict
+        ``"cut"`` (Cut or None), ``"noop"`` (None, ``"degenerate"`` or
+        ``"removes_nothing"``), ``"iou_part"`` and ``"iou_reconstruction"``
+        (the two reward terms; the second is None without a reconstructor),
+        ``"remaining_voxels"``.
+    """
+
+    part: Part | None
+    reward: float
+    done: bool
+    info: dict[str, Any]
+
+
+def iou(a: NDArray[np.bool_], b: NDArray[np.bool_]) -> float:
+    """Voxel intersection over union of two same-shaped masks; 1.0 when both are empty."""
+    union = int(np.count_nonzero(a | b))
+    if union == 0:
+        return 1.0
+    return int(np.count_nonzero(a & b)) / union
+
+
+class PartitionState:
+    """The state of one partition episode.
+
+    Parameters
+    ----------
+    occupancy : ndarray of shape (I, J, K), bool
+        The shape ``O`` to partition (ground truth in training, the visual
+        hull at inference).
+    reconstruct : callable, optional
+        ``reconstruct(box) -> ndarray of box.shape, bool``: the voxel
+        reconstruction ``S`` of a part from the cross-sections inside ``box``
+        (e.g. ``functools.partial(part_voxels, sections)``). None skips the
+        second reward term.
+    lam : float, optional
+        Weight ``lambda`` of the reconstruction term.
+    max_steps : int, optional
+        The episode ends after this many steps (no-op steps count).
+    min_remaining : float, optional
+        The episode ends when fewer than ``min_remaining * |O|`` voxels remain.
+    max_corners : int, optional
+        Corners kept per view (the strongest Harris responses).
+
+    Attributes
+    ----------
+    occupancy : ndarray of shape (I, J, K), bool
+        ``O``, read-only.
+    remaining : ndarray of shape (I, J, K), bool
+        ``R``, the voxels of ``O`` not yet in a part, read-only (replaced each step).
+    parts : list of Part
+        Parts made so far, in order.
+    step_count : int
+        Steps taken (including no-ops).
+    """
+
+    def __init__(
+        self,
+        occupancy: ArrayLike,
+        *,
+        reconstruct: Reconstruct | None = None,
+        lam: float = 1.0,
+        max_steps: int = 8,
+        min_remaining: float = 0.02,
+        max_corners: int = 32,
+    ) -> None:
+        occ = np.asarray(occupancy)
+        if occ.ndim != 3:
+            raise InputError(f"occupancy must be a 3-D array (got shape {occ.shape})")
+        if occ.dtype != np.bool_:
+            if occ.dtype.kind not in "biuf" or not np.all(np.isin(occ, (0, 1))):
+                raise InputError("occupancy must be boolean (or 0/1 numbers)")
+            occ = occ.astype(bool)
+        if not occ.any():
+            raise EmptyMaskError("the occupancy is empty: nothing to partition")
+        if not np.isfinite(lam) or lam < 0:
+            raise OptionError(f"lam must be a finite number >= 0 (got {lam})")
+        if int(max_steps) < 0:
+            raise OptionError(f"max_steps must be >= 0 (got {max_steps})")
+        if not 0.0 <= float(min_remaining) < 1.0:
+            raise OptionError(f"min_remaining must be in [0, 1) (got {min_remaining})")
+        if int(max_corners) < 1:
+            raise OptionError(f"max_corners must be >= 1 (got {max_corners})")
+        self.occupancy: NDArray[np.bool_] = np.array(occ, dtype=bool)
+        self.occupancy.setflags(write=False)
+        self.reconstruct = reconstruct
+        self.lam = float(lam)
+        self.max_steps = int(max_steps)
+        self.min_remaining = float(min_remaining)
+        self.max_corners = int(max_corners)
+        self.n_occupied = int(np.count_nonzero(self.occupancy))
+        self.image_shapes = view_shapes(self.occupancy.shape)
+        self.remaining: NDArray[np.bool_] = self.occupancy
+        self.parts: list[Part] = []
+        self.step_count = 0
+        self._corners: tuple[NDArray[np.float64], ...] | None = None
+        self._finished = False
+
+    # -- observation ---------------------------------------------------------------
+    @property
+    def grid_shape(self) -> tuple[int, int, int]:
+        """``(I, J, K)``."""
+        i, j, k = self.occupancy.shape
+        return i, j, k
+
+    @property
+    def remaining_voxels(self) -> int:
+        """``|R|``."""
+        return int(np.count_nonzero(self.remaining))
+
+    @property
+    def done(self) -> bool:
+        """True when ``|R| < min_remaining * |O|``, ``R`` is empty, or ``max_steps`` are spent."""
+        left = self.remaining_voxels
+        return (
+            self._finished
+            or left == 0
+            or left < self.min_remaining * self.n_occupied
+            or self.step_count >= self.max_steps
+        )
+
+    def projections(self) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
+        """Silhouettes of ``R``: view ``a`` is ``R.any(axis=a)``, shapes (J, K), (I, K), (I, J)."""
+        x, y, z = (np.asarray(self.remaining.any(axis=a)) for a in range(3))
+        return x, y, z
+
+    def corners(self) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Harris corners of :meth:`projections` (default options), one (K_a, 2) array per view."""
+        if self._corners is None:
+            self._corners = tuple(
+                harris_corners(img, max_corners=self.max_corners) for img in self.projections()
+            )
+        a, b, c = self._corners
+        return a, b, c
+
+    def padded_corners(
+        self, n_max: int | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Corner state for a policy: points (3, n_max, 2) in [0, 1] and validity (3, n_max).
+
+        ``n_max`` defaults to ``max_corners``; see :func:`slicerecon.corners.pad_corners`.
+        """
+        n = self.max_corners if n_max is None else int(n_max)
+        pairs = [
+            pad_corners(c, n_max=n, image_shape=shape)
+            for c, shape in zip(self.corners(), self.image_shapes, strict=True)
+        ]
+        return np.stack([p for p, _ in pairs]), np.stack([v for _, v in pairs])
+
+    # -- transitions ---------------------------------------------------------------
+    def _score(self, w: NDArray[np.bool_], box: Box) -> tuple[float, float | None]:
+        iou_part = iou(w, self.occupancy)
+        if self.reconstruct is None:
+            return iou_part, None
+        s = np.asarray(self.reconstruct(box))
+        if s.shape != box.shape:
+            raise GeometryError(
+                f"reconstruct(box) returned shape {s.shape}, expected the box shape {box.shape}"
+            )
+        return iou_part, iou(s.astype(bool), w[box.slices])
+
+    def _make_part(self, w: NDArray[np.bool_], cut: Cut | None) -> tuple[Part, dict[str, Any]]:
+        box = Box.of_mask(w)
+        iou_part, iou_rec = self._score(w, box)
+        reward = iou_part + (0.0 if iou_rec is None else self.lam * iou_rec)
+        part = Part(box, int(np.count_nonzero(w)), float(reward), cut)
+        return part, {"iou_part": iou_part, "iou_reconstruction": iou_rec}
+
+    def _set_remaining(self, rest: NDArray[np.bool_]) -> None:
+        rest.setflags(write=False)
+        self.remaining = rest
+        self._corners = None
+
+    def apply_cut(self, cut: Cut | None) -> StepResult:
+        """Take one step with an already snapped cut (None = degenerate action).
+
+        Raises
+        ------
+        OptionError
+            If the episode is already done.
+        """
+        if self.done:
+            raise OptionError("the episode is over: call finish(), then start a new state")
+        self.step_count += 1
+        info: dict[str, Any] = {"cut": cut, "noop": None}
+        result = None if cut is None else split(self.remaining, cut)
+        if result is None:
+            info["noop"] = "degenerate" if cut is None else "removes_nothing"
+            info.update(iou_part=None, iou_reconstruction=None)
+            info["remaining_voxels"] = self.remaining_voxels
+            logger.debug("step %d: no-op (%s)", self.step_count, info["noop"])
+            return StepResult(None, NOOP_REWARD, self.done, info)
+        w, rest = result
+        part, scores = self._make_part(w, cut)
+        info.update(scores)
+        self.parts.append(part)
+        self._set_remaining(rest)
+        info["remaining_voxels"] = self.remaining_voxels
+        logger.debug("step %d: part %s, reward %.4f", self.step_count, part.box, part.reward)
+        return StepResult(part, part.reward, self.done, info)
+
+    def step(self, action: ArrayLike) -> StepResult:
+        """Snap ``action`` (5 numbers in [0, 1]) to a cut on the current corners and apply it.
+
+        See :func:`~slicerecon.partition.cuts.snap_action` and :meth:`apply_cut`.
+        """
+        cut = snap_action(action, self.corners(), self.image_shapes)
+        return self.apply_cut(cut)
+
+    def finish(self) -> list[Part]:
+        """End the episode: any leftover ``R`` becomes a last part (its bounding box, no cut).
+
+        After this the parts' boxes cover every voxel of ``O``. Idempotent.
+
+        Returns
+        -------
+        list of Part
+            All parts, in order.
+        """
+        if not self._finished and self.remaining.any():
+            part, _ = self._make_part(np.asarray(self.remaining), None)
+            self.parts.append(part)
+            self._set_remaining(np.zeros_like(self.occupancy))
+        self._finished = True
+        return list(self.parts)

@@ -1,0 +1,213 @@
+"""Per-part reconstruction: what the pipeline and the planners call.
+
+A planner partitions the shape into cuboid parts (:class:`~slicerecon.sections.Box`);
+each part is reconstructed on its own from the cross-sections inside its box
+(:func:`reconstruct_part`), and the parts are merged by union
+(:func:`reconstruct_parts`). :func:`part_voxels` is a cheap voxel version of
+a part's reconstruction for the planner's reward ``IoU(S_i, W_i)``.
+
+Methods
+-------
+``"loft"``
+    Contour lofting (:func:`~slicerecon.surface.loft.loft`), the paper's method.
+``"sdf"``
+    Signed-distance interpolation + marching cubes
+    (:func:`~slicerecon.surface.sdf.sdf_mesh`).
+
+Both use the same extent semantics along the section axis (see
+``docs/lofting.md``): with ``extend_to_box=True`` the first / last plane in
+the box is extended to the box faces and a box holding no plane is filled by
+the slab of the planes either side of it; without it the part spans its
+first to last plane. A single call with the bounding box of the sections and
+``extend_to_box=False`` is the paper's "no projection" baseline.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from ..errors import EmptyMaskError, InputError, OptionError
+from ..sections import Box, CrossSections
+from .loft import loft_solid
+from .merge import check_closed, from_manifold, union_solids
+from .sdf import sdf_field, sdf_mesh, sdf_parts_mesh
+from .smooth import taubin_smooth
+
+__all__ = ["METHODS", "VOXEL_METHODS", "reconstruct_part", "reconstruct_parts", "part_voxels"]
+
+logger = logging.getLogger(__name__)
+
+METHODS = ("loft", "sdf")
+"""Surface methods of :func:`reconstruct_part` and :func:`reconstruct_parts`."""
+
+VOXEL_METHODS = ("sdf", "loft")
+"""Methods of :func:`part_voxels` (``"sdf"`` is the cheap one)."""
+
+
+def _check_method(method: str, choices: tuple[str, ...]) -> str:
+    if not isinstance(method, str) or method.strip().lower() not in choices:
+        raise OptionError(f"method must be one of {', '.join(choices)} (got {method!r})")
+    return method.strip().lower()
+
+
+def _check_inputs(sections: CrossSections, box: Box) -> None:
+    if not isinstance(sections, CrossSections):
+        raise InputError(f"expected CrossSections (got {type(sections).__name__})")
+    if not isinstance(box, Box):
+        raise InputError(f"expected a slicerecon Box (got {type(box).__name__})")
+
+
+def reconstruct_part(
+    sections: CrossSections, box: Box, *, method: str = "loft", extend_to_box: bool = True
+) -> trimesh.Trimesh | None:
+    """Reconstruct one part from the sections inside its box.
+
+    Parameters
+    ----------
+    sections : CrossSections
+        All cross-sections of the shape.
+    box : Box
+        The part's cuboid on the reference grid.
+    method : {"loft", "sdf"}, default "loft"
+        Surface method.
+    extend_to_box : bool, default True
+        Extend the part to the box faces along the section axis.
+
+    Returns
+    -------
+    trimesh.Trimesh or None
+        Closed, outward mesh in world mm, inside the box; None when the box
+        holds no section foreground.
+
+    Raises
+    ------
+    OptionError
+        If ``method`` is unknown or the box lies outside the grid.
+    """
+    method = _check_method(method, METHODS)
+    _check_inputs(sections, box)
+    if method == "loft":
+        solid = loft_solid(sections, box=box, extend_to_box=extend_to_box)
+        return None if solid is None else from_manifold(solid, transform=sections.affine)
+    try:
+        return sdf_mesh(sections, box=box, extend_to_box=extend_to_box)
+    except EmptyMaskError:
+        return None
+
+
+def part_voxels(
+    sections: CrossSections, box: Box, *, method: str = "sdf", extend_to_box: bool = True
+) -> NDArray[np.bool_]:
+    """Voxel occupancy of a part's reconstruction on the reference grid, inside its box.
+
+    Parameters
+    ----------
+    sections : CrossSections
+        All cross-sections of the shape.
+    box : Box
+        The part's cuboid; must lie inside the reference grid.
+    method : {"sdf", "loft"}, default "sdf"
+        ``"sdf"``: signed-distance interpolation sampled at the voxel centres
+        (fast: a few ms for a 100³ box). ``"loft"``: the lofted mesh
+        rasterized at the voxel centres (slower, exact for the loft).
+    extend_to_box : bool, default True
+        As for :func:`reconstruct_part`.
+
+    Returns
+    -------
+    ndarray of shape box.shape, bool
+        ``S_i`` restricted to the box; all False when the box holds no
+        section foreground.
+
+    Raises
+    ------
+    OptionError
+        If ``method`` is unknown or the box does not lie inside the grid.
+    """
+    method = _check_method(method, VOXEL_METHODS)
+    _check_inputs(sections, box)
+    if any(lo < 0 for lo in box.lo) or any(
+        hi > n for hi, n in zip(box.hi, sections.grid_shape, strict=True)
+    ):
+        raise OptionError(
+            f"box {box.to_dict()} must lie inside the reference grid {sections.grid_shape}"
+        )
+    if method == "sdf":
+        field, _ = sdf_field(sections, box=box, extend_to_box=extend_to_box)
+        return field < 0
+    from ..rasterize import mesh_to_mask
+
+    mesh = reconstruct_part(sections, box, method="loft", extend_to_box=extend_to_box)
+    if mesh is None:
+        return np.zeros(box.shape, dtype=bool)
+    affine = sections.affine.copy()
+    affine[:3, 3] = sections.affine[:3, :3] @ np.asarray(box.lo, dtype=np.float64) + affine[:3, 3]
+    return mesh_to_mask(mesh, affine, box.shape)
+
+
+def reconstruct_parts(
+    sections: CrossSections,
+    boxes: Sequence[Box],
+    *,
+    method: str = "loft",
+    smooth: bool = False,
+    extend_to_box: bool = True,
+) -> trimesh.Trimesh:
+    """Reconstruct every part and merge them into one watertight mesh.
+
+    Parameters
+    ----------
+    sections : CrossSections
+        All cross-sections of the shape.
+    boxes : sequence of Box
+        The parts' cuboids (they may touch or overlap).
+    method : {"loft", "sdf"}, default "loft"
+        Surface method of every part.
+    smooth : bool, default False
+        Taubin-smooth the merged mesh (:func:`~slicerecon.surface.smooth.taubin_smooth`
+        with its defaults).
+    extend_to_box : bool, default True
+        As for :func:`reconstruct_part`.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Union of the parts: closed, outward, world mm.
+
+    Raises
+    ------
+    OptionError
+        If ``boxes`` is empty or ``method`` unknown.
+    EmptyMaskError
+        If no box holds section foreground.
+    """
+    method = _check_method(method, METHODS)
+    boxes = list(boxes)
+    if not boxes:
+        raise OptionError("give at least one box (part) to reconstruct")
+    for box in boxes:
+        _check_inputs(sections, box)
+    if method == "loft":
+        solids = [loft_solid(sections, box=b, extend_to_box=extend_to_box) for b in boxes]
+        kept = [s for s in solids if s is not None]
+        if not kept:
+            raise EmptyMaskError("no part's box holds any section foreground")
+        # Parts are united in voxel index coordinates, where shared box faces are
+        # exactly coplanar, and mapped to world mm once.
+        mesh = from_manifold(union_solids(kept), transform=sections.affine)
+        check_closed(mesh, "reconstruct_parts")
+    else:
+        # Implicit union: the minimum of the parts' signed distances, meshed once.
+        mesh = sdf_parts_mesh(sections, boxes, extend_to_box=extend_to_box)
+    logger.debug(
+        "merged %d parts (%s): %d faces, %.6g mm^3", len(boxes), method, len(mesh.faces),
+        mesh.volume,
+    )
+    if smooth:
+        mesh = taubin_smooth(mesh)
+    return mesh

@@ -1,0 +1,193 @@
+"""DICOM SEG: segment selection, frame placement, fractional masks and clear errors."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pydicom
+import pytest
+
+from slicerecon.errors import EmptyMaskError, GeometryError, InputError, LabelError
+from slicerecon.io import load_input
+from slicerecon.io.dicom import dicom_info, read_dicom_seg
+
+
+def _load_factory():
+    name = "slicerecon_tests_dicom_factory"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(
+            name, Path(__file__).with_name("dicom_factory.py")
+        )
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+factory = _load_factory()
+
+
+def _oblique_affine(spacing=(0.7, 1.2, 3.0), origin=(55.0, -80.5, 12.25)):
+    """A fixed oblique grid: rotated 30° about z then 20° about x, right-handed."""
+    a, b = np.deg2rad(30.0), np.deg2rad(20.0)
+    rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    rx = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    rot = rx @ rz
+    return factory.affine_from_geometry(
+        rot[:, 0], rot[:, 1], (spacing[1], spacing[0]), rot[:, 2] * spacing[2], origin
+    )
+
+
+def _two_segments(shape=(9, 8, 6)):
+    liver = np.zeros(shape, bool)
+    liver[1:6, 2:7, 0:4] = True
+    liver[1, 2, 0] = False  # break symmetry
+    tumour = np.zeros(shape, bool)
+    tumour[5:8, 1:3, 2:6] = True
+    return liver, tumour
+
+
+@pytest.fixture
+def two_segment_seg(tmp_path):
+    liver, tumour = _two_segments()
+    affine = _oblique_affine()
+    path = factory.write_seg(
+        tmp_path / "seg.dcm", {1: liver, 2: tumour}, affine, labels={1: "Liver", 2: "Tumour"}
+    )
+    return path, affine, liver, tumour
+
+
+def test_segments_by_number_and_label_round_trip(two_segment_seg):
+    path, affine, liver, tumour = two_segment_seg
+
+    by_number = read_dicom_seg(path, segment=1)
+    by_label = read_dicom_seg(path, segment="Tumour")
+
+    np.testing.assert_array_equal(by_number.mask, liver)
+    np.testing.assert_array_equal(by_label.mask, tumour)
+    np.testing.assert_allclose(by_number.affine, affine, atol=1e-6)
+    np.testing.assert_allclose(by_label.affine, affine, atol=1e-6)
+    np.testing.assert_array_equal(read_dicom_seg(path, segment="tumour").mask, tumour)
+
+
+def test_every_frame_lands_on_the_plane_at_its_position(two_segment_seg):
+    path, _, liver, tumour = two_segment_seg
+    volume = read_dicom_seg(path, segment=2)
+    ds = pydicom.dcmread(path)
+    frames = ds.pixel_array
+    for f, item in enumerate(ds.PerFrameFunctionalGroupsSequence):
+        ipp = np.array([float(v) for v in item.PlanePositionSequence[0].ImagePositionPatient])
+        k = volume.world_to_index(ipp)
+        np.testing.assert_allclose(k, np.rint(k), atol=1e-6)  # exactly on a plane ...
+        np.testing.assert_allclose(k[:2], 0, atol=1e-6)  # ... at its first pixel
+        plane = int(np.rint(k[2]))
+        np.testing.assert_allclose(volume.index_to_world([0, 0, plane]), ipp, atol=1e-6)
+        segment = int(item.SegmentIdentificationSequence[0].ReferencedSegmentNumber)
+        expected = (liver if segment == 1 else tumour)[:, :, plane]
+        np.testing.assert_array_equal(frames[f].T.astype(bool), expected)
+
+
+def test_several_segments_without_choice_are_listed(two_segment_seg):
+    path = two_segment_seg[0]
+    with pytest.raises(LabelError, match="1: Liver, 2: Tumour"):
+        read_dicom_seg(path)
+
+
+@pytest.mark.parametrize("segment", [3, "Bone"])
+def test_missing_segment_is_refused_with_the_list(two_segment_seg, segment):
+    path = two_segment_seg[0]
+    with pytest.raises(LabelError, match=r"not in .*1: Liver, 2: Tumour"):
+        read_dicom_seg(path, segment=segment)
+
+
+def test_single_frame_single_segment_is_read_without_a_choice(tmp_path):
+    mask = np.zeros((6, 5, 4), bool)
+    mask[2:5, 1:3, 2] = True
+    affine = _oblique_affine()
+    path = factory.write_seg(tmp_path / "one.dcm", {4: mask}, affine, labels={4: "Lesion"})
+    assert int(pydicom.dcmread(path).NumberOfFrames) == 1
+
+    volume = read_dicom_seg(path)
+
+    # one plane: the grid holds only that plane, at the frame's position
+    assert volume.shape == (6, 5, 1)
+    np.testing.assert_array_equal(volume.mask[:, :, 0], mask[:, :, 2])
+    np.testing.assert_allclose(volume.index_to_world([0, 0, 0]),
+                               affine[:3, 3] + 2 * affine[:3, 2], atol=1e-6)
+    np.testing.assert_allclose(volume.spacing, [0.7, 1.2, 3.0], atol=1e-6)
+
+
+def test_omitted_empty_frames_leave_empty_planes(tmp_path):
+    mask = np.zeros((5, 5, 7), bool)
+    mask[1:4, 1:4, [1, 2, 5]] = True  # planes 3 and 4 empty: their frames are omitted
+    affine = _oblique_affine()
+    path = factory.write_seg(tmp_path / "gap.dcm", {1: mask}, affine, labels={1: "A"})
+
+    volume = read_dicom_seg(path)
+
+    np.testing.assert_array_equal(volume.mask, mask[:, :, 1:6])
+    np.testing.assert_allclose(volume.index_to_world([0, 0, 0]),
+                               affine[:3, 3] + affine[:3, 2], atol=1e-6)
+
+
+def test_frames_off_the_regular_grid_are_refused(tmp_path):
+    liver, _ = _two_segments()
+    affine = _oblique_affine()
+    path = factory.write_seg(tmp_path / "seg.dcm", {1: liver}, affine, labels={1: "Liver"})
+    ds = pydicom.dcmread(path)
+    position = ds.PerFrameFunctionalGroupsSequence[2].PlanePositionSequence[0]
+    ipp = np.array([float(v) for v in position.ImagePositionPatient])
+    position.ImagePositionPatient = [f"{v:.6f}" for v in ipp + 0.4 * affine[:3, 2]]
+    ds.save_as(path)
+
+    with pytest.raises(GeometryError, match="not evenly spaced"):
+        read_dicom_seg(path)
+
+
+def test_fractional_segmentation_is_thresholded_at_half(tmp_path):
+    prob = np.zeros((6, 6, 3))
+    prob[1:5, 1:5, :] = 0.3
+    prob[2:4, 2:4, :] = 0.7
+    path = factory.write_seg(
+        tmp_path / "frac.dcm", {1: prob}, _oblique_affine(), labels={1: "P"}, fractional=True
+    )
+
+    np.testing.assert_array_equal(read_dicom_seg(path).mask, prob >= 0.5)
+
+
+def test_empty_segment_raises_empty_mask_error(tmp_path):
+    liver, _ = _two_segments()
+    path = factory.write_seg(
+        tmp_path / "seg.dcm", {1: liver, 2: np.zeros_like(liver)}, _oblique_affine(),
+        labels={1: "Liver", 2: "Nothing"}, omit_empty_frames=False,
+    )
+    with pytest.raises(EmptyMaskError, match="Nothing"):
+        read_dicom_seg(path, segment=2)
+
+
+def test_non_seg_files_are_refused(tmp_path):
+    paths = factory.write_series(tmp_path / "series", np.ones((3, 3, 2), bool),
+                                 _oblique_affine())
+    with pytest.raises(InputError, match="not a DICOM SEG"):
+        read_dicom_seg(paths[0])
+    with pytest.raises(InputError, match="not found"):
+        read_dicom_seg(tmp_path / "missing.dcm")
+
+
+def test_info_and_dispatcher(two_segment_seg):
+    path, _, liver, _ = two_segment_seg
+
+    info = dicom_info(path)
+
+    assert info["kind"] == "dicom-seg" and info["segmentation_type"] == "BINARY"
+    assert info["shape"] == [9, 8, 6]
+    np.testing.assert_allclose(info["spacing_mm"], [0.7, 1.2, 3.0], atol=1e-6)
+    assert info["segments"] == [
+        {"number": 1, "label": "Liver", "n_frames": 4},
+        {"number": 2, "label": "Tumour", "n_frames": 4},
+    ]
+    assert info["n_frames"] == 8
+    np.testing.assert_array_equal(load_input(path, label=1).mask, liver)
