@@ -122,7 +122,15 @@ def info(
     if kind.kind == "nifti":
         from .io.nifti import nifti_labels
 
-        details["labels"] = nifti_labels(input)
+        details["labels"] = nifti_labels(input).to_dict()["labels"]
+    elif kind.kind in ("dicom-series", "dicom-seg"):
+        from .io.dicom import dicom_info
+
+        details["dicom"] = dicom_info(input)
+    elif kind.kind == "rtstruct":
+        from .io.rtstruct import list_rois
+
+        details["rois"] = list_rois(input)
     data = load_input(input, label=label, roi=_roi(roi), allow_irregular=allow_irregular)
     details.update(_volume_info(data) if isinstance(data, Volume) else _sections_info(data))
     if as_json:

@@ -371,7 +371,10 @@ def run_case(
             "positions_mm": sections.positions.tolist(),
         }
         plan["projections"] = projections.source
+        plan["input"] = str(input_path)
+        plan["ground_truth"] = None if ground_truth is None else str(ground_truth)
         plan["config"] = asdict(config)
+        plan["timings_s"] = {k: round(v, 4) for k, v in timings.items()}
         _write_json(out / "plan.json", plan)
         if metrics is not None:
             _write_json(out / "metrics.json", metrics.to_dict())

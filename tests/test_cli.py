@@ -1,0 +1,162 @@
+"""The command-line contract: outputs of ``run``, one-line errors, exit codes."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from slicerecon.cli import main
+from slicerecon.io.nifti import write_nifti
+from slicerecon.sections import Volume
+from slicerecon.shapes import make_shape
+
+
+@pytest.fixture(scope="module")
+def chair_nii(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("in") / "chair.nii.gz"
+    write_nifti(make_shape("chair"), path)
+    return path
+
+
+def _one_error_line(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith("error: ")
+    assert "Traceback" not in err[0]
+    return err[0]
+
+
+def test_help_lists_the_commands(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for command in ("run", "info", "evaluate"):
+        assert command in out
+
+
+def test_run_writes_all_outputs_in_world_mm(
+    chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "chair"
+    assert main(["run", str(chair_nii), "-o", str(out), "--slices", "12"]) == 0
+    for name in ("mesh.stl", "plan.json", "metrics.json", "preview.png"):
+        assert (out / name).stat().st_size > 0, name
+    mesh = trimesh.load(out / "mesh.stl")
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    truth = make_shape("chair")
+    lo, hi = truth.bounding_box_mm()
+    # The mesh overlays the mask in world coordinates (within two voxels).
+    np.testing.assert_allclose(mesh.bounds[0], lo, atol=2.0)
+    np.testing.assert_allclose(mesh.bounds[1], hi, atol=2.0)
+    plan = json.loads((out / "plan.json").read_text())
+    assert plan["sections"]["n_planes"] == 12
+    assert len(plan["parts"]) >= 1
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["volume_iou"] > 0.8
+    assert not list(out.glob("*.tmp*")), "temporary files left behind"
+
+
+def test_run_every_k_and_other_format(chair_nii: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ply"
+    code = main(["run", str(chair_nii), "-o", str(out), "--every", "8", "--format", "ply",
+                 "--planner", "none", "--axis", "z"])
+    assert code == 0
+    assert trimesh.load(out / "mesh.ply").is_watertight
+    plan = json.loads((out / "plan.json").read_text())
+    indices = np.diff(plan["sections"]["plane_indices"])
+    assert np.all(indices[:-1] == 8)
+
+
+def test_info_reports_grid_and_labels(chair_nii: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["info", str(chair_nii), "--json"]) == 0
+    details = json.loads(capsys.readouterr().out)
+    assert details["format"] == "nifti"
+    assert details["spacing_mm"] == [1.0, 1.0, 1.0]
+    assert details["labels"] == {"1": int(make_shape("chair").mask.sum())}
+
+
+def test_evaluate_prints_metrics_json(
+    chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["evaluate", str(chair_nii), str(chair_nii), "--n-points", "5000"]) == 0
+    metrics = json.loads(capsys.readouterr().out)
+    assert metrics["volume_iou"] == pytest.approx(1.0)
+    assert metrics["chamfer_l1_mm"] == pytest.approx(0.0, abs=1e-9)
+
+
+# ------------------------------------------------------------------ bad input
+def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", str(tmp_path / "nope.nii.gz"), "-o", str(tmp_path / "o")]) == 2
+    assert "nope.nii.gz" in _one_error_line(capsys)
+    assert not (tmp_path / "o").exists()
+
+
+def test_corrupt_nifti_header(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.nii.gz"
+    bad.write_bytes(gzip.compress(b"this is not a nifti header" * 20))
+    assert main(["info", str(bad)]) == 2
+    assert "bad.nii.gz" in _one_error_line(capsys)
+
+
+def test_empty_mask(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "empty.nii.gz"
+    write_nifti(Volume(np.zeros((8, 8, 8), bool), np.eye(4)), path)
+    assert main(["run", str(path), "-o", str(tmp_path / "o")]) == 2
+    assert "empty" in _one_error_line(capsys).lower()
+
+
+def test_missing_label(chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", str(chair_nii), "--label", "7", "-o", str(tmp_path / "o")]) == 2
+    assert "7" in _one_error_line(capsys)
+
+
+def test_conflicting_options(chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["run", str(chair_nii), "--slices", "8", "--every", "2", "-o", str(tmp_path / "o")]
+    assert main(args) == 2
+    assert "--every" in _one_error_line(capsys)
+
+
+def test_non_parallel_contours(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    square = [[-5.0, -5.0], [5.0, -5.0], [5.0, 5.0], [-5.0, 5.0]]
+    flat = [[x, y, 0.0] for x, y in square]
+    tilted = [[x, y, 10.0 + 0.5 * x] for x, y in square]
+    path = tmp_path / "tilted.json"
+    path.write_text(json.dumps({
+        "format": "slicerecon-contours", "version": 1, "units": "mm",
+        "planes": [{"polygons": [flat]}, {"polygons": [tilted]}],
+    }))
+    assert main(["run", str(path), "-o", str(tmp_path / "o")]) == 2
+    assert "parallel" in _one_error_line(capsys)
+
+
+def test_failed_run_keeps_earlier_outputs(
+    chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "keep"
+    assert main(["run", str(chair_nii), "-o", str(out), "--slices", "6"]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    capsys.readouterr()
+    empty = tmp_path / "empty.nii.gz"
+    write_nifti(Volume(np.zeros((8, 8, 8), bool), np.eye(4)), empty)
+    assert main(["run", str(empty), "-o", str(out)]) == 2
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_console_script_exit_code_and_debug_traceback(tmp_path: Path) -> None:
+    missing = str(tmp_path / "missing.nii")
+    plain = subprocess.run(
+        [sys.executable, "-m", "slicerecon.cli", "info", missing], capture_output=True, text=True
+    )
+    assert plain.returncode == 2
+    assert plain.stderr.strip().count("\n") == 0 and "Traceback" not in plain.stderr
+    debug = subprocess.run(
+        [sys.executable, "-m", "slicerecon.cli", "--debug", "info", missing],
+        capture_output=True, text=True,
+    )
+    assert debug.returncode != 0 and "Traceback" in debug.stderr
