@@ -1,6 +1,6 @@
 """Contour files: closed polygons on parallel planes, as JSON or CSV.
 
-The formats are specified in ``docs/formats_contours.md``. In short:
+The formats are specified in ``docs/formats.md``. In short:
 
 JSON (``.json``)::
 
@@ -83,7 +83,7 @@ def read_contours(
     Parameters
     ----------
     path : path-like
-        A JSON or CSV contour file (see ``docs/formats_contours.md``).
+        A JSON or CSV contour file (see ``docs/formats.md``).
     pixel_spacing : float, optional
         In-plane pixel size of the grid the polygons are rasterized on, mm.
         Default: the file's ``grid`` when it has one (JSON), else the longest
@@ -198,7 +198,7 @@ def _parse_json(text: str, path: Path) -> _Parsed:
     _check_keys(doc, _TOP_KEYS, path, "")
     for key in ("format", "version", "units", "planes"):
         if key not in doc:
-            raise _fail(path, "", f"missing key {key!r}; see docs/formats_contours.md")
+            raise _fail(path, "", f"missing key {key!r}; see docs/formats.md")
     if doc["format"] != CONTOUR_FORMAT:
         raise _fail(path, "format",
                     f"expected {CONTOUR_FORMAT!r} (got {doc['format']!r}): not a contour file")

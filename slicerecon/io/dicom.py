@@ -5,7 +5,7 @@ Coordinates
 Everything stays in DICOM patient coordinates, **LPS millimetres** (x to the
 patient's left, y to posterior, z to superior); nothing is converted to RAS, so a
 mesh reconstructed from a DICOM input is written in LPS mm and overlays the
-source images in LPS-aware viewers. See ``docs/formats_dicom.md`` for the user guide.
+source images in LPS-aware viewers. See ``docs/formats.md`` for the user guide.
 
 The voxel grid follows the NIfTI-from-DICOM convention. With ImageOrientationPatient
 ``(row_cosine, column_cosine)``, PixelSpacing ``(between rows, between columns)``

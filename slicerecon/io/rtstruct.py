@@ -12,7 +12,7 @@ so a reconstruction overlays the images the structure set was drawn on. With
 the image series (``image_dir``) the contours are rasterized on its voxel grid;
 without it, on a grid built from the contours alone
 (:func:`slicerecon.io.polygons.sections_from_polygons`). See
-``docs/formats_contours.md``.
+``docs/formats.md``.
 """
 
 from __future__ import annotations

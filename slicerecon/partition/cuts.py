@@ -6,7 +6,7 @@ end points are corner points in continuous pixel coordinates (half-integers,
 see :mod:`slicerecon.corners`). The straight line through them, extruded along
 the viewing axis, divides the voxel grid into two open half-spaces; the
 smaller non-empty one (by voxel count of the remaining region) is the part
-``W`` that the cut separates. ``docs/method_partition.md`` states the rules.
+``W`` that the cut separates. ``docs/method.md`` states the rules.
 """
 
 from __future__ import annotations

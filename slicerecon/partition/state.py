@@ -4,7 +4,7 @@ One episode partitions a shape ``O`` (a boolean occupancy grid) into parts:
 each step applies one cut to the remaining region ``R``, separates the part
 ``W_i`` (:func:`~slicerecon.partition.cuts.split`) and scores it with the
 paper's reward ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)``.
-``docs/method_partition.md`` states the rules.
+``docs/method.md`` states the rules.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ The paper's surface step: within one part (a :class:`~slicerecon.sections.Box`),
 contours of consecutive planes are matched by centre and size, matched
 contours are joined by a triangle band, unmatched ones are closed off, and the
 ends are capped. The exact algorithm, with its costs and thresholds, is in
-``docs/lofting.md``; in short:
+``docs/method.md``; in short:
 
 1. **Regions.** Each plane's mask, cropped to the box (plus a one-pixel margin),
    is split into foreground regions (4-connected) and holes (8-connected

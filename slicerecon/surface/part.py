@@ -15,7 +15,7 @@ Methods
     (:func:`~slicerecon.surface.sdf.sdf_mesh`).
 
 Both use the same extent semantics along the section axis (see
-``docs/lofting.md``): with ``extend_to_box=True`` the first / last plane in
+``docs/method.md``): with ``extend_to_box=True`` the first / last plane in
 the box is extended to the box faces and a box holding no plane is filled by
 the slab of the planes either side of it; without it the part spans its
 first to last plane. A single call with the bounding box of the sections and
