@@ -91,7 +91,8 @@ def main() -> None:
     config = ReconstructConfig(slices=args.slices)
     stages = ["read", "sections", "plan", "surface", "metrics", "write"]
     lines = [
-        f"Measured by `python benchmarks/bench_run.py` ({platform.processor() or platform.machine()}, "
+        "Measured by `python benchmarks/bench_run.py` "
+        f"({platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} CPUs, Python {sys.version.split()[0]}); best of {args.repeat}; "
         f"{args.slices} planes; default planner and method.",
         "",

@@ -27,12 +27,14 @@ def main() -> None:
     parser.add_argument("--axes", default="x,y,z")
     parser.add_argument("--slices", default="6,10,16")
     parser.add_argument("--method", default="loft")
+    parser.add_argument("--no-carve", action="store_true", help="do not carve by the hull")
     parser.add_argument("--n-points", type=int, default=20_000)
     parser.add_argument("--out", type=Path)
     args = parser.parse_args()
     header = (
         f"Command: `python benchmarks/planner_quality.py --shapes {args.shapes} --axes {args.axes} "
-        f"--slices {args.slices} --method {args.method}`. Volume IoU (higher is better) and "
+        f"--slices {args.slices} --method {args.method}{' --no-carve' if args.no_carve else ''}`. "
+        "Volume IoU (higher is better) and "
         "Chamfer-L1 as a fraction of the ground-truth bounding-box diagonal (lower is better), "
         "x1000.\n\n"
         "| shape | axis | planes | IoU none | IoU heuristic | Chamfer none | Chamfer heuristic "
@@ -49,7 +51,10 @@ def main() -> None:
                 scores = {}
                 parts = 0
                 for planner in ("none", "heuristic"):
-                    result = reconstruct(sections, projections, planner=planner, method=args.method)
+                    result = reconstruct(
+                        sections, projections, planner=planner, method=args.method,
+                        carve=not args.no_carve,
+                    )
                     scores[planner] = evaluate(result.mesh, truth, n_points=args.n_points, seed=0)
                     parts = len(result.plan.parts)
                 none, heur = scores["none"], scores["heuristic"]

@@ -116,7 +116,9 @@ def test_missing_label(chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFi
     assert "7" in _one_error_line(capsys)
 
 
-def test_conflicting_options(chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_conflicting_options(
+    chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     args = ["run", str(chair_nii), "--slices", "8", "--every", "2", "-o", str(tmp_path / "o")]
     assert main(args) == 2
     assert "--every" in _one_error_line(capsys)

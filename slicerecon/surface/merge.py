@@ -20,7 +20,7 @@ from collections.abc import Sequence
 import manifold3d
 import numpy as np
 import trimesh
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ..errors import EmptyMaskError, GeometryError, InputError
 
@@ -126,7 +126,45 @@ def from_manifold(
         verts = verts @ mat[:3, :3].T + mat[:3, 3]
         if np.linalg.det(mat[:3, :3]) < 0:
             faces = faces[:, ::-1]
+    verts = _separate_pinches(verts, faces)
     return trimesh.Trimesh(vertices=verts, faces=faces, process=True)
+
+
+PINCH_GAP_MM = 1e-3
+"""How far apart :func:`from_manifold` pulls vertices that touch at one position."""
+
+
+def _separate_pinches(verts: NDArray[np.float64], faces: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Pull apart distinct vertices that share a position.
+
+    manifold3d keeps a solid 2-manifold where it touches itself along an edge
+    or at a point by giving the touching sheets separate vertices at the same
+    position. File formats without connectivity (STL) merge them, which makes
+    edges shared by four faces. Each such vertex is moved by
+    :data:`PINCH_GAP_MM` towards the centre of its own neighbours, so the
+    sheets separate by a few micrometres and the mesh stays manifold after
+    any merge by position.
+    """
+    if len(verts) == 0:
+        return verts
+    _, inverse, counts = np.unique(
+        np.round(verts, 9), axis=0, return_inverse=True, return_counts=True
+    )
+    pinched = np.flatnonzero(counts[inverse.ravel()] > 1)
+    if pinched.size == 0:
+        return verts
+    verts = verts.copy()
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    for v in pinched:
+        neighbours = edges[edges[:, 0] == v, 1]
+        if neighbours.size == 0:
+            continue
+        direction = verts[neighbours].mean(axis=0) - verts[v]
+        length = float(np.linalg.norm(direction))
+        if length > 0:
+            verts[v] += direction * min(PINCH_GAP_MM / length, 0.25)
+    logger.debug("separated %d pinched vertices", pinched.size)
+    return verts
 
 
 def union_solids(solids: Sequence[manifold3d.Manifold]) -> manifold3d.Manifold:
