@@ -167,6 +167,9 @@ def run(
     ] = None,
     mesh_format: Annotated[str, typer.Option("--format", help="stl, ply or obj.")] = "stl",
     smooth: Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")] = False,
+    carve: Annotated[
+        bool, typer.Option("--carve/--no-carve", help="Cut the surface to the projections' hull.")
+    ] = True,
     label: Annotated[int | None, typer.Option(help="Label value or segment number.")] = None,
     roi: Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")] = None,
     allow_irregular: Annotated[
@@ -186,6 +189,7 @@ def run(
         method=method,
         projections=projections,
         smooth=smooth,
+        carve=carve,
         mesh_format=mesh_format,
         label=label,
         roi=roi,
