@@ -68,6 +68,9 @@ class ReconstructConfig:
     ``auto`` (``gt`` for dense inputs, ``sections`` for sparse ones)."""
     smooth: bool = False
     """Taubin-smooth the merged mesh."""
+    carve: bool = True
+    """Intersect the surface with the visual hull of the projections
+    (``docs/method.md``, section 7): nothing the silhouettes rule out is kept."""
     mesh_format: str = "stl"
     """Output mesh format: stl, ply or obj."""
     label: int | None = None
@@ -237,6 +240,7 @@ def reconstruct(
     planner: str = "heuristic",
     method: str = "loft",
     smooth: bool = False,
+    carve: bool = True,
     max_parts: int = 8,
 ) -> Reconstruction:
     """Reconstruct a watertight surface from cross-sections and projections.
@@ -254,6 +258,9 @@ def reconstruct(
         Per-part surface method.
     smooth : bool
         Taubin-smooth the merged mesh.
+    carve : bool
+        Intersect the surface with the projections' visual hull
+        (:func:`slicerecon.surface.carve.carve`).
     max_parts : int
         Upper bound on the number of parts.
 
@@ -283,6 +290,13 @@ def reconstruct(
         mesh = reconstruct_parts(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none"
         )
+    if carve:
+        from .partition.hull import visual_hull
+        from .surface.carve import carve as carve_by_hull
+
+        with _timed(timings, "carve"):
+            hull = visual_hull(projections, sections.grid_shape)
+            mesh = carve_by_hull(mesh, hull, sections.affine)
     return Reconstruction(mesh, plan, sections, projections, timings)
 
 
@@ -352,6 +366,7 @@ def run_case(
         planner=config.planner,
         method=config.method,
         smooth=config.smooth,
+        carve=config.carve,
         max_parts=config.max_parts,
     )
     timings.update(result.timings)
