@@ -183,3 +183,19 @@ def test_projections_container():
     np.testing.assert_allclose(views[2].pixel_spacing, (1, 1))
     with pytest.raises(GeometryError):
         Projections(views[::-1])
+
+
+def test_atomic_writes_get_normal_permissions(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import os
+    import stat
+
+    from slicerecon.io.atomic import atomic_path
+
+    umask = os.umask(0o022)
+    try:
+        with atomic_path(tmp_path / "a.txt") as tmp:
+            tmp.write_text("x")
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE((tmp_path / "a.txt").stat().st_mode) == 0o644
+    assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
