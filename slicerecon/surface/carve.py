@@ -8,10 +8,9 @@ narrows, ends or turns between two planes. :func:`carve` intersects the
 surface with the hull, an exact Boolean in manifold3d, so every part of the
 reconstruction that the projections rule out is removed.
 
-The hull is meshed by marching cubes at level ``HULL_LEVEL`` (slightly below
-0.5, so its surface sits 1 % of a voxel outside the half-voxel boundary that
-the section contours use): the carve then never cuts into a contour that the
-hull itself contains, and the two surfaces never coincide exactly.
+Only where the surface leaves the hull is anything computed: the
+outside-the-hull voxels near those places are meshed by marching cubes and
+subtracted, which keeps the cost proportional to what is carved.
 """
 
 from __future__ import annotations
@@ -20,10 +19,11 @@ import logging
 
 import numpy as np
 import trimesh
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ..errors import EmptyMaskError, InputError
-from ..sections import Volume
+from ..rasterize import mesh_to_mask
+from ..sections import Box, Volume
 from .marching import volume_to_mesh
 from .merge import check_closed, from_manifold, to_manifold
 
@@ -32,11 +32,32 @@ __all__ = ["HULL_LEVEL", "carve"]
 logger = logging.getLogger(__name__)
 
 HULL_LEVEL = 0.49
-"""Marching-cubes level of the hull mask (0.5 is the voxel boundary)."""
+"""Marching-cubes level of the hull (0.5 is the voxel boundary): the carve
+keeps 1 % of a voxel more than the hull, so it never cuts a contour that the
+hull contains and the two surfaces never coincide."""
+
+_TEST_OFFSET = 0.5
+"""A surface sample counts as outside the hull when it stays outside after moving
+this many voxels along any axis: sub-voxel excursions (voxelisation noise of
+the hull around a smooth surface) are left alone."""
+
+_REACH = 2
+"""Voxels by which the carved region is grown around the samples found outside."""
 
 
-def carve(mesh: trimesh.Trimesh, hull: ArrayLike, affine: ArrayLike) -> trimesh.Trimesh:
+def carve(
+    mesh: trimesh.Trimesh, hull: ArrayLike, affine: ArrayLike, *, seed: int = 0
+) -> trimesh.Trimesh:
     """Intersect a closed mesh with a voxel visual hull.
+
+    Only the parts of the surface that leave the hull are touched: the surface
+    is sampled (about two points per voxel face of area); when samples lie
+    outside the hull, the voxels of the solid outside the hull (rasterized
+    voxel centres, plus the voxels of those samples) grown by ``_REACH``
+    voxels and kept outside the hull are meshed and subtracted with an exact
+    Boolean.
+    A surface that stays inside the hull is returned unchanged, at the cost of
+    the sampling only.
 
     Parameters
     ----------
@@ -46,6 +67,8 @@ def carve(mesh: trimesh.Trimesh, hull: ArrayLike, affine: ArrayLike) -> trimesh.
         The visual hull on the reference grid.
     affine : ndarray of shape (4, 4)
         Voxel index → world mm of the grid.
+    seed : int, default 0
+        Seed of the surface sampling.
 
     Returns
     -------
@@ -59,6 +82,8 @@ def carve(mesh: trimesh.Trimesh, hull: ArrayLike, affine: ArrayLike) -> trimesh.
     EmptyMaskError
         If the hull is empty or the intersection encloses no volume.
     """
+    from scipy import ndimage
+
     hull_mask = np.asarray(hull)
     if hull_mask.ndim != 3:
         raise InputError(f"the hull must be a 3-D mask (got shape {hull_mask.shape})")
@@ -66,8 +91,26 @@ def carve(mesh: trimesh.Trimesh, hull: ArrayLike, affine: ArrayLike) -> trimesh.
     if not hull_mask.any():
         raise EmptyMaskError("the visual hull is empty: the projections hold no foreground")
     grid = Volume(hull_mask, np.asarray(affine, dtype=np.float64))
-    hull_mesh = volume_to_mesh(grid, level=HULL_LEVEL)
-    solid = to_manifold(mesh) ^ to_manifold(hull_mesh)
+    outside, fraction_out = _outside_voxels(mesh, grid, seed=seed)
+    if fraction_out == 1.0:
+        raise EmptyMaskError(
+            "the reconstruction lies entirely outside the projections' visual hull; "
+            "check that the projections belong to these sections (or use --no-carve)"
+        )
+    if not outside.any():
+        logger.debug("carve: the surface stays inside the hull")
+        return mesh
+    # Everything of the solid outside the hull: voxel centres inside the mesh,
+    # plus the voxels of thin slivers that hold no centre but surface samples.
+    # (rasterized only inside the bounding box of the outside samples, grown).
+    box = Box.of_mask(ndimage.binary_dilation(outside, iterations=_REACH))
+    sub_affine = grid.affine.copy()
+    sub_affine[:3, 3] = grid.index_to_world(np.asarray(box.lo, dtype=np.float64))
+    inside = mesh_to_mask(mesh, sub_affine, box.shape)
+    outside[box.slices] |= inside & ~hull_mask[box.slices]
+    region = ndimage.binary_dilation(outside, iterations=_REACH) & ~hull_mask
+    cutter = volume_to_mesh(grid.with_mask(region).crop(pad=1), level=1.0 - HULL_LEVEL)
+    solid = to_manifold(mesh) - to_manifold(cutter)
     if solid.is_empty() or solid.volume() <= 0:
         raise EmptyMaskError(
             "the reconstruction lies entirely outside the projections' visual hull; "
@@ -79,3 +122,27 @@ def carve(mesh: trimesh.Trimesh, hull: ArrayLike, affine: ArrayLike) -> trimesh.
         "carved by the hull: %.6g -> %.6g mm^3", float(mesh.volume), float(carved.volume)
     )
     return carved
+
+
+def _outside_voxels(
+    mesh: trimesh.Trimesh, grid: Volume, *, seed: int
+) -> tuple[NDArray[np.bool_], float]:
+    """Voxels of ``grid`` holding surface samples outside its mask, and the fraction outside."""
+    spacing = grid.spacing
+    face_area = float(np.min(spacing)) ** 2
+    count = int(np.clip(mesh.area / face_area * 2.0, 1_000, 2_000_000))
+    points, _ = trimesh.sample.sample_surface(mesh, count, seed=seed)
+    index = grid.world_to_index(points)
+    shape = np.array(grid.shape)
+    out = np.ones(len(index), dtype=bool)
+    offsets = np.vstack([np.zeros(3), _TEST_OFFSET * np.vstack([np.eye(3), -np.eye(3)])])
+    for offset in offsets:
+        ijk = np.round(index + offset).astype(np.int64)
+        valid = np.all((ijk >= 0) & (ijk < shape), axis=1)
+        inside = np.zeros(len(ijk), dtype=bool)
+        inside[valid] = grid.mask[tuple(ijk[valid].T)]
+        out &= ~inside
+    marked = np.zeros(grid.shape, dtype=bool)
+    ijk = np.clip(np.round(index[out]).astype(np.int64), 0, shape - 1)
+    marked[tuple(ijk.T)] = True
+    return marked, float(out.mean())
