@@ -157,7 +157,9 @@ def run(
     ] = None,
     every: Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")] = None,
     axis: Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")] = "z",
-    planner: Annotated[str, typer.Option(help="heuristic or none.")] = "heuristic",
+    planner: Annotated[
+        str, typer.Option(help="heuristic, none or policy (learned planner).")
+    ] = "heuristic",
     method: Annotated[str, typer.Option(help="Per-part surface: loft or sdf.")] = "loft",
     projections: Annotated[
         str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
@@ -223,6 +225,119 @@ def _print_summary(summary: dict[str, Any], outdir: Path) -> None:
     console.print(f"outputs in {outdir}")
 
 
+# --------------------------------------------------------------------------- batch
+@app.command()
+def batch(
+    indir: Annotated[Path, typer.Argument(help="Folder of cases (NIfTI, DICOM, contours).")],
+    outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Output directory.")],
+    workers: Annotated[
+        int | None,
+        typer.Option(help="Local worker processes (default: CPUs); 0 runs in this process."),
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option(help="Dask scheduler address, e.g. tcp://host:8786.")
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Recompute cases finished by an earlier run.")
+    ] = False,
+    retries: Annotated[int, typer.Option(help="Re-runs of a case whose worker died.")] = 2,
+    no_report: Annotated[
+        bool, typer.Option("--no-report", help="Do not write the HTML report.")
+    ] = False,
+    slices: Annotated[
+        int | None, typer.Option("--slices", help="Keep N evenly spaced planes (default 16).")
+    ] = None,
+    every: Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")] = None,
+    axis: Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")] = "z",
+    planner: Annotated[
+        str, typer.Option(help="heuristic, none or policy (learned planner).")
+    ] = "heuristic",
+    method: Annotated[str, typer.Option(help="Per-part surface: loft or sdf.")] = "loft",
+    projections: Annotated[
+        str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
+    ] = "auto",
+    mesh_format: Annotated[str, typer.Option("--format", help="stl, ply or obj.")] = "stl",
+    smooth: Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")] = False,
+    label: Annotated[int | None, typer.Option(help="Label value or segment number.")] = None,
+    roi: Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")] = None,
+    allow_irregular: Annotated[
+        bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
+    ] = False,
+) -> None:
+    """Reconstruct every case in INDIR on Dask; write OUTDIR/<case>/ and OUTDIR/summary.csv.
+
+    Finished cases are skipped on a re-run (unless --force); a failed case is
+    recorded in OUTDIR/<case>/error.json and summary.csv. Exit code 0 when every
+    case is done, 1 when any failed, 2 for a bad invocation.
+    """
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    from pipelines.batch import run_batch
+
+    from .reconstruct import ReconstructConfig
+
+    config = ReconstructConfig(
+        slices=slices,
+        every=every,
+        axis=axis,
+        planner=planner,
+        method=method,
+        projections=projections,
+        smooth=smooth,
+        mesh_format=mesh_format,
+        label=label,
+        roi=roi,
+        allow_irregular=allow_irregular,
+    )
+    if not logging.getLogger().handlers:
+        logging.getLogger("distributed").setLevel(logging.ERROR)  # keep the bar readable
+    console = Console(stderr=True)
+    columns = (
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("{task.fields[last]}"),
+    )
+    with Progress(*columns, console=console, transient=True) as bar:
+        task = bar.add_task("cases", total=None, last="finding cases")
+
+        def advance(result: Any, done: int, total: int) -> None:
+            colour = {"ok": "green", "failed": "red", "skipped": "dim"}[result.status]
+            bar.update(task, total=total, completed=done,
+                       last=f"[{colour}]{result.status}[/] {result.case}")
+
+        outcome = run_batch(
+            indir,
+            outdir,
+            config,
+            workers=workers,
+            scheduler=scheduler,
+            force=force,
+            progress=advance,
+            retries=retries,
+            report=not no_report,
+        )
+    for failed in (c for c in outcome.cases if c.status == "failed"):
+        console.print(f"[red]failed[/] {failed.case}: {failed.error_type}: {failed.error}",
+                      markup=True, highlight=False, soft_wrap=True)
+    if outcome.report_error:
+        console.print(f"[yellow]report not written[/]: {outcome.report_error}")
+    typer.echo(
+        f"{len(outcome.cases)} cases: {outcome.n_ok} ok, {outcome.n_failed} failed, "
+        f"{outcome.n_skipped} skipped in {outcome.seconds:.1f} s -> {outcome.summary_csv}"
+    )
+    if not outcome.ok:
+        raise typer.Exit(code=1)
+
+
 # ------------------------------------------------------------------------ evaluate
 @app.command()
 def evaluate(
@@ -250,6 +365,246 @@ def evaluate(
         load(prediction, None), load(ground_truth, label), n_points=n_points, seed=seed
     )
     typer.echo(json.dumps(metrics.to_dict(), indent=2))
+
+
+# -------------------------------------------------------------- report / evaluate-dataset
+@app.command()
+def report(
+    results_dir: Annotated[Path, typer.Argument(help="Directory of case folders (plan.json).")],
+    title: Annotated[str | None, typer.Option("--title", help="Report title.")] = None,
+    no_renders: Annotated[
+        bool, typer.Option("--no-renders", help="Skip the per-case 3-D renders (faster).")
+    ] = False,
+) -> None:
+    """Write report.html, metrics.csv, summary.json into RESULTS_DIR; print the report path."""
+    from .report import write_report
+
+    typer.echo(str(write_report(results_dir, title=title, renders=not no_renders)))
+
+
+@app.command("evaluate-dataset")
+def evaluate_dataset(
+    dataset_dir: Annotated[Path, typer.Argument(help="Directory of NIfTI masks (recursive).")],
+    outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Results directory.")],
+    method: Annotated[
+        str, typer.Option(help="Comma-separated surface methods, e.g. loft,sdf.")
+    ] = "loft",
+    planner: Annotated[str, typer.Option(help="Partition planner.")] = "heuristic",
+    slices: Annotated[
+        int | None, typer.Option("--slices", help="Keep N evenly spaced planes (default 16).")
+    ] = None,
+    every: Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")] = None,
+    axis: Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")] = "z",
+    projections: Annotated[
+        str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
+    ] = "auto",
+    mesh_format: Annotated[str, typer.Option("--format", help="stl, ply or obj.")] = "stl",
+    smooth: Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")] = False,
+    label: Annotated[int | None, typer.Option(help="Label value to keep.")] = None,
+    n_points: Annotated[int, typer.Option(help="Surface samples per mesh.")] = 50_000,
+    seed: Annotated[int, typer.Option(help="Sampling seed.")] = 0,
+    title: Annotated[str | None, typer.Option("--title", help="Report title.")] = None,
+    no_renders: Annotated[
+        bool, typer.Option("--no-renders", help="Skip the per-case 3-D renders.")
+    ] = False,
+    rerun: Annotated[
+        bool, typer.Option("--rerun", help="Recompute cases already done with the same options.")
+    ] = False,
+) -> None:
+    """Run every mask of DATASET_DIR with each method into OUTDIR/<case>/<method>/; report.
+
+    Sequential; a failing case writes error.json and the others go on. Prints
+    the report path.
+    """
+    from rich.console import Console
+
+    from .reconstruct import ReconstructConfig
+    from .report import evaluate_dataset as run_dataset
+
+    config = ReconstructConfig(
+        slices=slices,
+        every=every,
+        axis=axis,
+        planner=planner,
+        projections=projections,
+        smooth=smooth,
+        mesh_format=mesh_format,
+        label=label,
+        n_points=n_points,
+        seed=seed,
+    )
+    with Console(stderr=True).status("starting") as status:
+        path = run_dataset(
+            dataset_dir,
+            outdir,
+            methods=method.split(","),
+            config=config,
+            title=title,
+            renders=not no_renders,
+            resume=not rerun,
+            progress=lambda s: status.update(s),
+        )
+    typer.echo(str(path))
+
+
+# --------------------------------------------------------------------------- train
+@app.command()
+def train(
+    config: Annotated[
+        str, typer.Option("--config", help="TOML file, or a shipped config: ddpg, il, il_rl.")
+    ] = "il_rl",
+    device: Annotated[str, typer.Option(help="cpu or cuda.")] = "cpu",
+    out: Annotated[Path | None, typer.Option("--out", help="Output directory.")] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Continue from OUT/checkpoint.pt.")
+    ] = False,
+    steps: Annotated[
+        int | None, typer.Option("--steps", help="Total updates (overrides the config).")
+    ] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="Seed (overrides the config).")] = None,
+    threads: Annotated[
+        int | None, typer.Option("--threads", help="torch CPU threads (default: torch's).")
+    ] = None,
+) -> None:
+    """Train the learned cut planner (DDPG / imitation / DDPG from demonstrations)."""
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from .errors import OptionError
+    from .policy.train import load_config
+    from .policy.train import train as run_training
+
+    if device not in ("cpu", "cuda"):
+        raise OptionError(f"--device must be cpu or cuda (got {device!r})")
+    if threads is not None:
+        if threads < 1:
+            raise OptionError(f"--threads must be >= 1 (got {threads})")
+        import torch
+
+        torch.set_num_threads(threads)
+    cfg = load_config(config, total_updates=steps, seed=seed)
+    outdir = out if out is not None else Path("runs") / cfg.name
+    columns = (
+        TextColumn(f"[bold]{cfg.name}"), BarColumn(), MofNCompleteColumn(),
+        TextColumn("{task.fields[info]}"), TimeElapsedColumn(), TimeRemainingColumn(),
+    )
+    with Progress(*columns, console=Console(stderr=True)) as bar:
+        task = bar.add_task("train", total=cfg.total_updates, info="")
+
+        def progress(done: int, total: int, metrics: dict[str, float]) -> None:
+            info = " ".join(
+                f"{k}={v:.3g}" for k, v in metrics.items()
+                if k in ("critic_loss", "bc_loss", "eval_iou") and v == v
+            )
+            bar.update(task, completed=done, total=total, info=info)
+
+        result = run_training(cfg, out=outdir, device=device, resume=resume, progress=progress)
+    typer.echo(
+        json.dumps(
+            {
+                "out": str(result.out),
+                "actor": str(result.actor_path),
+                "log": str(result.log_path),
+                "updates": result.n_updates,
+                "eval_iou": round(result.eval_iou, 4),
+                "heuristic_eval_iou": round(result.heuristic_eval_iou, 4),
+            },
+            indent=2,
+        )
+    )
+
+
+# ------------------------------------------------------------------------- dataset
+dataset_app = typer.Typer(
+    help="Make datasets of procedural and real shape masks; list the shapes.",
+    no_args_is_help=True,
+)
+app.add_typer(dataset_app, name="dataset")
+
+
+def _spacing_option(text: str) -> float | tuple[float, ...]:
+    """Parse ``"1.5"`` or ``"0.8,0.8,2"`` (mm)."""
+    from .errors import OptionError
+
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise OptionError(f"--spacing must be one or three numbers of mm (got {text!r})") from None
+    if len(values) not in (1, 3):
+        raise OptionError(f"--spacing must be one or three numbers of mm (got {text!r})")
+    return values[0] if len(values) == 1 else values
+
+
+@dataset_app.command("make")
+def dataset_make(
+    outdir: Annotated[Path, typer.Argument(help="Output directory (new, empty or a dataset).")],
+    shapes: Annotated[
+        str | None,
+        typer.Option(help="Comma-separated shapes, families or real shapes (default: all "
+                     "procedural shapes)."),
+    ] = None,
+    per_shape: Annotated[int, typer.Option(help="Seeded variants per procedural shape.")] = 1,
+    seed: Annotated[int, typer.Option(help="Dataset seed.")] = 0,
+    size: Annotated[
+        int | None, typer.Option(help="Largest extent of each shape, voxels.")
+    ] = None,
+    spacing: Annotated[str, typer.Option(help="Voxel size in mm: s or sx,sy,sz.")] = "1",
+    margin: Annotated[int, typer.Option(help="Background voxels around each shape.")] = 3,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Write into a non-empty, non-dataset directory.")
+    ] = False,
+) -> None:
+    """Write one NIfTI mask per case and a manifest.json into OUTDIR."""
+    from rich.progress import Progress
+
+    from .dataset import make_dataset
+
+    with Progress(transient=True) as bar:
+        task = bar.add_task("shapes", total=None)
+        manifest = make_dataset(
+            outdir,
+            shapes=shapes,
+            per_shape=per_shape,
+            seed=seed,
+            size=size,
+            spacing=_spacing_option(spacing),
+            margin=margin,
+            overwrite=overwrite,
+            progress=lambda done, total, case: bar.update(
+                task, completed=done, total=total, description=case
+            ),
+        )
+    cases = json.loads(manifest.read_text(encoding="utf-8"))["cases"]
+    typer.echo(f"wrote {len(cases)} cases to {outdir} (manifest: {manifest})")
+
+
+@dataset_app.command("list")
+def dataset_list(
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """List the shape families, their shapes, and the real shapes installed here."""
+    from .realshapes import available_real_shapes, real_shape_names
+    from .shapes import FAMILIES
+
+    available = set(available_real_shapes())
+    real = {name: name in available for name in real_shape_names()}
+    if as_json:
+        typer.echo(json.dumps({"families": FAMILIES, "real": real}, indent=2))
+        return
+    for family, names in FAMILIES.items():
+        typer.echo(f"{family}: {', '.join(names)}")
+    installed = [n for n, ok in real.items() if ok]
+    missing = [n for n, ok in real.items() if not ok]
+    typer.echo(f"real (installed): {', '.join(installed) or 'none'}")
+    if missing:
+        typer.echo(f"real (missing packages): {', '.join(missing)}")
 
 
 def main(argv: list[str] | None = None) -> int:

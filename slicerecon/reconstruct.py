@@ -38,7 +38,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-PLANNERS = ("heuristic", "none")
+PLANNERS = ("heuristic", "none", "policy")
 METHODS = ("loft", "sdf")
 PROJECTION_SOURCES = ("auto", "gt", "sections")
 MESH_FORMATS = ("stl", "ply", "obj")
@@ -58,7 +58,8 @@ class ReconstructConfig:
     """Grid axis the section planes are perpendicular to (x, y or z)."""
     planner: str = "heuristic"
     """How the shape is partitioned into cuboid parts: ``heuristic`` (the
-    paper's expert) or ``none`` (one part: the no-projection baseline)."""
+    paper's expert), ``none`` (one part: the no-projection baseline) or
+    ``policy`` (the shipped learned planner, ``docs/policy.md``)."""
     method: str = "loft"
     """How each part is reconstructed: ``loft`` (contour lofting) or ``sdf``
     (signed-distance interpolation + marching cubes)."""
@@ -242,6 +243,7 @@ def reconstruct(
     smooth: bool = False,
     carve: bool = True,
     max_parts: int = 8,
+    weights: str | os.PathLike[str] | None = None,
 ) -> Reconstruction:
     """Reconstruct a watertight surface from cross-sections and projections.
 
@@ -252,8 +254,8 @@ def reconstruct(
     projections : Projections
         Orthographic silhouettes on the same grid (from the dense mask or
         derived from the sections).
-    planner : {"heuristic", "none"}
-        Partition planner.
+    planner : {"heuristic", "none", "policy"}
+        Partition planner (``policy``: a trained actor, needs torch).
     method : {"loft", "sdf"}
         Per-part surface method.
     smooth : bool
@@ -263,6 +265,8 @@ def reconstruct(
         (:func:`slicerecon.surface.carve.carve`).
     max_parts : int
         Upper bound on the number of parts.
+    weights : path-like, optional
+        Actor weights for ``planner="policy"`` (default: the shipped ``il_rl`` actor).
 
     Returns
     -------
@@ -283,7 +287,8 @@ def reconstruct(
             return part_voxels(sections, box)
 
         plan = plan_partition(
-            occupancy, planner=planner, reconstruct=part_reconstruction, max_parts=max_parts
+            occupancy, planner=planner, reconstruct=part_reconstruction, max_parts=max_parts,
+            weights=weights,
         )
     with _timed(timings, "surface"):
         boxes = [part.box for part in plan.parts]
@@ -313,6 +318,7 @@ def run_case(
     config: ReconstructConfig,
     *,
     ground_truth: str | os.PathLike[str] | None = None,
+    image_dir: str | os.PathLike[str] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Reconstruct one case and write its outputs.
@@ -343,6 +349,7 @@ def run_case(
             input_path,
             label=config.label,
             roi=_roi(config.roi),
+            image_dir=image_dir,
             allow_irregular=config.allow_irregular,
         )
     with _timed(timings, "sections"):

@@ -3,12 +3,14 @@
 A planner is a function registered in :data:`PLANNERS`; :func:`plan_partition`
 looks it up by name. ``"none"`` is the paper's no-projection baseline (one part,
 the bounding box of the shape); ``"heuristic"`` runs the heuristic expert to the
-end of an episode. A learned planner is added with one more registry entry.
+end of an episode; ``"policy"`` runs a trained actor (:mod:`slicerecon.policy.planner`,
+imported only when that planner is used, so the geometry never imports torch).
 """
 
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -181,9 +183,32 @@ def _plan_heuristic(
     return state.finish()
 
 
+def _plan_policy(
+    occupancy: NDArray[np.bool_],
+    *,
+    reconstruct: Reconstruct | None,
+    max_parts: int,
+    min_remaining: float,
+    lam: float,
+    weights: str | os.PathLike[str] | None = None,
+    device: str = "cpu",
+) -> list[Part]:
+    """The learned planner (:func:`slicerecon.policy.planner.plan_policy`).
+
+    The policy package (and torch) is imported only when this planner runs.
+    """
+    from ..policy.planner import plan_policy
+
+    return plan_policy(
+        occupancy, reconstruct=reconstruct, max_parts=max_parts,
+        min_remaining=min_remaining, lam=lam, weights=weights, device=device,
+    )
+
+
 PLANNERS: dict[str, PlannerFn] = {
     "none": _plan_none,
     "heuristic": _plan_heuristic,
+    "policy": _plan_policy,
 }
 """Registered planners by name. Register a new one with ``PLANNERS["name"] = function``."""
 
@@ -201,6 +226,7 @@ def plan_partition(
     max_parts: int = 8,
     min_remaining: float = 0.02,
     lam: float = 1.0,
+    weights: str | os.PathLike[str] | None = None,
 ) -> Plan:
     """Partition an occupancy grid into cuboid parts.
 
@@ -209,7 +235,8 @@ def plan_partition(
     occupancy : ndarray of shape (I, J, K), bool
         The shape (ground truth, or the visual hull of the projections).
     planner : str, optional
-        A name in :data:`PLANNERS`: ``"none"`` or ``"heuristic"``.
+        A name in :data:`PLANNERS`: ``"none"``, ``"heuristic"`` or ``"policy"``
+        (the learned planner; needs torch).
     reconstruct : callable, optional
         ``reconstruct(box) -> bool array of box.shape``, used for the reward's
         reconstruction term (see :class:`~slicerecon.partition.state.PartitionState`).
@@ -219,6 +246,9 @@ def plan_partition(
         Stop cutting when fewer than this fraction of the voxels remain.
     lam : float, optional
         Reward weight of the reconstruction term.
+    weights : path-like, optional
+        Actor weights of the ``"policy"`` planner (default: the shipped
+        ``il_rl`` actor); an error for the other planners.
 
     Returns
     -------
@@ -239,13 +269,17 @@ def plan_partition(
         )
     if isinstance(max_parts, bool) or int(max_parts) < 1:
         raise OptionError(f"max_parts must be >= 1 (got {max_parts})")
+    if weights is not None and name != "policy":
+        raise OptionError(f"weights apply to the policy planner only (planner is {name!r})")
     occ = np.asarray(occupancy)
+    options = {} if weights is None else {"weights": weights}
     parts = PLANNERS[name](
         occ,
         reconstruct=reconstruct,
         max_parts=int(max_parts),
         min_remaining=float(min_remaining),
         lam=float(lam),
+        **options,
     )
     shape = tuple(int(s) for s in occ.shape)
     plan = Plan(name, tuple(PlanPart(p.box, p.cut, p.mask_voxels) for p in parts), shape)  # type: ignore[arg-type]
