@@ -18,6 +18,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import FormatError, InputError
 from ..sections import CrossSections, Volume
 
@@ -38,7 +40,7 @@ class InputKind:
     Attributes
     ----------
     kind : str
-        One of ``"nifti"``, ``"dicom-series"``, ``"dicom-seg"``, ``"rtstruct"``,
+        One of ``"nifti"``, ``"vti"``, ``"dicom-series"``, ``"dicom-seg"``, ``"rtstruct"``,
         ``"contours"``, ``"mesh"``.
     path : Path
         The file or directory itself.
@@ -105,6 +107,8 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         return InputKind("nifti", p)
     if suffix in MESH_SUFFIXES:
         return InputKind("mesh", p)
+    if suffix == ".vti":
+        return InputKind("vti", p)
     if suffix in CONTOUR_SUFFIXES:
         return InputKind("contours", p)
     modality = _dicom_modality(p)
@@ -118,7 +122,8 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         )
     raise FormatError(
         f"cannot tell the format of {p}: expected .nii/.nii.gz, a DICOM series directory, "
-        "a DICOM SEG or RTSTRUCT file, a contour file (.json/.csv) or a mesh (.stl/.ply/.obj/.off)"
+        "a DICOM SEG or RTSTRUCT file, a contour file (.json/.csv), a VTK image (.vti) "
+        "or a mesh (.stl/.ply/.obj/.off)"
     )
 
 
@@ -182,6 +187,8 @@ def load_input(
             image_dir=image_dir if image_dir is not None else kind.image_dir,
             pixel_spacing=pixel_spacing,
         )
+    if kind.kind == "vti":
+        return _vti_volume(kind.path, label=label)
     if kind.kind == "contours":
         from .contours import read_contours
 
@@ -189,3 +196,21 @@ def load_input(
     from .mesh import read_mesh_volume
 
     return read_mesh_volume(kind.path, resolution=mesh_resolution)
+
+
+def _vti_volume(path: Path, *, label: int | None) -> Volume:
+    """A label map in a VTK XML image (``.vti``): one label, or every non-zero voxel."""
+    from ..errors import LabelError
+    from .vti import read_vti
+
+    image = read_vti(path)
+    values = np.asarray(image.values)
+    if label is None:
+        mask = values != 0
+    else:
+        present = np.unique(values)
+        if label not in present:
+            shown = ", ".join(str(v) for v in present[present != 0][:20])
+            raise LabelError(f"{path}: label {label} is not in the image (labels: {shown})")
+        mask = values == label
+    return Volume(mask, image.affine)

@@ -193,3 +193,19 @@ def test_clear_errors(tmp_path: Path) -> None:
     short.write_bytes(text[:start] + text[start:].split(b" ", 1)[1])  # drop the first value
     with pytest.raises(FormatError, match="holds 139 values; its extent needs 140"):
         read_vti(short)
+
+
+def test_load_input_reads_a_vti_label_map(tmp_path: Path) -> None:
+    from slicerecon.cli import main
+    from slicerecon.io import detect_kind, load_input
+
+    labels = np.zeros((12, 10, 8), dtype=np.uint8)
+    labels[2:6, 2:5, 1:4] = 3
+    labels[7:10, 5:9, 3:7] = 5
+    path = write_vti(tmp_path / "organs.vti", labels)
+    assert detect_kind(path).kind == "vti"
+    assert load_input(path).mask.sum() == np.count_nonzero(labels)
+    assert load_input(path, label=5).mask.sum() == np.count_nonzero(labels == 5)
+    with pytest.raises(LabelError, match="label 4"):
+        load_input(path, label=4)
+    assert main(["info", str(path), "--label", "4"]) == 2
