@@ -100,16 +100,23 @@ def carve(
     if not outside.any():
         logger.debug("carve: the surface stays inside the hull")
         return mesh
-    # Everything of the solid outside the hull: voxel centres inside the mesh,
-    # plus the voxels of thin slivers that hold no centre but surface samples.
-    # (rasterized only inside the bounding box of the outside samples, grown).
-    box = Box.of_mask(ndimage.binary_dilation(outside, iterations=_REACH))
+    # Work in the bounding box of the outside samples, grown: there, everything
+    # of the solid outside the hull (rasterized voxel centres, plus the voxels
+    # of thin slivers that hold no centre but samples), grown and kept outside
+    # the hull, is the region to cut away.
+    found = Box.of_mask(outside)
+    grow = 2 * _REACH + 1
+    work = Box(
+        tuple(max(lo - grow, 0) for lo in found.lo),  # type: ignore[arg-type]
+        tuple(min(hi + grow, n) for hi, n in zip(found.hi, grid.shape, strict=True)),  # type: ignore[arg-type]
+    )
     sub_affine = grid.affine.copy()
-    sub_affine[:3, 3] = grid.index_to_world(np.asarray(box.lo, dtype=np.float64))
-    inside = mesh_to_mask(mesh, sub_affine, box.shape)
-    outside[box.slices] |= inside & ~hull_mask[box.slices]
-    region = ndimage.binary_dilation(outside, iterations=_REACH) & ~hull_mask
-    cutter = volume_to_mesh(grid.with_mask(region).crop(pad=1), level=1.0 - HULL_LEVEL)
+    sub_affine[:3, 3] = grid.index_to_world(np.asarray(work.lo, dtype=np.float64))
+    outside_hull = ~hull_mask[work.slices]
+    solid_out = mesh_to_mask(mesh, sub_affine, work.shape) & outside_hull
+    seeds = outside[work.slices] | solid_out
+    region = ndimage.binary_dilation(seeds, iterations=_REACH) & outside_hull
+    cutter = volume_to_mesh(Volume(region, sub_affine).crop(pad=1), level=1.0 - HULL_LEVEL)
     solid = to_manifold(mesh) - to_manifold(cutter)
     if solid.is_empty() or solid.volume() <= 0:
         raise EmptyMaskError(
