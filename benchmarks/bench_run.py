@@ -89,7 +89,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="write a markdown table here")
     args = parser.parse_args()
     config = ReconstructConfig(slices=args.slices)
-    stages = ["read", "sections", "plan", "surface", "metrics", "write"]
+    stages = ["read", "sections", "plan", "surface", "carve", "metrics", "write"]
     lines = [
         "Measured by `python benchmarks/bench_run.py` "
         f"({platform.processor() or platform.machine()}, "
