@@ -188,7 +188,7 @@ class Volume:
 
     def world_to_index(self, xyz: ArrayLike) -> NDArray[np.float64]:
         """Map world mm, ndarray of shape (..., 3), to fractional voxel indices."""
-        return _apply(np.linalg.inv(self.affine), xyz)
+        return _apply(np.linalg.inv(self.affine).astype(np.float64), xyz)
 
     def bounding_box_vox(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """Index bounds ``(lo, hi)`` of the foreground, ``hi`` exclusive.
