@@ -1,0 +1,311 @@
+"""Find the cases of a batch in an input directory and give each a safe name.
+
+A *case* is one input that :func:`slicerecon.reconstruct.run_case` reconstructs
+on its own. :func:`discover_cases` walks ``INDIR`` (recursively, in sorted
+order, skipping hidden files and folders) and finds:
+
+* NIfTI masks: ``*.nii``, ``*.nii.gz``;
+* contour files: ``*.json``, ``*.csv``;
+* DICOM SEG files: one case each;
+* DICOM RTSTRUCT files: one case each. When the RTSTRUCT lies in a folder that
+  also holds an image series, the contours are read on that series' voxel grid
+  (the images are its reference, not a case of their own);
+* DICOM image series: a folder of image files of one series (a mask stored as
+  DICOM) is one case, unless the folder also holds an RTSTRUCT or a SEG (then
+  the images are the reference those were drawn on);
+* a file named like DICOM (``.dcm``, ``.dicom``, ``.ima``) that cannot be read
+  in a folder without image files: one case, so that its failure is recorded.
+
+Meshes (``.stl``, ``.ply``, ``.obj``, ``.off``) are not cases: a batch writes
+meshes, and an output directory inside ``INDIR`` must not be read back as
+input. Other files are ignored.
+
+Case names
+----------
+A case's name is its path relative to ``INDIR`` without the format suffix,
+made safe by :func:`safe_case_name`: ASCII letters, digits, ``-`` and ``_``
+only, folder levels joined by ``__``. A name can therefore never hold a path
+separator, ``..``, a dot or a drive, so ``OUTDIR/<name>/`` always lies directly
+inside ``OUTDIR``. Names that collide (compared case-insensitively) or
+that a batch output uses (:data:`RESERVED_NAMES`) get ``-2``, ``-3``, ... in
+sorted input order.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import re
+import unicodedata
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath, PureWindowsPath
+
+from slicerecon.errors import InputError
+
+__all__ = ["CASE_KINDS", "RESERVED_NAMES", "Case", "discover_cases", "safe_case_name"]
+
+logger = logging.getLogger(__name__)
+
+CASE_KINDS = ("nifti", "contours", "dicom-series", "dicom-seg", "rtstruct", "dicom-unreadable")
+"""The kinds of case :func:`discover_cases` reports."""
+
+NIFTI_SUFFIXES = (".nii.gz", ".nii")
+CONTOUR_SUFFIXES = (".json", ".csv")
+DICOM_SUFFIXES = (".dcm", ".dicom", ".ima")
+MAX_NAME_LENGTH = 96
+"""Longest case name; longer ones are cut and get a hash of the full name."""
+
+_SEG_SOP_CLASS_UID = "1.2.840.10008.5.1.4.1.1.66.4"
+_NON_IMAGE_MODALITIES = frozenset(
+    {"RTSTRUCT", "SEG", "RTPLAN", "RTRECORD", "SR", "KO", "PR", "REG", "DOC", "FID", "PLAN"}
+)
+RESERVED_NAMES = frozenset({"report_assets"})
+"""Names of batch-level outputs in OUTDIR (the HTML report's figure folder); a case
+that would get one of them is numbered instead (``report_assets-2``)."""
+_UNSAFE = re.compile(r"[^A-Za-z0-9_-]+")
+_RESERVED = frozenset(
+    {"con", "prn", "aux", "nul"} | {f"com{i}" for i in range(10)} | {f"lpt{i}" for i in range(10)}
+)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One input of a batch.
+
+    Attributes
+    ----------
+    name : str
+        Safe, unique name; outputs go to ``OUTDIR/<name>/``.
+    path : Path
+        What :func:`~slicerecon.reconstruct.run_case` reads: a file, or the
+        folder of a DICOM series.
+    kind : str
+        One of :data:`CASE_KINDS`.
+    relpath : str
+        ``path`` relative to the input directory (POSIX separators), as shown
+        in ``summary.csv``.
+    files : tuple of Path
+        Every file whose bytes determine the output (the input file; all
+        files of a series folder; an RTSTRUCT and the images of its grid).
+        Their names and bytes make the resume key.
+    root : Path
+        Folder that names in ``files`` are taken relative to when hashing.
+    image_dir : Path or None
+        For an RTSTRUCT beside an image series: that folder (its voxel grid).
+    """
+
+    name: str
+    path: Path
+    kind: str
+    relpath: str
+    files: tuple[Path, ...]
+    root: Path
+    image_dir: Path | None = None
+
+
+def safe_case_name(relpath: str | os.PathLike[str]) -> str:
+    """Turn a relative input path into a name that is safe as one folder in OUTDIR.
+
+    Parameters
+    ----------
+    relpath : str or path-like
+        Path of the input relative to the input directory, with or without its
+        suffix. Absolute paths, drive letters, ``..`` and ``.`` parts are
+        accepted and neutralised (dropped), never followed.
+
+    Returns
+    -------
+    str
+        A non-empty name of ASCII letters, digits, ``-`` and ``_``; folder
+        levels are joined by ``__``. Accents are dropped (``Müller`` →
+        ``Muller``); other characters become ``_``; a part with nothing left
+        (e.g. only CJK letters) becomes ``u`` plus 8 hex digits of its hash, so
+        different names stay different. Names longer than
+        :data:`MAX_NAME_LENGTH` are cut and end in a hash of the full name.
+
+    Examples
+    --------
+    >>> safe_case_name("../../etc/passwd")
+    'etc__passwd'
+    >>> safe_case_name("patient 01/ct.v2")
+    'patient_01__ct_v2'
+    """
+    text = os.fspath(relpath)
+    parts: list[str] = []
+    for raw in PureWindowsPath(text).parts if "\\" in text else PurePosixPath(text).parts:
+        raw = raw.strip().strip("/\\")
+        if raw in ("", ".", ".."):
+            continue
+        ascii_text = (
+            unicodedata.normalize("NFKD", raw).encode("ascii", "ignore").decode("ascii")
+        )
+        part = _UNSAFE.sub("_", ascii_text)
+        part = re.sub(r"_{2,}", "_", part).strip("_-")
+        if not part:
+            part = "u" + hashlib.sha256(raw.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+        if part.lower() in _RESERVED:
+            part = f"_{part}"
+        parts.append(part)
+    name = "__".join(parts) or "case"
+    if len(name) > MAX_NAME_LENGTH:
+        digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:8]
+        name = f"{name[: MAX_NAME_LENGTH - 9]}-{digest}"
+    return name
+
+
+def _strip_suffix(name: str) -> str:
+    lower = name.lower()
+    for suffix in (*NIFTI_SUFFIXES, *CONTOUR_SUFFIXES, *DICOM_SUFFIXES):
+        if lower.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def _has_dicom_marker(path: Path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(132)
+    except OSError:
+        return False
+    return len(head) == 132 and head[128:132] == b"DICM"
+
+
+def _dicom_role(path: Path) -> str | None:
+    """``"image"``, ``"seg"``, ``"rtstruct"``, ``"other"`` (a non-image object),
+    ``"unreadable"`` (named like DICOM but not readable), or None (not DICOM)."""
+    named_dicom = path.name.lower().endswith(DICOM_SUFFIXES)
+    if not _has_dicom_marker(path):
+        return "unreadable" if named_dicom else None
+    import pydicom
+
+    try:
+        ds = pydicom.dcmread(
+            path, stop_before_pixels=True, specific_tags=["Modality", "SOPClassUID"]
+        )
+    except Exception:  # noqa: BLE001 - any parser failure: the reader reports it later
+        return "unreadable"
+    modality = str(getattr(ds, "Modality", "") or "").upper()
+    sop_class = str(getattr(ds, "SOPClassUID", "") or "")
+    meta = getattr(ds, "file_meta", None)
+    media_class = str(meta.get("MediaStorageSOPClassUID", "")) if meta is not None else ""
+    if sop_class == _SEG_SOP_CLASS_UID or media_class == _SEG_SOP_CLASS_UID:
+        return "seg"
+    if modality == "RTSTRUCT":
+        return "rtstruct"
+    if modality in _NON_IMAGE_MODALITIES or media_class == "1.2.840.10008.1.3.10":
+        return "other"
+    return "image"
+
+
+def _relpath(path: Path, root: Path) -> str:
+    return path.relative_to(root).as_posix()
+
+
+def _folder_cases(folder: Path, files: list[Path], root: Path) -> list[tuple[str, Case]]:
+    """Cases in one folder (not recursing), keyed by their unsanitised base name."""
+    found: list[tuple[str, Case]] = []
+    dicom: dict[str, list[Path]] = {}
+    for f in files:
+        lower = f.name.lower()
+        rel = _relpath(f, root)
+        if lower.endswith(NIFTI_SUFFIXES):
+            found.append((_strip_suffix(rel), Case("", f, "nifti", rel, (f,), f.parent)))
+            continue
+        if lower.endswith(CONTOUR_SUFFIXES):
+            found.append((_strip_suffix(rel), Case("", f, "contours", rel, (f,), f.parent)))
+            continue
+        role = _dicom_role(f)
+        if role is not None:
+            dicom.setdefault(role, []).append(f)
+    images = dicom.get("image", [])
+    annotations = dicom.get("seg", []) + dicom.get("rtstruct", [])
+    # files whose bytes define a series folder: every readable or DICOM-named file in it
+    series_files = tuple(
+        sorted(images + dicom.get("unreadable", []) + dicom.get("other", []) + annotations)
+    )
+    if images and not annotations:
+        rel = _relpath(folder, root) if folder != root else folder.name
+        found.append((rel, Case("", folder, "dicom-series", rel, series_files, folder)))
+    elif not images:
+        for f in dicom.get("unreadable", []):
+            rel = _relpath(f, root)
+            found.append((_strip_suffix(rel), Case("", f, "dicom-unreadable", rel, (f,), folder)))
+    for f in dicom.get("seg", []):
+        rel = _relpath(f, root)
+        found.append((_strip_suffix(rel), Case("", f, "dicom-seg", rel, (f,), folder)))
+    reference = tuple(sorted(images + dicom.get("unreadable", []))) if images else ()
+    for f in dicom.get("rtstruct", []):
+        rel = _relpath(f, root)
+        case = Case(
+            "", f, "rtstruct", rel, (f, *reference), folder, folder if images else None
+        )
+        found.append((_strip_suffix(rel), case))
+    return found
+
+
+def _walk(root: Path, skip: Iterable[Path]) -> list[tuple[Path, list[Path]]]:
+    skipped = {p.resolve() for p in skip}
+    out: list[tuple[Path, list[Path]]] = []
+    for here, dirs, names in os.walk(root):
+        folder = Path(here)
+        dirs[:] = sorted(
+            d for d in dirs
+            if not d.startswith(".") and (folder / d).resolve() not in skipped
+        )
+        files = [
+            folder / n for n in sorted(names)
+            if not n.startswith(".") and (folder / n).is_file()
+        ]
+        out.append((folder, files))
+    return out
+
+
+def discover_cases(
+    indir: str | os.PathLike[str], *, exclude: Iterable[str | os.PathLike[str]] = ()
+) -> list[Case]:
+    """List the cases in ``indir`` in a stable, sorted order.
+
+    Parameters
+    ----------
+    indir : path-like
+        The input directory (searched recursively; hidden entries skipped).
+    exclude : iterable of path-like
+        Folders not to search (e.g. an output directory inside ``indir``).
+
+    Returns
+    -------
+    list of Case
+        Sorted by relative input path; names unique (case-insensitively).
+
+    Raises
+    ------
+    InputError
+        If ``indir`` does not exist or is not a directory.
+    """
+    root = Path(indir)
+    if not root.exists():
+        raise InputError(f"input directory not found: {root}")
+    if not root.is_dir():
+        raise InputError(f"{root} is not a directory; pass the folder that holds the cases")
+    found: list[tuple[str, Case]] = []
+    for folder, files in _walk(root, [Path(p) for p in exclude]):
+        found.extend(_folder_cases(folder, files, root))
+    found.sort(key=lambda item: item[1].relpath)
+    cases: list[Case] = []
+    taken: set[str] = {name.casefold() for name in RESERVED_NAMES}
+    for base, case in found:
+        name = safe_case_name(base)
+        unique, n = name, 1
+        while unique.casefold() in taken:
+            n += 1
+            unique = f"{name}-{n}"
+        taken.add(unique.casefold())
+        if unique != base:
+            logger.debug("case %s is named %s", case.relpath, unique)
+        cases.append(
+            Case(unique, case.path, case.kind, case.relpath, case.files, case.root, case.image_dir)
+        )
+    logger.info("found %d case(s) in %s", len(cases), root)
+    return cases

@@ -1,0 +1,392 @@
+"""Batch pipelines: discovery, safe names, Dask runs, failure isolation, resume, atomicity."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipelines.batch import (
+    SUMMARY_COLUMNS,
+    CaseResult,
+    case_key,
+    run_batch,
+    write_summary,
+)
+from pipelines.discover import discover_cases, safe_case_name
+from slicerecon.cli import main
+from slicerecon.errors import InputError, OptionError
+from slicerecon.io.nifti import write_nifti
+from slicerecon.reconstruct import ReconstructConfig
+from slicerecon.shapes import make_shape
+
+CONFIG = ReconstructConfig(n_points=5000, slices=8)
+TESTS = Path(__file__).resolve().parents[1]
+
+
+def _load(name: str, path: Path):
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+def _shapes() -> dict[str, object]:
+    """Six tiny masks (a few hundred to a few thousand voxels each)."""
+    return {
+        "ball_small": make_shape("sphere", radius=6.0),
+        "ball_large": make_shape("sphere", radius=9.0),
+        "branch": make_shape(
+            "y_branch", trunk_length=12.0, branch_length=12.0, spread=9.0, radius=3.5
+        ),
+        "egg": make_shape("ellipsoid", radii=(9.0, 6.0, 5.0)),
+        "brick": make_shape("box", size=(14.0, 10.0, 8.0)),
+    }
+
+
+def _write_cases(root: Path) -> dict[str, Path]:
+    paths = {}
+    for name, volume in _shapes().items():
+        paths[name] = write_nifti(volume, root / f"{name}.nii.gz")
+    corrupt = root / "corrupt.nii.gz"
+    corrupt.write_bytes(paths["ball_small"].read_bytes()[:40])  # truncated gzip
+    paths["corrupt"] = corrupt
+    return paths
+
+
+def _hidden_or_temporary(root: Path) -> list[Path]:
+    return [p for p in root.rglob("*") if p.name.startswith(".") or ".tmp" in p.name]
+
+
+def _summary(outdir: Path) -> dict[str, dict[str, str]]:
+    with open(outdir / "summary.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows and list(rows[0]) == list(SUMMARY_COLUMNS)
+    return {row["case"]: row for row in rows}
+
+
+def _mtimes(folder: Path) -> dict[str, int]:
+    return {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
+
+
+# ---------------------------------------------------------------------------- names
+@pytest.mark.parametrize(
+    "raw",
+    [
+        "../../etc/passwd",
+        "/etc/passwd",
+        "..",
+        ".",
+        "",
+        "a/../../b",
+        "C:\\Windows\\system32\\cfg",
+        "\\\\server\\share\\x",
+        "..\\..\\up",
+        "Müller/ÄÖÜ ß",
+        "患者/肝臓",
+        "name with spaces & $(rm -rf ~)",
+        "con",
+        "a" * 400,
+        "\u202e.nii",
+    ],
+)
+def test_case_names_cannot_escape_outdir(tmp_path, raw):
+    name = safe_case_name(raw)
+    assert name and len(name) <= 96
+    assert set(name) <= set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-_")
+    assert name.lower() not in ("con", "nul")
+    target = (tmp_path / name).resolve()
+    assert target.parent == tmp_path.resolve()
+
+
+def test_case_names_keep_what_is_safe_and_differ_where_inputs_differ():
+    assert safe_case_name("../../etc/passwd") == "etc__passwd"
+    assert safe_case_name("patient 01/ct.v2") == "patient_01__ct_v2"
+    assert safe_case_name("Müller") == "Muller"
+    assert safe_case_name("患者") != safe_case_name("肝臓")
+    assert safe_case_name("a" * 400) != safe_case_name("a" * 399)
+
+
+def test_discovery_kinds_order_and_unique_names(tmp_path):
+    factory = _load("slicerecon_tests_dicom_factory", TESTS / "io" / "dicom_factory.py")
+    rt = _load("slicerecon_tests_rtstruct", TESTS / "io" / "test_rtstruct.py")
+    ball = make_shape("sphere", radius=5.0)
+    indir = tmp_path / "in"
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 1], [0, 0, 0])
+    factory.write_series(indir / "p1", ball.mask.astype(np.uint16), affine)
+    files = factory.write_series(indir / "p2", np.zeros((30, 30, 8), np.uint16), affine)
+    uids = factory.read_uids(files)
+    rings = [rt._contour_item(rt._ring(6.0, [15.0, 15.0], affine, k), image_uid=uids[k])
+             for k in range(2, 6)]
+    rt.write_rtstruct(indir / "p2" / "rtstruct.dcm", {(1, "Lesion"): rings})
+    factory.write_seg(indir / "seg.dcm", {1: ball.mask}, affine, labels={1: "ball"})
+    for name in ("a.nii.gz", "A.nii", "x.nii", "report_assets.nii.gz", ".hidden.nii.gz"):
+        write_nifti(ball, indir / name)
+    (indir / "x.json").write_text("{}")
+    (indir / "broken.dcm").write_bytes(b"not dicom")
+    (indir / "notes.txt").write_text("ignored")
+    trimesh.creation.icosphere().export(indir / "mesh.stl")
+    write_nifti(ball, indir / "out" / "old.nii.gz")
+
+    cases = discover_cases(indir, exclude=[indir / "out"])
+    by_input = {c.relpath: c for c in cases}
+    assert [c.relpath for c in cases] == sorted(by_input)
+    assert set(by_input) == {
+        "A.nii", "a.nii.gz", "broken.dcm", "p1", "p2/rtstruct.dcm", "report_assets.nii.gz",
+        "seg.dcm", "x.json", "x.nii",
+    }
+    kinds = {rel: c.kind for rel, c in by_input.items()}
+    assert kinds["p1"] == "dicom-series" and kinds["p2/rtstruct.dcm"] == "rtstruct"
+    assert kinds["seg.dcm"] == "dicom-seg" and kinds["x.json"] == "contours"
+    assert kinds["broken.dcm"] == "dicom-unreadable"
+    assert by_input["p2/rtstruct.dcm"].image_dir == indir / "p2"
+    assert len(by_input["p2/rtstruct.dcm"].files) == 9  # the RTSTRUCT and its 8 images
+    assert len(by_input["p1"].files) == ball.shape[2]
+    names = [c.name for c in cases]
+    assert len({n.casefold() for n in names}) == len(names)
+    assert by_input["A.nii"].name == "A" and by_input["a.nii.gz"].name == "a-2"
+    assert by_input["x.json"].name == "x" and by_input["x.nii"].name == "x-2"
+    assert by_input["report_assets.nii.gz"].name == "report_assets-2"
+    assert by_input["p2/rtstruct.dcm"].name == "p2__rtstruct"
+    assert discover_cases(indir, exclude=[indir / "out"]) == cases  # stable
+
+
+def test_dicom_series_and_rtstruct_beside_its_images_reconstruct(tmp_path):
+    factory = _load("slicerecon_tests_dicom_factory", TESTS / "io" / "dicom_factory.py")
+    rt = _load("slicerecon_tests_rtstruct", TESTS / "io" / "test_rtstruct.py")
+    ball = make_shape("sphere", radius=6.0)
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 2], [0, 0, 0])
+    factory.write_series(tmp_path / "in" / "mask", ball.mask.astype(np.uint16), affine)
+    files = factory.write_series(tmp_path / "in" / "ct", np.zeros((40, 40, 12), np.uint16), affine)
+    uids = factory.read_uids(files)
+    rings = [rt._contour_item(rt._ring(8.0 - abs(k - 6), [20.0, 20.0], affine, k),
+                              image_uid=uids[k]) for k in range(3, 10)]
+    rt.write_rtstruct(tmp_path / "in" / "ct" / "rs.dcm", {(1, "Lesion"): rings})
+
+    result = run_batch(tmp_path / "in", tmp_path / "out",
+                       ReconstructConfig(n_points=5000), workers=0, report=False)
+    assert [(c.case, c.kind, c.status) for c in result.cases] == [
+        ("ct__rs", "rtstruct", "ok"), ("mask", "dicom-series", "ok")]
+    plan = json.loads((tmp_path / "out" / "ct__rs" / "plan.json").read_text())
+    assert plan["sections"]["plane_indices"] == list(range(3, 10))  # on the CT's slice grid
+    assert result.cases[1].metrics["volume_iou"] > 0.7
+    for case in ("ct__rs", "mask"):
+        assert trimesh.load(tmp_path / "out" / case / "mesh.stl").is_watertight
+
+
+# ------------------------------------------------------------------ batch on Dask
+@pytest.fixture(scope="module")
+def first_run(tmp_path_factory):
+    """Six cases (one corrupt) through the CLI on a 2-process LocalCluster."""
+    root = tmp_path_factory.mktemp("batch")
+    paths = _write_cases(root / "in")
+    outdir = root / "out"
+    code = main(["batch", str(root / "in"), "-o", str(outdir), "--workers", "2",
+                 "--slices", "8", "--no-report"])
+    return {"root": root, "in": root / "in", "out": outdir, "code": code, "paths": paths,
+            "config": ReconstructConfig(slices=8)}
+
+
+def test_batch_records_failures_and_finishes_every_good_case(first_run):
+    assert first_run["code"] == 1  # one case failed
+    outdir = first_run["out"]
+    rows = _summary(outdir)
+    assert sorted(rows) == sorted(["ball_small", "ball_large", "branch", "egg", "brick",
+                                   "corrupt"])
+    for name, volume in _shapes().items():
+        row = rows[name]
+        assert row["status"] == "ok" and row["error"] == ""
+        assert row["watertight"] == "true" and int(row["planes"]) == 8
+        assert int(row["parts"]) >= 1 and float(row["seconds"]) > 0
+        assert float(row["volume_iou"]) > 0.7, (name, row["volume_iou"])
+        mesh = trimesh.load(outdir / name / "mesh.stl")
+        assert mesh.is_watertight
+        assert mesh.volume == pytest.approx(volume.volume_mm3, rel=0.3)
+        done = json.loads((outdir / name / "done.json").read_text())
+        assert done["key"] == case_key(
+            next(c for c in discover_cases(first_run["in"]) if c.name == name),
+            first_run["config"])
+    bad = rows["corrupt"]
+    assert bad["status"] == "failed" and bad["error_type"] == "FormatError"
+    assert "corrupt.nii.gz" in bad["error"] and "corrupt" in bad["error"]
+    error = json.loads((outdir / "corrupt" / "error.json").read_text())
+    assert {"case", "input", "error", "type"} <= set(error)
+    assert error["case"] == "corrupt" and error["type"] == "FormatError"
+    assert sorted(p.name for p in (outdir / "corrupt").iterdir()) == ["error.json"]
+    assert not _hidden_or_temporary(outdir)
+
+
+def test_second_run_recomputes_nothing(first_run):
+    outdir = first_run["out"]
+    before = {name: _mtimes(outdir / name) for name in _shapes()}
+    result = run_batch(first_run["in"], outdir, first_run["config"], workers=0, report=False)
+    status = {c.case: c.status for c in result.cases}
+    assert status == {**{name: "skipped" for name in _shapes()}, "corrupt": "failed"}
+    assert {name: _mtimes(outdir / name) for name in _shapes()} == before
+    rows = _summary(outdir)
+    assert rows["egg"]["status"] == "skipped" and rows["egg"]["volume_iou"] != ""
+    assert result.n_failed == 1 and not result.ok
+
+
+def test_force_recomputes_and_exit_code_is_zero_when_every_case_is_done(tmp_path, capsys):
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "ball.nii.gz")
+    out = tmp_path / "out"
+    args = ["batch", str(tmp_path / "in"), "-o", str(out), "--workers", "0", "--slices", "6",
+            "--format", "ply", "--no-report"]
+    assert main(args) == 0
+    assert "1 cases: 1 ok, 0 failed, 0 skipped" in capsys.readouterr().out
+    mesh = out / "ball" / "mesh.ply"
+    assert trimesh.load(mesh).is_watertight
+    stamp = mesh.stat().st_mtime_ns
+    assert main(args) == 0
+    assert "1 cases: 0 ok, 0 failed, 1 skipped" in capsys.readouterr().out
+    assert mesh.stat().st_mtime_ns == stamp
+    assert main([*args, "--force"]) == 0
+    assert "1 cases: 1 ok, 0 failed, 0 skipped" in capsys.readouterr().out
+    assert mesh.stat().st_mtime_ns != stamp
+    assert trimesh.load(mesh).is_watertight
+    assert not _hidden_or_temporary(out)
+
+
+def test_key_changes_with_input_bytes_and_options_only(tmp_path):
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "a" / "ball.nii.gz")
+    (case,) = discover_cases(tmp_path / "a")
+    key = case_key(case, CONFIG)
+    assert case_key(case, ReconstructConfig(n_points=5000, slices=8)) == key
+    for other in (ReconstructConfig(n_points=5000, slices=6),
+                  ReconstructConfig(n_points=5000, slices=8, method="sdf"),
+                  ReconstructConfig(n_points=5000, slices=8, seed=1),
+                  ReconstructConfig(n_points=5000, slices=8, mesh_format="obj")):
+        assert case_key(case, other) != key
+    (tmp_path / "a" / "ball.nii.gz").rename(tmp_path / "a" / "renamed.nii.gz")
+    (renamed,) = discover_cases(tmp_path / "a")
+    assert case_key(renamed, CONFIG) == key  # same bytes, same options: same outputs
+    write_nifti(make_shape("sphere", radius=6.0), tmp_path / "a" / "renamed.nii.gz")
+    assert case_key(renamed, CONFIG) != key
+
+
+@pytest.mark.slow
+def test_a_killed_worker_is_replaced_and_nothing_is_half_written(tmp_path):
+    import dask
+    from distributed import Client, LocalCluster, WorkerPlugin
+
+    marker = str(tmp_path / "crashed")
+
+    class Crash(WorkerPlugin):
+        """Kill the worker process 0.3 s into case ``crash_me`` (once) or ``doomed`` (always)."""
+
+        name = "crash"
+
+        def transition(self, key, start, finish, **kwargs):
+            import threading
+
+            if finish != "executing":
+                return
+            if "crash_me" in str(key):
+                try:
+                    with open(marker, "x"):
+                        pass
+                except FileExistsError:
+                    return
+            elif "doomed" not in str(key):
+                return
+            threading.Timer(0.3, os._exit, (1,)).start()
+
+    indir, doomed_dir = tmp_path / "in", tmp_path / "in2"
+    write_nifti(make_shape("sphere", radius=14.0), indir / "crash_me.nii.gz")
+    write_nifti(make_shape("sphere", radius=14.0), doomed_dir / "doomed.nii.gz")
+    for name, radius in (("a", 5.0), ("b", 6.0)):
+        write_nifti(make_shape("sphere", radius=radius), indir / f"{name}.nii.gz")
+    write_nifti(make_shape("sphere", radius=5.0), doomed_dir / "c.nii.gz")
+    out = tmp_path / "out"
+    (out / ".crash_me.partial-stale").mkdir(parents=True)  # a leftover of an earlier crash
+    (out / ".crash_me.partial-stale" / ".mesh.x.tmp.stl").write_bytes(b"half")
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):  # 2nd death is final
+        cluster = LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                               dashboard_address=None)
+    with cluster, Client(cluster) as client:
+        client.register_plugin(Crash())
+        result = run_batch(indir, out, CONFIG, scheduler=cluster.scheduler_address,
+                           report=False)
+        doomed = run_batch(doomed_dir, tmp_path / "out2", CONFIG,
+                           scheduler=cluster.scheduler_address, report=False)
+    assert os.path.exists(marker)  # the worker really died once
+    assert [(c.case, c.status) for c in result.cases] == [
+        ("a", "ok"), ("b", "ok"), ("crash_me", "ok")]
+    assert trimesh.load(out / "crash_me" / "mesh.stl").is_watertight
+    crashed_at = os.stat(marker).st_mtime_ns + 300_000_000
+    assert (out / "crash_me" / "done.json").stat().st_mtime_ns > crashed_at  # made after it
+    assert not _hidden_or_temporary(out)
+    # a case that kills every worker it runs on fails alone, as KilledWorker
+    assert [(c.case, c.status) for c in doomed.cases] == [("c", "ok"), ("doomed", "failed")]
+    assert doomed.cases[1].error_type == "KilledWorker" and "died" in doomed.cases[1].error
+    error = json.loads((tmp_path / "out2" / "doomed" / "error.json").read_text())
+    assert error["type"] == "KilledWorker"
+    assert sorted(p.name for p in (tmp_path / "out2" / "doomed").iterdir()) == ["error.json"]
+    assert not _hidden_or_temporary(tmp_path / "out2")
+
+
+# --------------------------------------------------------------- report and atomicity
+def test_report_is_written_and_its_failure_does_not_fail_the_batch(tmp_path, monkeypatch):
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "ball.nii.gz")
+    import slicerecon.report as report
+
+    def broken(results_dir):
+        raise RuntimeError("renderer exploded")
+
+    monkeypatch.setattr(report, "write_report", broken)
+    result = run_batch(tmp_path / "in", tmp_path / "out", CONFIG, workers=0)
+    assert result.ok and result.report is None
+    assert "renderer exploded" in result.report_error
+    assert _summary(tmp_path / "out")["ball"]["status"] == "ok"
+
+    calls = []
+    monkeypatch.setattr(report, "write_report", lambda d: calls.append(Path(d)) or Path(d))
+    run_batch(tmp_path / "in", tmp_path / "out", CONFIG, workers=0)
+    assert calls == [(tmp_path / "out").resolve()]
+
+
+def test_interrupted_summary_write_leaves_no_partial_file(tmp_path):
+    target = tmp_path / "summary.csv"
+    good = [CaseResult("a", "a.nii.gz", "nifti", "ok", parts=2, planes=8, watertight=True)]
+    write_summary(good, target)
+    before = target.read_bytes()
+
+    def interrupted():
+        yield CaseResult("b", "b.nii.gz", "nifti", "ok")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_summary(interrupted(), target)
+    assert target.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["summary.csv"]
+    with pytest.raises(KeyboardInterrupt):
+        write_summary(interrupted(), tmp_path / "new.csv")
+    assert not (tmp_path / "new.csv").exists()
+
+
+# ------------------------------------------------------------------------ invocation
+def test_bad_invocations(tmp_path, capsys):
+    assert main(["batch", str(tmp_path / "missing"), "-o", str(tmp_path / "o")]) == 2
+    assert "input directory not found" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / "readme.txt").write_text("no cases here")
+    assert main(["batch", str(tmp_path / "empty"), "-o", str(tmp_path / "o")]) == 2
+    assert "no cases found" in capsys.readouterr().err
+    assert main(["batch", str(tmp_path / "empty"), "-o", str(tmp_path / "o"),
+                 "--workers", "-1"]) == 2
+    with pytest.raises(InputError, match="no cases found"):
+        run_batch(tmp_path / "empty", tmp_path / "o", CONFIG)
+    with pytest.raises(OptionError, match="workers"):
+        run_batch(tmp_path / "empty", tmp_path / "o", CONFIG, workers=-2)
+    with pytest.raises(OptionError, match="OUTDIR must differ from INDIR"):
+        run_batch(tmp_path / "empty", tmp_path / "empty", CONFIG)
