@@ -145,6 +145,13 @@ def info(
     Console().print(table)
 
 
+_METHOD_HELP = (
+    "Surface method: loft or sdf (per part of the plan), or a whole-shape baseline "
+    "that skips the planner and the carve: poisson, sdf-hull or itk-mci "
+    '(needs pip install "slicerecon\\[itk]"). See docs/baselines.md.'
+)
+
+
 # ----------------------------------------------------------------------------- run
 @app.command()
 def run(
@@ -160,7 +167,7 @@ def run(
     planner: Annotated[
         str, typer.Option(help="heuristic, none or policy (learned planner).")
     ] = "heuristic",
-    method: Annotated[str, typer.Option(help="Per-part surface: loft or sdf.")] = "loft",
+    method: Annotated[str, typer.Option(help=_METHOD_HELP)] = "loft",
     projections: Annotated[
         str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
     ] = "auto",
@@ -252,7 +259,7 @@ def batch(
     planner: Annotated[
         str, typer.Option(help="heuristic, none or policy (learned planner).")
     ] = "heuristic",
-    method: Annotated[str, typer.Option(help="Per-part surface: loft or sdf.")] = "loft",
+    method: Annotated[str, typer.Option(help=_METHOD_HELP)] = "loft",
     projections: Annotated[
         str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
     ] = "auto",

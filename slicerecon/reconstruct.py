@@ -29,6 +29,7 @@ __all__ = [
     "Reconstruction",
     "PLANNERS",
     "METHODS",
+    "WHOLE_SHAPE_METHODS",
     "PROJECTION_SOURCES",
     "MESH_FORMATS",
     "prepare_inputs",
@@ -39,7 +40,10 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 PLANNERS = ("heuristic", "none", "policy")
-METHODS = ("loft", "sdf")
+METHODS = ("loft", "sdf", "poisson", "sdf-hull", "itk-mci")
+WHOLE_SHAPE_METHODS = ("poisson", "sdf-hull", "itk-mci")
+"""Methods that reconstruct all the sections at once, without a partition
+(:mod:`slicerecon.surface.baselines`); planners and carving apply to loft/sdf only."""
 PROJECTION_SOURCES = ("auto", "gt", "sections")
 MESH_FORMATS = ("stl", "ply", "obj")
 DEFAULT_SLICES = 16
@@ -62,7 +66,12 @@ class ReconstructConfig:
     ``policy`` (the shipped learned planner, ``docs/policy.md``)."""
     method: str = "loft"
     """How each part is reconstructed: ``loft`` (contour lofting) or ``sdf``
-    (signed-distance interpolation + marching cubes)."""
+    (signed-distance interpolation + marching cubes); or a whole-shape
+    baseline that skips the planner and the carve: ``poisson`` (screened
+    Poisson on the contour points), ``sdf-hull`` (signed-distance
+    interpolation intersected with the visual hull) or ``itk-mci`` (ITK
+    morphological contour interpolation, needs ``slicerecon[itk]``); see
+    ``docs/baselines.md``."""
     projections: str = "auto"
     """Where the orthographic projections come from: ``gt`` (the dense input,
     the paper's prior), ``sections`` (derived from the sections alone) or
@@ -256,13 +265,18 @@ def reconstruct(
         derived from the sections).
     planner : {"heuristic", "none", "policy"}
         Partition planner (``policy``: a trained actor, needs torch).
-    method : {"loft", "sdf"}
-        Per-part surface method.
+    method : {"loft", "sdf", "poisson", "sdf-hull", "itk-mci"}
+        Surface method. ``loft`` and ``sdf`` reconstruct each part of the
+        plan. The whole-shape baselines (:data:`WHOLE_SHAPE_METHODS`,
+        :mod:`slicerecon.surface.baselines`) run on all the sections at once:
+        no planner runs (``planner`` and ``max_parts`` are ignored), the plan
+        records one part whose box is the sections' bounding box, and the
+        mesh is not carved (``sdf-hull`` intersects with the hull itself).
     smooth : bool
         Taubin-smooth the merged mesh.
     carve : bool
         Intersect the surface with the projections' visual hull
-        (:func:`slicerecon.surface.carve.carve`).
+        (:func:`slicerecon.surface.carve.carve`); loft and sdf only.
     max_parts : int
         Upper bound on the number of parts.
     weights : path-like, optional
@@ -279,6 +293,8 @@ def reconstruct(
         raise OptionError(f"planner must be one of {', '.join(PLANNERS)} (got {planner!r})")
     if method not in METHODS:
         raise OptionError(f"method must be one of {', '.join(METHODS)} (got {method!r})")
+    if method in WHOLE_SHAPE_METHODS:
+        return _reconstruct_whole_shape(sections, projections, method=method, smooth=smooth)
     timings: dict[str, float] = {}
     with _timed(timings, "plan"):
         occupancy = planning_occupancy(sections, projections)
@@ -302,6 +318,26 @@ def reconstruct(
         with _timed(timings, "carve"):
             hull = visual_hull(projections, sections.grid_shape)
             mesh = carve_by_hull(mesh, hull, sections.affine)
+    return Reconstruction(mesh, plan, sections, projections, timings)
+
+
+def _reconstruct_whole_shape(
+    sections: CrossSections, projections: Projections, *, method: str, smooth: bool
+) -> Reconstruction:
+    """A whole-shape baseline on all the sections, recorded as a one-part plan."""
+    from .partition.planner import Plan, PlanPart
+    from .surface.baselines import reconstruct_baseline, sections_box
+    from .surface.smooth import taubin_smooth
+
+    timings: dict[str, float] = {}
+    with _timed(timings, "plan"):
+        box = sections_box(sections)
+        voxels = int(np.count_nonzero(planning_occupancy(sections, projections)[box.slices]))
+        plan = Plan("none", (PlanPart(box, None, voxels),), sections.grid_shape)
+    with _timed(timings, "surface"):
+        mesh = reconstruct_baseline(sections, projections, method=method)
+        if smooth:
+            mesh = taubin_smooth(mesh)
     return Reconstruction(mesh, plan, sections, projections, timings)
 
 
