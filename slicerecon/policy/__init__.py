@@ -1,0 +1,9 @@
+"""The learned cut planner: torch environment, actor-critic networks, DDPG from demonstrations.
+
+Only this package imports torch. Modules: :mod:`~slicerecon.policy.env`
+(batched cut environment), :mod:`~slicerecon.policy.networks`,
+:mod:`~slicerecon.policy.buffers`, :mod:`~slicerecon.policy.ddpg`,
+:mod:`~slicerecon.policy.train` (``TrainConfig``, ``train``),
+:mod:`~slicerecon.policy.weights` and :mod:`~slicerecon.policy.planner`
+(``plan_policy``, the ``"policy"`` planner). See ``docs/policy.md``.
+"""

@@ -1,0 +1,185 @@
+"""Actor and critic networks of the learned cut planner.
+
+Both networks read an :class:`~slicerecon.policy.env.Observation` through the
+same architecture (separate weights):
+
+* **Views**: each of the three silhouettes ``(R, R)`` gets two CoordConv
+  channels (normalised row and column coordinates in ``[-1, 1]``) and goes
+  through one small convolutional encoder shared by the three views
+  (a 4x4 stride-4 "patchify" CoordConv, a stride-2 and a stride-1 3x3
+  convolution, then adaptive average pooling to 4x4, so the encoder works at
+  any ``R >= 16``; the stride-4 first layer keeps a CPU update cheap); the three feature vectors are
+  concatenated in view order, which keeps the view identity.
+* **Step and corners**: the step ``t / T`` and the corner list
+  ``(3, K, 2)`` with its validity mask ``(3, K)`` are flattened into one MLP.
+* **Actor** ``pi(s)``: an MLP on the joined features, 5 sigmoid outputs in ``[0, 1]``.
+* **Critic** ``Q(s, a)``: the joined features and the action through an MLP, one output.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ..errors import OptionError
+from .env import Observation
+
+__all__ = ["NetConfig", "CoordConv", "ViewEncoder", "StateEncoder", "Actor", "Critic"]
+
+ACTION_DIM = 5
+
+
+@dataclass(frozen=True)
+class NetConfig:
+    """Sizes of the networks (stored with shipped weights).
+
+    Attributes
+    ----------
+    resolution : int
+        Side ``R`` of the silhouettes.
+    max_corners : int
+        Corners per view ``K``.
+    channels : int
+        Channels of the first convolution (doubled once).
+    hidden : int
+        Width of the MLP layers.
+    """
+
+    resolution: int = 64
+    max_corners: int = 16
+    channels: int = 16
+    hidden: int = 256
+
+    def __post_init__(self) -> None:
+        for name in ("resolution", "max_corners", "channels", "hidden"):
+            if int(getattr(self, name)) < 1:
+                raise OptionError(f"NetConfig.{name} must be >= 1 (got {getattr(self, name)})")
+        if self.resolution < 16:
+            raise OptionError(f"resolution must be >= 16 (got {self.resolution})")
+
+    def to_dict(self) -> dict[str, int]:
+        """Plain dict of the sizes."""
+        return {k: int(v) for k, v in asdict(self).items()}
+
+
+class CoordConv(nn.Module):
+    """A 2-D convolution whose input gets two extra channels: normalised row and column.
+
+    Parameters
+    ----------
+    in_channels, out_channels : int
+        Channels before the coordinate channels are added, and after the convolution.
+    **conv_kwargs
+        Passed to :class:`torch.nn.Conv2d` (kernel_size, stride, padding).
+    """
+
+    def __init__(self, in_channels: int, out_channels: int, **conv_kwargs: int) -> None:
+        super().__init__()
+        self.conv = nn.Conv2d(in_channels + 2, out_channels, **conv_kwargs)  # type: ignore[arg-type]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """x: Tensor of shape (N, C, H, W) → (N, C_out, H', W')."""
+        n, _, h, w = x.shape
+        rows = torch.linspace(-1.0, 1.0, h, device=x.device, dtype=x.dtype)
+        cols = torch.linspace(-1.0, 1.0, w, device=x.device, dtype=x.dtype)
+        rr = rows.view(1, 1, h, 1).expand(n, 1, h, w)
+        cc = cols.view(1, 1, 1, w).expand(n, 1, h, w)
+        return self.conv(torch.cat([x, rr, cc], dim=1))
+
+
+class ViewEncoder(nn.Module):
+    """Conv encoder of one silhouette: (N, 1, R, R) → (N, 2 * channels * 16)."""
+
+    def __init__(self, channels: int) -> None:
+        super().__init__()
+        c = int(channels)
+        self.net = nn.Sequential(
+            CoordConv(1, c, kernel_size=4, stride=4),
+            nn.ReLU(),
+            nn.Conv2d(c, 2 * c, kernel_size=3, stride=2, padding=1),
+            nn.ReLU(),
+            nn.Conv2d(2 * c, 2 * c, kernel_size=3, padding=1),
+            nn.ReLU(),
+        )
+        self.out_features = 2 * c * 16
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """x: Tensor of shape (N, 1, R, R)."""
+        y = self.net(x)
+        if tuple(y.shape[-2:]) != (4, 4):
+            y = F.adaptive_avg_pool2d(y, 4)
+        return y.flatten(1)
+
+
+class StateEncoder(nn.Module):
+    """Features of an observation: three encoded views + the step/corner MLP."""
+
+    def __init__(self, config: NetConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.views = ViewEncoder(config.channels)
+        k = config.max_corners
+        self.corners = nn.Sequential(
+            nn.Linear(1 + 3 * k * 3, config.hidden), nn.ReLU(),
+            nn.Linear(config.hidden, config.hidden), nn.ReLU(),
+        )
+        self.view_proj = nn.Sequential(
+            nn.Linear(3 * self.views.out_features, config.hidden), nn.ReLU()
+        )
+        self.out_features = 2 * config.hidden
+
+    def forward(self, obs: Observation) -> torch.Tensor:
+        """Features, Tensor of shape (B, 2 * hidden)."""
+        b = obs.views.shape[0]
+        r = obs.views.shape[-1]
+        v = self.views(obs.views.reshape(b * 3, 1, r, r)).reshape(b, -1)
+        corner_in = torch.cat(
+            [obs.step, obs.corners.reshape(b, -1), obs.corner_mask.reshape(b, -1)], dim=1
+        )
+        return torch.cat([self.view_proj(v), self.corners(corner_in)], dim=1)
+
+
+class Actor(nn.Module):
+    """Deterministic policy ``pi(s)``: 5 numbers in ``[0, 1]``."""
+
+    def __init__(self, config: NetConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.encoder = StateEncoder(config)
+        self.head = nn.Sequential(
+            nn.Linear(self.encoder.out_features, config.hidden), nn.ReLU(),
+            nn.Linear(config.hidden, ACTION_DIM),
+        )
+
+    def forward(self, obs: Observation) -> torch.Tensor:
+        """Actions, Tensor of shape (B, 5)."""
+        return torch.sigmoid(self.logits(obs))
+
+    def logits(self, obs: Observation) -> torch.Tensor:
+        """Pre-sigmoid outputs, Tensor of shape (B, 5)."""
+        return self.head(self.encoder(obs))
+
+
+class Critic(nn.Module):
+    """Action value ``Q(s, a)``."""
+
+    def __init__(self, config: NetConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.encoder = StateEncoder(config)
+        self.head = nn.Sequential(
+            nn.Linear(self.encoder.out_features + ACTION_DIM, config.hidden), nn.ReLU(),
+            nn.Linear(config.hidden, config.hidden), nn.ReLU(),
+            nn.Linear(config.hidden, 1),
+        )
+
+    def forward(self, obs: Observation, action: torch.Tensor) -> torch.Tensor:
+        """Q values, Tensor of shape (B,)."""
+        return self.q(self.encoder(obs), action)
+
+    def q(self, features: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """Q values from precomputed state features (``encoder(obs)``), Tensor of shape (B,)."""
+        return self.head(torch.cat([features, action], dim=1)).squeeze(1)

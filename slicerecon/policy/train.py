@@ -1,0 +1,663 @@
+"""Training the learned cut planner: :class:`TrainConfig` and :func:`train`.
+
+One run (``slicerecon train --config il_rl``):
+
+1. Build the shape pools: every family of ``shapes`` (all registered families
+   when empty) with seeds ``0 .. train_shapes - 1`` for training and seeds
+   ``EVAL_SEED_OFFSET + 0 .. eval_shapes - 1`` for evaluation (never trained on).
+2. Phase 0: roll out the heuristic expert for ``demo_episodes`` episodes into
+   the demonstration buffer ``R_D`` (skipped without demonstrations).
+3. Phase I: ``pretrain_updates`` updates on ``R_D`` alone (actor: cloning
+   loss only; critic: TD on the demonstrations).
+4. Phase II (``explore``): the actor plus Gaussian or Ornstein-Uhlenbeck noise
+   acts in ``n_envs`` episodes; transitions (with the expert's action at each
+   state) go to ``R_A``; ``updates_per_step`` updates per batched env step on
+   minibatches from ``R_D`` and ``R_A``.
+5. Every ``eval_every`` updates: the greedy actor on the held-out shapes; the
+   CSV log gets the mean surrogate IoU (``docs/policy.md``).
+
+Outputs in ``out``: ``log.csv``, ``checkpoint.pt`` (networks, optimizers,
+buffers, counters, RNG states; ``resume=True`` continues from it),
+``actor.safetensors`` (the final actor) and ``config.json``; TensorBoard
+event files under ``tb/`` when the ``tensorboard`` package is installed.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import logging
+import math
+import os
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..errors import FormatError, InputError, OptionError
+from .buffers import ReplayBuffer
+from .ddpg import DDPG, TARGET_UPDATES
+from .env import CutEnv, Observation, ShapePool
+from .networks import NetConfig
+from .weights import save_actor
+
+__all__ = [
+    "TrainConfig",
+    "TrainResult",
+    "EVAL_SEED_OFFSET",
+    "CONFIG_NAMES",
+    "config_path",
+    "load_config",
+    "train",
+    "evaluate_actor",
+]
+
+logger = logging.getLogger(__name__)
+
+EVAL_SEED_OFFSET = 10_000
+"""Evaluation shapes use seeds from here on; training seeds stay below it."""
+
+CONFIG_NAMES = ("ddpg", "il", "il_rl")
+"""The shipped configs in ``slicerecon/policy/configs/``."""
+
+NOISES = ("gaussian", "ou")
+
+LOG_FIELDS = (
+    "update", "env_steps", "phase", "critic_loss", "actor_loss", "bc_loss", "q_mean",
+    "q_filter_frac", "episode_reward", "eval_iou", "eval_return", "elapsed_s",
+)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Every setting of a training run (fields of a TOML file, all optional)."""
+
+    name: str = "il_rl"
+    """Run name, recorded in the outputs."""
+    seed: int = 0
+    """Seed of torch and numpy (network init, episode draws, noise, minibatches)."""
+    shapes: tuple[str, ...] = ()
+    """Shape families to train on; empty: every family ``slicerecon.shapes`` registers."""
+    train_shapes: int = 16
+    """Seeds per family for training (seeds ``0 .. train_shapes - 1``)."""
+    eval_shapes: int = 3
+    """Seeds per family for evaluation (seeds ``EVAL_SEED_OFFSET + i``)."""
+    grid: int = 32
+    """Side of the cubic voxel grid every shape is scaled into."""
+    resolution: int = 32
+    """Side ``R`` of the observed silhouettes."""
+    max_corners: int = 16
+    """Corners per view ``K`` in the state."""
+    max_steps: int = 7
+    """Cuts per episode (``max_parts - 1`` of the planner)."""
+    min_remaining: float = 0.02
+    """An episode ends when less than this fraction of the shape remains."""
+    lam: float = 1.0
+    """Weight ``lambda`` of the reconstruction term of the reward."""
+    planes_min: int = 8
+    """Fewest section planes of the reward's reconstruction surrogate."""
+    planes_max: int = 16
+    """Most section planes of the surrogate (drawn per episode)."""
+    augment: bool = True
+    """Randomly permute and flip the axes of each training shape."""
+    n_envs: int = 8
+    """Episodes stepped together."""
+    channels: int = 16
+    """Channels of the first convolution."""
+    hidden: int = 128
+    """Width of the MLP layers."""
+    demo_episodes: int = 0
+    """Heuristic episodes put in ``R_D`` before training; 0: no demonstrations."""
+    pretrain_updates: int = 0
+    """Phase I: updates on the demonstrations alone."""
+    total_updates: int = 2000
+    """Updates in all (Phase I included)."""
+    explore: bool = True
+    """Phase II: collect agent experience in ``R_A`` (False: learn from ``R_D`` only)."""
+    updates_per_step: int = 1
+    """Updates per batched environment step in Phase II."""
+    learning_starts: int = 256
+    """Agent transitions (random actions) collected before the first update without demos."""
+    batch_size: int = 64
+    """Minibatch size drawn from each buffer."""
+    buffer_size: int = 20_000
+    """Capacity of each replay buffer, transitions."""
+    gamma: float = 0.95
+    """Discount factor."""
+    actor_lr: float = 1e-4
+    """Adam learning rate of the actor."""
+    critic_lr: float = 1e-3
+    """Adam learning rate of the critic."""
+    rl_weight: float = 1.0
+    """Weight of the DDPG actor loss; 0: no reinforcement learning."""
+    bc_weight: float = 0.0
+    """Weight of the behaviour-cloning loss; 0: no cloning."""
+    q_filter: bool = True
+    """Apply the Q-filter to the cloning loss."""
+    bc_on_agent: bool = True
+    """Clone the expert on agent samples too (needs the expert at every agent state)."""
+    noise: str = "gaussian"
+    """Exploration noise: ``gaussian`` or ``ou`` (Ornstein-Uhlenbeck)."""
+    noise_sigma: float = 0.1
+    """Standard deviation of the exploration noise (actions live in [0, 1])."""
+    target_update: str = "hard"
+    """``hard``: copy the networks every ``target_period`` updates; ``polyak``: rate ``tau``."""
+    target_period: int = 100
+    """Updates between hard target copies."""
+    tau: float = 0.005
+    """Polyak rate."""
+    logit_penalty: float = 1e-3
+    """Weight of the penalty on the actor's pre-sigmoid outputs (with the DDPG loss)."""
+    eval_every: int = 250
+    """Updates between evaluations on the held-out shapes."""
+    log_every: int = 50
+    """Updates between CSV log rows."""
+    checkpoint_every: int = 500
+    """Updates between checkpoints (one at the end always)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "shapes", tuple(str(s) for s in self.shapes))
+        positive = ("train_shapes", "eval_shapes", "grid", "resolution", "max_corners",
+                    "max_steps", "n_envs", "channels", "hidden", "total_updates",
+                    "updates_per_step", "batch_size", "buffer_size", "target_period",
+                    "eval_every", "log_every", "checkpoint_every", "planes_min")
+        for name in positive:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise OptionError(f"{name} must be a positive integer (got {value!r})")
+        for name in ("demo_episodes", "pretrain_updates", "learning_starts", "seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise OptionError(f"{name} must be an integer >= 0 (got {value!r})")
+        if self.planes_max < self.planes_min:
+            raise OptionError("planes_max must be >= planes_min")
+        if self.grid < 16 or self.resolution < 16:
+            raise OptionError("grid and resolution must be >= 16")
+        if self.train_shapes > EVAL_SEED_OFFSET:
+            raise OptionError(f"train_shapes must be <= {EVAL_SEED_OFFSET}")
+        if self.noise not in NOISES:
+            raise OptionError(f"noise must be one of {', '.join(NOISES)} (got {self.noise!r})")
+        if self.target_update not in TARGET_UPDATES:
+            raise OptionError(
+                f"target_update must be one of {', '.join(TARGET_UPDATES)} "
+                f"(got {self.target_update!r})"
+            )
+        if self.pretrain_updates > 0 and self.demo_episodes == 0:
+            raise OptionError("pretrain_updates needs demonstrations (demo_episodes > 0)")
+        if not self.explore and self.demo_episodes == 0:
+            raise OptionError("explore = false needs demonstrations (demo_episodes > 0)")
+        if self.bc_weight > 0 and self.demo_episodes == 0 and not self.bc_on_agent:
+            raise OptionError("bc_weight > 0 needs demonstrations or bc_on_agent = true")
+        if self.rl_weight < 0 or self.bc_weight < 0 or self.rl_weight + self.bc_weight == 0:
+            raise OptionError("rl_weight and bc_weight must be >= 0 and not both 0")
+        if not 0 <= self.min_remaining < 1 or self.lam < 0 or not 0 <= self.gamma <= 1:
+            raise OptionError("need 0 <= min_remaining < 1, lam >= 0 and 0 <= gamma <= 1")
+        if min(self.noise_sigma, self.logit_penalty) < 0 or min(self.actor_lr, self.critic_lr) <= 0:
+            raise OptionError("noise_sigma and logit_penalty must be >= 0, learning rates > 0")
+
+    @property
+    def net(self) -> NetConfig:
+        """Network sizes."""
+        return NetConfig(self.resolution, self.max_corners, self.channels, self.hidden)
+
+    def replace(self, **changes: Any) -> TrainConfig:
+        """A copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of every field."""
+        d = dataclasses.asdict(self)
+        d["shapes"] = list(self.shapes)
+        return d
+
+
+def config_path(name: str) -> Path:
+    """Path of a shipped config (``ddpg``, ``il``, ``il_rl``)."""
+    if name not in CONFIG_NAMES:
+        raise OptionError(f"no shipped config {name!r}; choose one of {', '.join(CONFIG_NAMES)}")
+    return Path(__file__).with_name("configs") / f"{name}.toml"
+
+
+def load_config(source: str | os.PathLike[str], **overrides: Any) -> TrainConfig:
+    """Read a :class:`TrainConfig` from a TOML file or a shipped config name.
+
+    Parameters
+    ----------
+    source : str or path-like
+        ``ddpg``, ``il``, ``il_rl`` or a path to a ``.toml`` file whose top-level
+        keys are :class:`TrainConfig` fields.
+    **overrides
+        Fields to replace (``None`` values are ignored).
+
+    Raises
+    ------
+    InputError
+        If the file is missing.
+    FormatError
+        If it is not TOML or holds an unknown key.
+    """
+    text_source = str(source)
+    path = config_path(text_source) if text_source in CONFIG_NAMES else Path(text_source)
+    if not path.is_file():
+        raise InputError(
+            f"config file not found: {path} (give a .toml file or one of {', '.join(CONFIG_NAMES)})"
+        )
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise FormatError(f"{path} is not valid TOML: {exc}") from exc
+    known = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise FormatError(
+            f"{path}: unknown setting(s) {', '.join(unknown)}; see TrainConfig for the fields"
+        )
+    data.update({k: v for k, v in overrides.items() if v is not None})
+    if "shapes" in data:
+        data["shapes"] = tuple(data["shapes"])
+    try:
+        return TrainConfig(**data)
+    except TypeError as exc:
+        raise FormatError(f"{path}: {exc}") from exc
+
+
+@dataclass
+class TrainResult:
+    """What :func:`train` produced.
+
+    Attributes
+    ----------
+    out : Path
+        Output directory.
+    actor_path : Path
+        ``actor.safetensors``.
+    log_path : Path
+        ``log.csv``.
+    n_updates : int
+    eval_iou : float
+        Last evaluation's mean surrogate IoU on the held-out shapes.
+    heuristic_eval_iou : float
+        The heuristic expert's on the same shapes (NaN when not measured).
+    agent : DDPG
+        The trained networks.
+    """
+
+    out: Path
+    actor_path: Path
+    log_path: Path
+    n_updates: int
+    eval_iou: float
+    heuristic_eval_iou: float
+    agent: DDPG = field(repr=False)
+
+
+# -- pieces of the loop -----------------------------------------------------------------
+def _shape_names(config: TrainConfig) -> list[str]:
+    from ..shapes import shape_names
+
+    names = list(config.shapes) if config.shapes else shape_names()
+    unknown = sorted(set(names) - set(shape_names()))
+    if unknown:
+        raise OptionError(
+            f"unknown shape famil(ies) {', '.join(unknown)}; choose from {', '.join(shape_names())}"
+        )
+    return names
+
+
+def _make_env(config: TrainConfig, pool: ShapePool, *, n_envs: int, augment: bool, seed: int,
+              device: torch.device) -> CutEnv:
+    return CutEnv(
+        pool, n_envs=n_envs, resolution=config.resolution, max_corners=config.max_corners,
+        max_steps=config.max_steps, min_remaining=config.min_remaining, lam=config.lam,
+        planes=(config.planes_min, config.planes_max), augment=augment, device=device,
+        seed=seed,
+    )
+
+
+def evaluate_actor(
+    policy: Callable[[Observation, CutEnv], torch.Tensor], env: CutEnv, *, seed: int
+) -> tuple[float, float]:
+    """Run one greedy episode per slot on the env's pool (slot ``i`` = shape ``i``).
+
+    Parameters
+    ----------
+    policy : callable
+        ``policy(obs, env) -> actions (B, 5)``.
+    env : CutEnv
+        Its ``n_envs`` must equal its pool size.
+    seed : int
+        Seed of the plane-count draws (the same seed gives the same episodes).
+
+    Returns
+    -------
+    (mean surrogate IoU, mean episode return)
+    """
+    obs = env.reset(seed=seed, shapes=list(range(env.n_envs)))
+    iou = torch.full((env.n_envs,), float("nan"))
+    ret = torch.full((env.n_envs,), float("nan"))
+    for _ in range(env.max_steps):
+        out = env.step(policy(obs, env))
+        first = out.done.cpu() & torch.isnan(iou)
+        iou[first] = out.final_iou.cpu()[first]
+        ret[first] = out.episode_return.cpu()[first]
+        obs = out.obs
+    return float(iou.mean()), float(ret.mean())
+
+
+def _expert_policy(obs: Observation, env: CutEnv) -> torch.Tensor:
+    actions, valid = env.expert_actions()
+    # without an expert cut, a degenerate action (a no-op: both ends on one corner)
+    actions[~valid] = 0.0
+    return torch.from_numpy(actions)
+
+
+class _Noise:
+    """Gaussian or Ornstein-Uhlenbeck exploration noise, (B, 5)."""
+
+    def __init__(self, kind: str, sigma: float, shape: tuple[int, int],
+                 rng: np.random.Generator) -> None:
+        self.kind, self.sigma, self.rng = kind, float(sigma), rng
+        self.state = np.zeros(shape)
+
+    def __call__(self, done: np.ndarray | None = None) -> np.ndarray:
+        if self.kind == "gaussian":
+            return self.rng.normal(0.0, self.sigma, self.state.shape)
+        if done is not None:
+            self.state[done] = 0.0
+        theta, dt = 0.15, 1.0
+        self.state += theta * (-self.state) * dt + self.sigma * np.sqrt(dt) * self.rng.normal(
+            size=self.state.shape
+        )
+        return self.state.copy()
+
+
+def _collect_demos(env: CutEnv, buffer: ReplayBuffer, episodes: int, seed: int) -> float:
+    """Roll out the heuristic into ``buffer``; returns the mean demonstration return."""
+    obs = env.reset(seed=seed)
+    finished, returns = 0, []
+    while finished < episodes:
+        actions, valid = env.expert_actions()
+        if not valid.any():  # the expert has no cut in any slot: those episodes are over
+            finished += env.n_envs
+            obs = env.reset()
+            continue
+        act = torch.from_numpy(actions)
+        out = env.step(act)
+        # an episode where the expert has no cut left ends there (as the heuristic planner)
+        buffer.add(
+            obs.select(torch.from_numpy(valid)), act[valid], out.reward.cpu()[valid],
+            out.obs.select(torch.from_numpy(valid)), out.done.cpu()[valid].float(),
+            act[valid], torch.ones(int(valid.sum())),
+        )
+        done = out.done.cpu().numpy() | ~valid
+        finished += int(done.sum())
+        returns.extend(out.episode_return.cpu().numpy()[out.done.cpu().numpy()].tolist())
+        stuck = [int(e) for e in np.flatnonzero(~valid)]
+        if stuck:
+            env._start(stuck, [env._draw(e, None) for e in stuck])  # noqa: SLF001
+        obs = env.observation()
+    if len(buffer) == 0:
+        raise OptionError(
+            f"the heuristic expert found no cut in {finished} episodes on these training "
+            "shapes: no demonstrations; use other shapes or demo_episodes = 0"
+        )
+    return float(np.mean(returns)) if returns else float("nan")
+
+
+def _rng_state(np_rng: np.random.Generator, env: CutEnv, gen: torch.Generator) -> dict[str, Any]:
+    return {
+        "torch": torch.get_rng_state(),
+        "numpy": np_rng.bit_generator.state,
+        "env": env.rng.bit_generator.state,
+        "sample": gen.get_state(),
+    }
+
+
+def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    from ..io.atomic import atomic_path
+
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=LOG_FIELDS)
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: row.get(k, "") for k in LOG_FIELDS})
+    with atomic_path(path) as tmp:
+        tmp.write_text(buf.getvalue())
+
+
+def _tensorboard(out: Path) -> Any:
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:
+        return None
+    return SummaryWriter(str(out / "tb"))
+
+
+def _mean(values: list[float]) -> float:
+    vals = [v for v in values if not math.isnan(v)]
+    return float(np.mean(vals)) if vals else float("nan")
+
+
+# -- the loop ---------------------------------------------------------------------------
+def train(
+    config: TrainConfig,
+    *,
+    out: str | os.PathLike[str],
+    device: str | torch.device = "cpu",
+    resume: bool = False,
+    progress: Callable[[int, int, dict[str, float]], None] | None = None,
+) -> TrainResult:
+    """Train an actor-critic cut planner (see the module docstring).
+
+    Parameters
+    ----------
+    config : TrainConfig
+    out : path-like
+        Output directory (created).
+    device : str or torch.device, optional
+        ``cpu`` or ``cuda``.
+    resume : bool, optional
+        Continue from ``out/checkpoint.pt`` (networks, optimizers, buffers,
+        counters, RNG states; running episodes restart).
+    progress : callable, optional
+        ``progress(n_updates, total_updates, last_metrics)`` after every update.
+
+    Returns
+    -------
+    TrainResult
+
+    Raises
+    ------
+    OptionError
+        For an unavailable device or a checkpoint of another config.
+    """
+    dev = torch.device(device)
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise OptionError("--device cuda was asked for but CUDA is not available; use cpu")
+    outdir = Path(out)
+    outdir.mkdir(parents=True, exist_ok=True)
+    ckpt_path = outdir / "checkpoint.pt"
+    log_path = outdir / "log.csv"
+    start = time.perf_counter()
+
+    torch.manual_seed(config.seed)
+    np_rng = np.random.default_rng(config.seed)
+    gen = torch.Generator().manual_seed(config.seed)
+    names = _shape_names(config)
+    train_pool = ShapePool.build(names, range(config.train_shapes), grid=config.grid)
+    eval_pool = ShapePool.build(
+        names, range(EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + config.eval_shapes), grid=config.grid
+    )
+    env = _make_env(config, train_pool, n_envs=config.n_envs, augment=config.augment,
+                    seed=config.seed, device=dev)
+    eval_env = _make_env(config, eval_pool, n_envs=len(eval_pool), augment=False,
+                         seed=config.seed, device=dev)
+    eval_seed = config.seed + 1
+    agent = DDPG(
+        config.net, device=dev, gamma=config.gamma, actor_lr=config.actor_lr,
+        critic_lr=config.critic_lr, rl_weight=config.rl_weight, bc_weight=config.bc_weight,
+        q_filter=config.q_filter, bc_on_agent=config.bc_on_agent,
+        target_update=config.target_update, target_period=config.target_period, tau=config.tau,
+        logit_penalty=config.logit_penalty,
+    )
+    demos = ReplayBuffer(config.buffer_size, resolution=config.resolution,
+                         max_corners=config.max_corners)
+    replay = ReplayBuffer(config.buffer_size, resolution=config.resolution,
+                          max_corners=config.max_corners)
+    rows: list[dict[str, Any]] = []
+    env_steps = 0
+    heuristic_iou = float("nan")
+    elapsed_before = 0.0
+
+    if resume and ckpt_path.is_file():
+        ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
+        same = {k: v for k, v in config.to_dict().items() if k != "total_updates"}
+        if {k: v for k, v in ckpt["config"].items() if k != "total_updates"} != same:
+            raise OptionError(
+                f"{ckpt_path} was written by another config; use a fresh --out or the same config"
+            )
+        agent.load_state_dict(ckpt["agent"])
+        demos.load_state_dict(ckpt["demos"])
+        replay.load_state_dict(ckpt["replay"])
+        rows = list(ckpt["rows"])
+        env_steps = int(ckpt["env_steps"])
+        heuristic_iou = float(ckpt["heuristic_eval_iou"])
+        elapsed_before = float(ckpt["elapsed_s"])
+        torch.set_rng_state(ckpt["rng"]["torch"])
+        np_rng.bit_generator.state = ckpt["rng"]["numpy"]
+        gen.set_state(ckpt["rng"]["sample"])
+        env.rng.bit_generator.state = ckpt["rng"]["env"]
+        logger.info("resumed %s at update %d", ckpt_path, agent.n_updates)
+        obs = env.reset()
+    else:
+        if resume:
+            logger.info("no checkpoint in %s: starting a new run", outdir)
+        heuristic_iou, _ = evaluate_actor(_expert_policy, eval_env, seed=eval_seed)
+        logger.info("heuristic expert on the held-out shapes: surrogate IoU %.4f", heuristic_iou)
+        if config.demo_episodes:
+            demo_return = _collect_demos(env, demos, config.demo_episodes, config.seed)
+            logger.info("%d demonstration transitions (mean return %.3f)", len(demos),
+                        demo_return)
+        obs = env.reset(seed=config.seed + 2)
+    (outdir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
+
+    writer = _tensorboard(outdir)
+    noise = _Noise(config.noise, config.noise_sigma, (config.n_envs, 5), np_rng)
+    need_expert = config.bc_weight > 0 and config.bc_on_agent
+    episode_rewards: list[float] = []
+    window: dict[str, list[float]] = {}
+    last: dict[str, float] = {}
+    last_eval = float("nan")
+
+    def save_checkpoint() -> None:
+        from ..io.atomic import atomic_path
+
+        state = {
+            "config": config.to_dict(),
+            "agent": agent.state_dict(),
+            "demos": demos.state_dict(),
+            "replay": replay.state_dict(),
+            "rows": rows,
+            "env_steps": env_steps,
+            "heuristic_eval_iou": heuristic_iou,
+            "elapsed_s": elapsed_before + time.perf_counter() - start,
+            "rng": _rng_state(np_rng, env, gen),
+        }
+        with atomic_path(ckpt_path) as tmp:
+            torch.save(state, tmp)
+
+    def env_step(random_actions: bool) -> None:
+        nonlocal obs, env_steps
+        if random_actions:
+            actions = torch.from_numpy(np_rng.random((config.n_envs, 5))).float()
+        else:
+            actions = agent.act(obs).cpu() + torch.from_numpy(noise()).float()
+            actions = actions.clamp(0.0, 1.0)
+        if need_expert:
+            ea, ev = env.expert_actions()
+        else:
+            ea, ev = np.zeros((config.n_envs, 5), np.float32), np.zeros(config.n_envs, bool)
+        step = env.step(actions)
+        replay.add(obs, actions, step.reward.cpu(), step.obs, step.done.cpu().float(),
+                   torch.from_numpy(ea), torch.from_numpy(ev.astype(np.float32)))
+        if config.noise == "ou":
+            noise.state[step.done.cpu().numpy()] = 0.0
+        finished = step.episode_return.cpu().numpy()
+        episode_rewards.extend(finished[~np.isnan(finished)].tolist())
+        obs = step.obs
+        env_steps += config.n_envs
+
+    while agent.n_updates < config.total_updates:
+        pretraining = agent.n_updates < config.pretrain_updates
+        if config.explore and not pretraining:
+            env_step(random_actions=len(demos) == 0 and len(replay) < config.learning_starts)
+            if len(demos) == 0 and len(replay) < config.learning_starts:
+                continue
+            n_updates = config.updates_per_step
+        else:
+            n_updates = 1
+        for _ in range(n_updates):
+            demo_batch = (
+                demos.sample(config.batch_size, generator=gen, device=dev) if len(demos) else None
+            )
+            agent_batch = (
+                replay.sample(config.batch_size, generator=gen, device=dev)
+                if len(replay) and config.explore and not pretraining else None
+            )
+            last = agent.update(demo_batch, agent_batch, pretrain=pretraining)
+            for key, value in last.items():
+                window.setdefault(key, []).append(value)
+            u = agent.n_updates
+            row: dict[str, Any] | None = None
+            if u % config.log_every == 0 or u == config.total_updates:
+                row = {"update": u, "env_steps": env_steps,
+                       "phase": "pretrain" if pretraining else "train"}
+                row.update({k: _mean(v) for k, v in window.items()})
+                row["episode_reward"] = _mean(episode_rewards)
+                window.clear()
+                episode_rewards.clear()
+            if u % config.eval_every == 0 or u == config.total_updates:
+                iou, ret = evaluate_actor(
+                    lambda o, _e: agent.act(o), eval_env, seed=eval_seed
+                )
+                row = row or {"update": u, "env_steps": env_steps,
+                              "phase": "pretrain" if pretraining else "train"}
+                row.update(eval_iou=iou, eval_return=ret)
+                last_eval = iou
+                logger.info("update %d: eval IoU %.4f (heuristic %.4f)", u, iou, heuristic_iou)
+            if row is not None:
+                row["elapsed_s"] = round(elapsed_before + time.perf_counter() - start, 2)
+                rows.append(row)
+                _write_csv(log_path, rows)
+                if writer is not None:
+                    for key, value in row.items():
+                        if isinstance(value, float) and not math.isnan(value):
+                            writer.add_scalar(key, value, u)
+            if u % config.checkpoint_every == 0 or u == config.total_updates:
+                save_checkpoint()
+            if progress is not None:
+                progress(u, config.total_updates, {**last, "eval_iou": last_eval})
+            if u >= config.total_updates:
+                break
+    if not rows:
+        _write_csv(log_path, rows)
+    if not ckpt_path.is_file():
+        save_checkpoint()
+    if writer is not None:
+        writer.close()
+    actor_path = save_actor(
+        agent.actor, outdir / "actor.safetensors",
+        extra={"grid": config.grid, "max_steps": config.max_steps, "config": config.to_dict(),
+               "n_updates": agent.n_updates, "families": names,
+               "heuristic_eval_iou": heuristic_iou},
+    )
+    evals = [r["eval_iou"] for r in rows if "eval_iou" in r]
+    return TrainResult(outdir, actor_path, log_path, agent.n_updates,
+                       float(evals[-1]) if evals else float("nan"), heuristic_iou, agent)

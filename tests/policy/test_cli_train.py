@@ -1,0 +1,68 @@
+"""``slicerecon train`` on a tiny config file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from slicerecon.cli import main
+
+TINY_TOML = """
+name = "tiny"
+shapes = ["two_spheres", "chair"]
+train_shapes = 2
+eval_shapes = 1
+grid = 20
+resolution = 16
+max_corners = 6
+max_steps = 3
+n_envs = 2
+channels = 4
+hidden = 16
+batch_size = 8
+buffer_size = 500
+demo_episodes = 4
+explore = false
+rl_weight = 0.0
+bc_weight = 1.0
+q_filter = false
+bc_on_agent = false
+total_updates = 6
+log_every = 3
+eval_every = 3
+checkpoint_every = 3
+"""
+
+
+def test_train_command_writes_outputs_and_resumes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(TINY_TOML)
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--threads", "1"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["updates"] == 6 and 0 < summary["eval_iou"] <= 1
+    assert {p.name for p in out.iterdir()} >= {"log.csv", "checkpoint.pt", "actor.safetensors",
+                                              "config.json"}
+    args = ["train", "--config", str(cfg), "--out", str(out), "--resume", "--steps", "9"]
+    assert main(args) == 0
+    assert json.loads(capsys.readouterr().out)["updates"] == 9
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--device", "gpu"], "--device must be cpu or cuda"),
+        (["--config", "missing.toml"], "config file not found"),
+        (["--config", "il_rl", "--threads", "0"], "--threads must be >= 1"),
+    ],
+)
+def test_train_command_bad_options(
+    args: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["train", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]

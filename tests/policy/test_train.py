@@ -1,0 +1,127 @@
+"""Training loop: loss goes down, determinism, checkpoints, resume."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from slicerecon.errors import FormatError, OptionError
+from slicerecon.policy.buffers import ReplayBuffer
+from slicerecon.policy.env import CutEnv, ShapePool
+from slicerecon.policy.train import TrainConfig, config_path, load_config, train
+from slicerecon.policy.weights import load_actor
+
+TINY = dict(
+    shapes=("box", "two_spheres", "torus"), train_shapes=2, eval_shapes=1, grid=24,
+    resolution=32, max_corners=8, max_steps=4, n_envs=4, channels=4, hidden=32,
+    batch_size=32, buffer_size=2000, log_every=10, eval_every=50, checkpoint_every=50,
+)
+
+
+def _il(**changes: object) -> TrainConfig:
+    base = dict(TINY, name="il", demo_episodes=12, explore=False, rl_weight=0.0,
+                bc_weight=1.0, q_filter=False, bc_on_agent=False, actor_lr=3e-3,
+                total_updates=100)
+    base.update(changes)
+    return TrainConfig(**base)  # type: ignore[arg-type]
+
+
+def _il_rl(**changes: object) -> TrainConfig:
+    base = dict(TINY, name="il_rl", demo_episodes=6, pretrain_updates=4, total_updates=10,
+                explore=True, rl_weight=1.0, bc_weight=1.0, q_filter=True, bc_on_agent=True)
+    base.update(changes)
+    return TrainConfig(**base)  # type: ignore[arg-type]
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_behaviour_cloning_loss_goes_down(tmp_path: Path) -> None:
+    """~100 updates of imitation on tiny shapes: the BC loss drops clearly."""
+    losses: list[float] = []
+    result = train(_il(), out=tmp_path, progress=lambda u, n, m: losses.append(m["bc_loss"]))
+    assert result.n_updates == 100 and len(losses) == 100
+    first, last = np.mean(losses[:20]), np.mean(losses[-20:])
+    assert last < 0.7 * first, (first, last)
+    rows = _rows(result.log_path)
+    assert [int(r["update"]) for r in rows] == list(range(10, 101, 10))
+    assert rows[-1]["eval_iou"] and 0.0 < float(rows[-1]["eval_iou"]) <= 1.0
+    assert result.actor_path.is_file() and (tmp_path / "checkpoint.pt").is_file()
+
+
+def test_same_seed_same_parameters(tmp_path: Path) -> None:
+    a = train(_il_rl(), out=tmp_path / "a").agent
+    b = train(_il_rl(), out=tmp_path / "b").agent
+    c = train(_il_rl(seed=1), out=tmp_path / "c").agent
+    for net in ("actor", "critic"):
+        sa, sb, sc = (getattr(x, net).state_dict() for x in (a, b, c))
+        for key in sa:
+            torch.testing.assert_close(sa[key], sb[key], rtol=0, atol=0)
+        assert any(not torch.equal(sa[k], sc[k]) for k in sa)
+
+
+def test_saved_actor_acts_identically(tmp_path: Path) -> None:
+    result = train(_il_rl(), out=tmp_path)
+    actor, meta = load_actor(result.actor_path)
+    assert meta["grid"] == 24 and meta["net"]["max_corners"] == 8
+    pool = ShapePool.build(["chair", "torus"], [5], grid=24)
+    env = CutEnv(pool, n_envs=2, resolution=32, max_corners=8, augment=False)
+    obs = env.reset(seed=0)
+    with torch.no_grad():
+        torch.testing.assert_close(actor(obs), result.agent.act(obs), rtol=0, atol=0)
+    # the safetensors file holds plain tensors: also loadable without the library
+    from safetensors.torch import load_file
+
+    tensors = load_file(str(result.actor_path))
+    assert set(tensors) == set(actor.state_dict())
+
+
+def test_resume_continues_from_checkpoint(tmp_path: Path) -> None:
+    cfg = _il_rl(total_updates=8, checkpoint_every=4, log_every=4, eval_every=4)
+    first = train(cfg, out=tmp_path)
+    assert first.n_updates == 8
+    ckpt = torch.load(tmp_path / "checkpoint.pt", weights_only=False)
+    assert ckpt["agent"]["n_updates"] == 8
+    more = train(cfg.replace(total_updates=12), out=tmp_path, resume=True)
+    assert more.n_updates == 12
+    rows = _rows(more.log_path)
+    assert [int(r["update"]) for r in rows] == [4, 8, 12]
+    # the replay buffers came back: more agent transitions than one run of 4 updates makes
+    replay = ReplayBuffer(cfg.buffer_size, resolution=32, max_corners=8)
+    replay.load_state_dict(torch.load(tmp_path / "checkpoint.pt", weights_only=False)["replay"])
+    assert len(replay) == 8 * cfg.n_envs
+    with pytest.raises(OptionError):
+        train(cfg.replace(lam=0.5), out=tmp_path, resume=True)
+
+
+def test_shipped_configs_load_and_bad_files_fail(tmp_path: Path) -> None:
+    for name in ("ddpg", "il", "il_rl"):
+        cfg = load_config(name)
+        assert cfg.name == name and config_path(name).is_file()
+    assert load_config("ddpg").bc_weight == 0 and load_config("ddpg").demo_episodes == 0
+    assert load_config("il").rl_weight == 0 and not load_config("il").explore
+    il_rl = load_config("il_rl", seed=3)
+    assert il_rl.q_filter and il_rl.pretrain_updates > 0 and il_rl.seed == 3
+    bad = tmp_path / "bad.toml"
+    bad.write_text("learning_rate = 3\n")
+    with pytest.raises(FormatError, match="learning_rate"):
+        load_config(bad)
+    bad.write_text("grid = [\n")
+    with pytest.raises(FormatError):
+        load_config(bad)
+    with pytest.raises(OptionError):
+        TrainConfig(noise="pink")
+    with pytest.raises(OptionError):
+        TrainConfig(explore=False)  # imitation without demonstrations
+
+
+def test_shapes_without_expert_cuts_give_a_clear_error(tmp_path: Path) -> None:
+    """A box and a sphere have no splitting segment: no demonstrations can be collected."""
+    with pytest.raises(OptionError, match="no cut"):
+        train(_il(shapes=("box", "sphere"), demo_episodes=4), out=tmp_path)
