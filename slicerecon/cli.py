@@ -167,6 +167,9 @@ def run(
     planner: Annotated[
         str, typer.Option(help="heuristic, none or policy (learned planner).")
     ] = "heuristic",
+    weights: Annotated[
+        Path | None, typer.Option(help="Actor weights for --planner policy (default: shipped).")
+    ] = None,
     method: Annotated[str, typer.Option(help=_METHOD_HELP)] = "loft",
     projections: Annotated[
         str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
@@ -195,6 +198,7 @@ def run(
         every=every,
         axis=axis,
         planner=planner,
+        weights=None if weights is None else str(weights),
         method=method,
         projections=projections,
         smooth=smooth,

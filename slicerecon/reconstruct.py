@@ -91,6 +91,9 @@ class ReconstructConfig:
     """Accept DICOM series with uneven slice spacing."""
     max_parts: int = 8
     """Upper bound on the number of cuboid parts a planner may make."""
+    weights: str | None = None
+    """Actor weights file for ``planner="policy"`` (default: the shipped
+    ``il_rl`` actor)."""
     n_points: int = 50_000
     """Surface samples per mesh for the distance metrics."""
     seed: int = 0
@@ -411,6 +414,7 @@ def run_case(
         smooth=config.smooth,
         carve=config.carve,
         max_parts=config.max_parts,
+        weights=config.weights,
     )
     timings.update(result.timings)
     metrics = None

@@ -162,3 +162,18 @@ def test_console_script_exit_code_and_debug_traceback(tmp_path: Path) -> None:
         capture_output=True, text=True,
     )
     assert debug.returncode != 0 and "Traceback" in debug.stderr
+
+
+def test_policy_planner_with_shipped_weights(chair_nii: Path, tmp_path: Path) -> None:
+    out = tmp_path / "policy"
+    args = ["run", str(chair_nii), "-o", str(out), "--planner", "policy", "--slices", "8"]
+    assert main(args) == 0
+    assert trimesh.load(out / "mesh.stl").is_watertight
+    assert json.loads((out / "plan.json").read_text())["planner"] == "policy"
+
+
+def test_weights_need_the_policy_planner(
+    chair_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["run", str(chair_nii), "--weights", "w.safetensors", "-o", str(tmp_path)]) == 2
+    assert "policy" in _one_error_line(capsys)
