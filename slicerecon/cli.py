@@ -151,6 +151,26 @@ _METHOD_HELP = (
     '(needs pip install "slicerecon\\[itk]"). See docs/baselines.md.'
 )
 
+# Options shared by run, batch and evaluate-dataset (one definition, one help text).
+SlicesOpt = Annotated[
+    int | None, typer.Option("--slices", help="Keep N evenly spaced planes (default 16).")
+]
+EveryOpt = Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")]
+AxisOpt = Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")]
+PlannerOpt = Annotated[str, typer.Option(help="heuristic, none or policy (learned planner).")]
+MethodOpt = Annotated[str, typer.Option(help=_METHOD_HELP)]
+ProjectionsOpt = Annotated[str, typer.Option(help="gt, sections or auto (gt for dense inputs).")]
+FormatOpt = Annotated[str, typer.Option("--format", help="stl, ply or obj.")]
+SmoothOpt = Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")]
+CarveOpt = Annotated[
+    bool, typer.Option("--carve/--no-carve", help="Cut the surface to the projections' hull.")
+]
+LabelOpt = Annotated[int | None, typer.Option(help="Label value or segment number.")]
+RoiOpt = Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")]
+IrregularOpt = Annotated[
+    bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
+]
+
 
 # ----------------------------------------------------------------------------- run
 @app.command()
@@ -159,34 +179,24 @@ def run(
     outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Output directory.")] = Path(
         "slicerecon-out"
     ),
-    slices: Annotated[
-        int | None, typer.Option("--slices", help="Keep N evenly spaced planes (default 16).")
-    ] = None,
-    every: Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")] = None,
-    axis: Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")] = "z",
-    planner: Annotated[
-        str, typer.Option(help="heuristic, none or policy (learned planner).")
-    ] = "heuristic",
+    slices: SlicesOpt = None,
+    every: EveryOpt = None,
+    axis: AxisOpt = "z",
+    planner: PlannerOpt = "heuristic",
     weights: Annotated[
         Path | None, typer.Option(help="Actor weights for --planner policy (default: shipped).")
     ] = None,
-    method: Annotated[str, typer.Option(help=_METHOD_HELP)] = "loft",
-    projections: Annotated[
-        str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
-    ] = "auto",
+    method: MethodOpt = "loft",
+    projections: ProjectionsOpt = "auto",
     gt: Annotated[
         Path | None, typer.Option("--gt", help="Ground truth (mask or closed mesh).")
     ] = None,
-    mesh_format: Annotated[str, typer.Option("--format", help="stl, ply or obj.")] = "stl",
-    smooth: Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")] = False,
-    carve: Annotated[
-        bool, typer.Option("--carve/--no-carve", help="Cut the surface to the projections' hull.")
-    ] = True,
-    label: Annotated[int | None, typer.Option(help="Label value or segment number.")] = None,
-    roi: Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")] = None,
-    allow_irregular: Annotated[
-        bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
-    ] = False,
+    mesh_format: FormatOpt = "stl",
+    smooth: SmoothOpt = False,
+    carve: CarveOpt = True,
+    label: LabelOpt = None,
+    roi: RoiOpt = None,
+    allow_irregular: IrregularOpt = False,
 ) -> None:
     """Reconstruct one input; write mesh, plan.json, metrics.json and preview.png."""
     from rich.console import Console
@@ -255,25 +265,18 @@ def batch(
     no_report: Annotated[
         bool, typer.Option("--no-report", help="Do not write the HTML report.")
     ] = False,
-    slices: Annotated[
-        int | None, typer.Option("--slices", help="Keep N evenly spaced planes (default 16).")
-    ] = None,
-    every: Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")] = None,
-    axis: Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")] = "z",
-    planner: Annotated[
-        str, typer.Option(help="heuristic, none or policy (learned planner).")
-    ] = "heuristic",
-    method: Annotated[str, typer.Option(help=_METHOD_HELP)] = "loft",
-    projections: Annotated[
-        str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
-    ] = "auto",
-    mesh_format: Annotated[str, typer.Option("--format", help="stl, ply or obj.")] = "stl",
-    smooth: Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")] = False,
-    label: Annotated[int | None, typer.Option(help="Label value or segment number.")] = None,
-    roi: Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")] = None,
-    allow_irregular: Annotated[
-        bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
-    ] = False,
+    slices: SlicesOpt = None,
+    every: EveryOpt = None,
+    axis: AxisOpt = "z",
+    planner: PlannerOpt = "heuristic",
+    method: MethodOpt = "loft",
+    projections: ProjectionsOpt = "auto",
+    mesh_format: FormatOpt = "stl",
+    smooth: SmoothOpt = False,
+    carve: CarveOpt = True,
+    label: LabelOpt = None,
+    roi: RoiOpt = None,
+    allow_irregular: IrregularOpt = False,
 ) -> None:
     """Reconstruct every case in INDIR on Dask; write OUTDIR/<case>/ and OUTDIR/summary.csv.
 
@@ -302,6 +305,7 @@ def batch(
         method=method,
         projections=projections,
         smooth=smooth,
+        carve=carve,
         mesh_format=mesh_format,
         label=label,
         roi=roi,
@@ -401,16 +405,12 @@ def evaluate_dataset(
         str, typer.Option(help="Comma-separated surface methods, e.g. loft,sdf.")
     ] = "loft",
     planner: Annotated[str, typer.Option(help="Partition planner.")] = "heuristic",
-    slices: Annotated[
-        int | None, typer.Option("--slices", help="Keep N evenly spaced planes (default 16).")
-    ] = None,
-    every: Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")] = None,
-    axis: Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")] = "z",
-    projections: Annotated[
-        str, typer.Option(help="gt, sections or auto (gt for dense inputs).")
-    ] = "auto",
-    mesh_format: Annotated[str, typer.Option("--format", help="stl, ply or obj.")] = "stl",
-    smooth: Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")] = False,
+    slices: SlicesOpt = None,
+    every: EveryOpt = None,
+    axis: AxisOpt = "z",
+    projections: ProjectionsOpt = "auto",
+    mesh_format: FormatOpt = "stl",
+    smooth: SmoothOpt = False,
     label: Annotated[int | None, typer.Option(help="Label value to keep.")] = None,
     n_points: Annotated[int, typer.Option(help="Surface samples per mesh.")] = 50_000,
     seed: Annotated[int, typer.Option(help="Sampling seed.")] = 0,
