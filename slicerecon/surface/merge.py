@@ -133,6 +133,10 @@ def from_manifold(
 PINCH_GAP_MM = 1e-3
 """How far apart :func:`from_manifold` pulls vertices that touch at one position."""
 
+PINCH_RADIUS_MM = 1e-4
+"""Distinct vertices closer than this are taken as touching: welding tools and the
+float32 coordinates of STL would merge them."""
+
 
 def _separate_pinches(verts: NDArray[np.float64], faces: NDArray[np.int64]) -> NDArray[np.float64]:
     """Pull apart distinct vertices that share a position.
@@ -147,10 +151,12 @@ def _separate_pinches(verts: NDArray[np.float64], faces: NDArray[np.int64]) -> N
     """
     if len(verts) == 0:
         return verts
-    _, inverse, counts = np.unique(
-        np.round(verts, 9), axis=0, return_inverse=True, return_counts=True
-    )
-    pinched = np.flatnonzero(counts[inverse.ravel()] > 1)
+    from scipy.spatial import cKDTree
+
+    # Vertices closer than PINCH_RADIUS_MM would be merged by tools that weld by
+    # position (trimesh, STL readers): treat them as touching.
+    pairs = cKDTree(verts).query_pairs(PINCH_RADIUS_MM, output_type="ndarray")
+    pinched = np.unique(pairs)
     if pinched.size == 0:
         return verts
     verts = verts.copy()
