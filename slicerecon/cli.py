@@ -146,7 +146,8 @@ def info(
 
 
 _METHOD_HELP = (
-    "Surface method: loft or sdf (per part of the plan), or a whole-shape baseline "
+    "Surface method: hybrid (default: loft where contours correspond simply, sdf "
+    "elsewhere), loft or sdf (per part of the plan), or a whole-shape baseline "
     "that skips the planner and the carve: poisson, sdf-hull or itk-mci "
     '(needs pip install "slicerecon\\[itk]"). See docs/baselines.md.'
 )
@@ -186,7 +187,7 @@ def run(
     weights: Annotated[
         Path | None, typer.Option(help="Actor weights for --planner policy (default: shipped).")
     ] = None,
-    method: MethodOpt = "loft",
+    method: MethodOpt = "hybrid",
     projections: ProjectionsOpt = "auto",
     gt: Annotated[
         Path | None, typer.Option("--gt", help="Ground truth (mask or closed mesh).")
@@ -269,7 +270,7 @@ def batch(
     every: EveryOpt = None,
     axis: AxisOpt = "z",
     planner: PlannerOpt = "heuristic",
-    method: MethodOpt = "loft",
+    method: MethodOpt = "hybrid",
     projections: ProjectionsOpt = "auto",
     mesh_format: FormatOpt = "stl",
     smooth: SmoothOpt = False,
@@ -402,8 +403,8 @@ def evaluate_dataset(
     dataset_dir: Annotated[Path, typer.Argument(help="Directory of NIfTI masks (recursive).")],
     outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Results directory.")],
     method: Annotated[
-        str, typer.Option(help="Comma-separated surface methods, e.g. loft,sdf.")
-    ] = "loft",
+        str, typer.Option(help="Comma-separated surface methods, e.g. hybrid,loft,sdf.")
+    ] = "hybrid",
     planner: Annotated[str, typer.Option(help="Partition planner.")] = "heuristic",
     slices: SlicesOpt = None,
     every: EveryOpt = None,

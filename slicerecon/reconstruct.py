@@ -40,7 +40,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 PLANNERS = ("heuristic", "none", "policy")
-METHODS = ("loft", "sdf", "poisson", "sdf-hull", "itk-mci")
+METHODS = ("hybrid", "loft", "sdf", "poisson", "sdf-hull", "itk-mci")
 WHOLE_SHAPE_METHODS = ("poisson", "sdf-hull", "itk-mci")
 """Methods that reconstruct all the sections at once, without a partition
 (:mod:`slicerecon.surface.baselines`); planners and carving apply to loft/sdf only."""
@@ -64,9 +64,11 @@ class ReconstructConfig:
     """How the shape is partitioned into cuboid parts: ``heuristic`` (the
     paper's expert), ``none`` (one part: the no-projection baseline) or
     ``policy`` (the shipped learned planner, ``docs/policy.md``)."""
-    method: str = "loft"
-    """How each part is reconstructed: ``loft`` (contour lofting) or ``sdf``
-    (signed-distance interpolation + marching cubes); or a whole-shape
+    method: str = "hybrid"
+    """How each part is reconstructed: ``hybrid`` (the default: ``loft`` where
+    the contours of consecutive planes correspond simply, ``sdf`` where they
+    split, merge or appear), ``loft`` (contour lofting, the paper's method) or
+    ``sdf`` (signed-distance interpolation + marching cubes); or a whole-shape
     baseline that skips the planner and the carve: ``poisson`` (screened
     Poisson on the contour points), ``sdf-hull`` (signed-distance
     interpolation intersected with the visual hull) or ``itk-mci`` (ITK
@@ -251,7 +253,7 @@ def reconstruct(
     projections: Projections,
     *,
     planner: str = "heuristic",
-    method: str = "loft",
+    method: str = "hybrid",
     smooth: bool = False,
     carve: bool = True,
     max_parts: int = 8,
@@ -268,8 +270,8 @@ def reconstruct(
         derived from the sections).
     planner : {"heuristic", "none", "policy"}
         Partition planner (``policy``: a trained actor, needs torch).
-    method : {"loft", "sdf", "poisson", "sdf-hull", "itk-mci"}
-        Surface method. ``loft`` and ``sdf`` reconstruct each part of the
+    method : {"hybrid", "loft", "sdf", "poisson", "sdf-hull", "itk-mci"}
+        Surface method. ``hybrid``, ``loft`` and ``sdf`` reconstruct each part of the
         plan. The whole-shape baselines (:data:`WHOLE_SHAPE_METHODS`,
         :mod:`slicerecon.surface.baselines`) run on all the sections at once:
         no planner runs (``planner`` and ``max_parts`` are ignored), the plan

@@ -1101,7 +1101,7 @@ def evaluate_dataset(
     dataset_dir: str | os.PathLike[str],
     outdir: str | os.PathLike[str],
     *,
-    methods: Sequence[str] = ("loft",),
+    methods: Sequence[str] = ("hybrid",),
     config: ReconstructConfig | None = None,
     title: str | None = None,
     renders: bool = True,

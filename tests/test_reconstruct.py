@@ -29,7 +29,7 @@ def _assert_closed_manifold(mesh) -> None:  # type: ignore[no-untyped-def]
     assert np.all(counts == 2)
 
 
-@pytest.mark.parametrize("method", ["loft", "sdf"])
+@pytest.mark.parametrize("method", ["hybrid", "loft", "sdf"])
 def test_sphere_radius_40_with_16_planes(method: str) -> None:
     sphere = make_shape("sphere", radius=40.0)
     result, metrics = _run(sphere, method=method)
@@ -102,7 +102,7 @@ def test_real_mesh_input_gives_a_closed_surface_after_stl_round_trip() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", ["loft", "sdf"])
+@pytest.mark.parametrize("method", ["hybrid", "loft", "sdf"])
 def test_every_procedural_shape_every_axis_is_closed_after_stl(method: str) -> None:
     import io
 
@@ -119,3 +119,39 @@ def test_every_procedural_shape_every_axis_is_closed_after_stl(method: str) -> N
                 result.mesh.export(buffer, file_type="stl")
                 buffer.seek(0)
                 _assert_closed_manifold(trimesh.load(buffer, file_type="stl"))
+
+
+def test_hybrid_lofts_simple_parts_and_interpolates_folded_ones() -> None:
+    from slicerecon.reconstruct import planning_occupancy
+    from slicerecon.sections import Box
+    from slicerecon.surface.loft import correspondence_is_simple
+
+    # A sphere's contours correspond one to one: hybrid is exactly the loft.
+    sphere = make_shape("sphere", radius=20.0)
+    sections, projections, _ = prepare_inputs(sphere, slices=8)
+    box = Box((0, 0, 0), sections.grid_shape)
+    assert correspondence_is_simple(sections, box)
+    loft = reconstruct(sections, projections, planner="none", method="loft").mesh
+    hybrid = reconstruct(sections, projections, planner="none", method="hybrid").mesh
+    assert hybrid.volume == pytest.approx(loft.volume, rel=1e-9)
+    # Blobs appear and vanish between planes: not simple, and the hybrid
+    # result is closed and covers the occupancy the planner saw.
+    blobs = make_shape("blobs", seed=3)
+    sections, projections, truth = prepare_inputs(blobs, slices=6)
+    assert not correspondence_is_simple(sections, Box((0, 0, 0), sections.grid_shape))
+    result = reconstruct(sections, projections, method="hybrid")
+    _assert_closed_manifold(result.mesh)
+    assert result.plan.covers(planning_occupancy(sections, projections))
+
+
+def test_mni_white_matter_hybrid_beats_loft() -> None:
+    # Folded tissue: contours split and merge between planes, where lofting
+    # is ill posed; the hybrid interpolates those parts instead.
+    pytest.importorskip("nilearn")
+    from slicerecon.realshapes import mni152
+
+    wm = mni152("wm", resolution=64)
+    _, loft = _run(wm, slices=16, method="loft")
+    result, hybrid = _run(wm, slices=16, method="hybrid")
+    _assert_closed_manifold(result.mesh)
+    assert hybrid.volume_iou > loft.volume_iou

@@ -68,6 +68,7 @@ __all__ = [
     "HOLE_OVERSHOOT",
     "MATCH_COST_MAX",
     "OVERLAP_MIN",
+    "correspondence_is_simple",
     "loft",
     "loft_solid",
 ]
@@ -252,6 +253,58 @@ def loft_solid(
         len(planes), len(parts), solid.num_tri(), solid.volume(),
     )
     return solid
+
+
+def correspondence_is_simple(sections: CrossSections, box: Box) -> bool:
+    """Whether lofting is well posed for the planes inside ``box``.
+
+    True when, between every two consecutive planes inside the box, each
+    region is linked to at least one region of the other plane (nothing
+    appears or vanishes) and no link joins two regions that both branch
+    (no many-to-many merging): the cases the bands and branch pieces of the
+    loft are built for. Folded shapes whose contours split, merge and appear
+    from plane to plane (cortex, white matter) fail this test; the
+    ``"hybrid"`` method reconstructs such parts by signed-distance
+    interpolation instead.
+
+    Parameters
+    ----------
+    sections : CrossSections
+        All cross-sections of the shape.
+    box : Box
+        The part's cuboid on the reference grid.
+
+    Returns
+    -------
+    bool
+    """
+    if not isinstance(sections, CrossSections) or not isinstance(box, Box):
+        raise InputError("correspondence_is_simple needs CrossSections and a Box")
+    a, b = sections.plane_axes
+    inside = box.intersect(Box((0, 0, 0), sections.grid_shape))
+    if inside is None:
+        return True
+    lo_w, hi_w = inside.lo[sections.axis] - 0.5, inside.hi[sections.axis] - 0.5
+    w_all = sections.indices
+    chosen = np.flatnonzero((w_all >= lo_w - 1e-9) & (w_all <= hi_w + 1e-9))
+    if chosen.size < 2:
+        return True
+    window = _Window(inside.lo[a], inside.lo[b], sections.spacing[[a, b]])
+    masks = sections.masks[:, inside.lo[a] : inside.hi[a], inside.lo[b] : inside.hi[b]]
+    planes = [_plane(masks[p], float(w_all[p]), window) for p in chosen]
+    for lower, upper in zip(planes[:-1], planes[1:], strict=True):
+        if not lower.regions or not upper.regions:
+            if lower.regions or upper.regions:
+                return False
+            continue
+        links = _match(lower.regions, lower.labels, upper.regions, upper.labels)
+        degree_lo = np.bincount([i for i, _ in links], minlength=len(lower.regions))
+        degree_up = np.bincount([j for _, j in links], minlength=len(upper.regions))
+        if (degree_lo == 0).any() or (degree_up == 0).any():
+            return False
+        if any(degree_lo[i] >= 2 and degree_up[j] >= 2 for i, j in links):
+            return False
+    return True
 
 
 def _plane_to_index(axis: int) -> NDArray[np.float64]:

@@ -13,6 +13,11 @@ Methods
 ``"sdf"``
     Signed-distance interpolation + marching cubes
     (:func:`~slicerecon.surface.sdf.sdf_mesh`).
+``"hybrid"``
+    Per part: ``"loft"`` where the contour correspondence is simple
+    (:func:`~slicerecon.surface.loft.correspondence_is_simple`: nothing
+    appears, vanishes or merges many-to-many between consecutive planes),
+    ``"sdf"`` otherwise.
 
 Both use the same extent semantics along the section axis (see
 ``docs/method.md``): with ``extend_to_box=True`` the first / last plane in
@@ -27,14 +32,15 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 
+import manifold3d
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Box, CrossSections
-from .loft import loft_solid
-from .merge import check_closed, from_manifold, union_solids
+from .loft import correspondence_is_simple, loft_solid
+from .merge import check_closed, from_manifold, to_manifold, union_solids
 from .sdf import sdf_field, sdf_mesh, sdf_parts_mesh
 from .smooth import taubin_smooth
 
@@ -42,7 +48,7 @@ __all__ = ["METHODS", "VOXEL_METHODS", "reconstruct_part", "reconstruct_parts", 
 
 logger = logging.getLogger(__name__)
 
-METHODS = ("loft", "sdf")
+METHODS = ("hybrid", "loft", "sdf")
 """Surface methods of :func:`reconstruct_part` and :func:`reconstruct_parts`."""
 
 VOXEL_METHODS = ("sdf", "loft")
@@ -73,8 +79,8 @@ def reconstruct_part(
         All cross-sections of the shape.
     box : Box
         The part's cuboid on the reference grid.
-    method : {"loft", "sdf"}, default "loft"
-        Surface method.
+    method : {"hybrid", "loft", "sdf"}, default "loft"
+        Surface method (see the module docstring).
     extend_to_box : bool, default True
         Extend the part to the box faces along the section axis.
 
@@ -91,6 +97,8 @@ def reconstruct_part(
     """
     method = _check_method(method, METHODS)
     _check_inputs(sections, box)
+    if method == "hybrid":
+        method = "loft" if correspondence_is_simple(sections, box) else "sdf"
     if method == "loft":
         solid = loft_solid(sections, box=box, extend_to_box=extend_to_box)
         return None if solid is None else from_manifold(solid, transform=sections.affine)
@@ -166,8 +174,8 @@ def reconstruct_parts(
         All cross-sections of the shape.
     boxes : sequence of Box
         The parts' cuboids (they may touch or overlap).
-    method : {"loft", "sdf"}, default "loft"
-        Surface method of every part.
+    method : {"hybrid", "loft", "sdf"}, default "loft"
+        Surface method of the parts (see the module docstring).
     smooth : bool, default False
         Taubin-smooth the merged mesh (:func:`~slicerecon.surface.smooth.taubin_smooth`
         with its defaults).
@@ -192,7 +200,14 @@ def reconstruct_parts(
         raise OptionError("give at least one box (part) to reconstruct")
     for box in boxes:
         _check_inputs(sections, box)
-    if method == "loft":
+    if method == "hybrid":
+        solids = [_hybrid_solid(sections, b, extend_to_box=extend_to_box) for b in boxes]
+        kept = [s for s in solids if s is not None]
+        if not kept:
+            raise EmptyMaskError("no part's box holds any section foreground")
+        mesh = from_manifold(union_solids(kept), transform=sections.affine)
+        check_closed(mesh, "reconstruct_parts")
+    elif method == "loft":
         solids = [loft_solid(sections, box=b, extend_to_box=extend_to_box) for b in boxes]
         kept = [s for s in solids if s is not None]
         if not kept:
@@ -211,3 +226,19 @@ def reconstruct_parts(
     if smooth:
         mesh = taubin_smooth(mesh)
     return mesh
+
+
+def _hybrid_solid(
+    sections: CrossSections, box: Box, *, extend_to_box: bool
+) -> manifold3d.Manifold | None:
+    """One part of the ``"hybrid"`` method as a solid in voxel index coordinates."""
+    if correspondence_is_simple(sections, box):
+        return loft_solid(sections, box=box, extend_to_box=extend_to_box)
+    try:
+        mesh = sdf_mesh(sections, box=box, extend_to_box=extend_to_box)
+    except EmptyMaskError:
+        return None
+    logger.debug("part %s: contours split, merge or appear; signed-distance surface", box.to_dict())
+    index_mesh = mesh.copy()
+    index_mesh.apply_transform(np.linalg.inv(sections.affine))
+    return to_manifold(index_mesh)
