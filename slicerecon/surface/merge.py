@@ -169,6 +169,19 @@ def _separate_pinches(verts: NDArray[np.float64], faces: NDArray[np.int64]) -> N
         length = float(np.linalg.norm(direction))
         if length > 0:
             verts[v] += direction * min(PINCH_GAP_MM / length, 0.25)
+    # Copies whose fans lie on the same side moved together: push each such
+    # pair apart along the line between their fans' centres.
+    for _ in range(3):
+        close = cKDTree(verts[pinched]).query_pairs(PINCH_RADIUS_MM, output_type="ndarray")
+        if close.size == 0:
+            break
+        for i, j in pinched[close]:
+            centre_i = verts[edges[edges[:, 0] == i, 1]].mean(axis=0)
+            centre_j = verts[edges[edges[:, 0] == j, 1]].mean(axis=0)
+            apart = centre_i - centre_j
+            length = float(np.linalg.norm(apart))
+            if length > 0:
+                verts[i] += apart / length * PINCH_GAP_MM
     logger.debug("separated %d pinched vertices", pinched.size)
     return verts
 
