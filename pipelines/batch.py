@@ -232,7 +232,8 @@ def case_key(case: Case, config: ReconstructConfig) -> str:
 
     SHA-256 of the bytes of ``case.files`` (and, for a case of several files,
     of their names relative to ``case.root``; so renaming an input file or
-    folder keeps its key), of every field of ``config`` and of the slicerecon
+    folder keeps its key), of every field of ``config``, of the bytes of the
+    policy weights file when ``config.weights`` is set, and of the slicerecon
     version.
 
     Returns
@@ -249,6 +250,12 @@ def case_key(case: Case, config: ReconstructConfig) -> str:
     digest.update(f"slicerecon {__version__}\0".encode())
     digest.update(json.dumps(asdict(config), sort_keys=True, default=str).encode() + b"\0")
     digest.update(f"{case.kind}\0".encode())
+    if config.weights is not None:
+        # A retrained actor at the same path must recompute the cases.
+        try:
+            _hash_file(digest, Path(config.weights), "weights")
+        except OSError as exc:
+            raise InputError(f"cannot read the policy weights {config.weights}: {exc}") from exc
     single = case.files == (case.path,)
     for path in case.files:
         try:

@@ -390,3 +390,21 @@ def test_bad_invocations(tmp_path, capsys):
         run_batch(tmp_path / "empty", tmp_path / "o", CONFIG, workers=-2)
     with pytest.raises(OptionError, match="OUTDIR must differ from INDIR"):
         run_batch(tmp_path / "empty", tmp_path / "empty", CONFIG)
+
+
+def test_resume_key_follows_the_weights_file_contents(tmp_path: Path) -> None:
+    from pipelines.batch import case_key
+    from pipelines.discover import discover_cases
+    from slicerecon.io.nifti import write_nifti
+    from slicerecon.reconstruct import ReconstructConfig
+    from slicerecon.shapes import make_shape
+
+    write_nifti(make_shape("sphere", radius=6.0), tmp_path / "in" / "a.nii.gz")
+    (case,) = discover_cases(tmp_path / "in")
+    weights = tmp_path / "actor.safetensors"
+    weights.write_bytes(b"first")
+    config = ReconstructConfig(planner="policy", weights=str(weights))
+    first = case_key(case, config)
+    assert case_key(case, config) == first
+    weights.write_bytes(b"second")
+    assert case_key(case, config) != first
