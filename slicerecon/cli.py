@@ -160,7 +160,12 @@ EveryOpt = Annotated[int | None, typer.Option("--every", help="Keep every K-th p
 AxisOpt = Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")]
 PlannerOpt = Annotated[str, typer.Option(help="heuristic, none or policy (learned planner).")]
 MethodOpt = Annotated[str, typer.Option(help=_METHOD_HELP)]
-ProjectionsOpt = Annotated[str, typer.Option(help="gt, sections or auto (gt for dense inputs).")]
+ProjectionsOpt = Annotated[
+    str,
+    typer.Option(
+        help="gt, sections, auto (gt for dense inputs), or FILE[,FILE...]: 1-3 NIfTI silhouettes."
+    ),
+]
 FormatOpt = Annotated[str, typer.Option("--format", help="stl, ply or obj.")]
 SmoothOpt = Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mesh.")]
 CarveOpt = Annotated[

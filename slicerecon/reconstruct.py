@@ -12,7 +12,7 @@ import json
 import logging
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -76,8 +76,10 @@ class ReconstructConfig:
     ``docs/baselines.md``."""
     projections: str = "auto"
     """Where the orthographic projections come from: ``gt`` (the dense input,
-    the paper's prior), ``sections`` (derived from the sections alone) or
-    ``auto`` (``gt`` for dense inputs, ``sections`` for sparse ones)."""
+    the paper's prior), ``sections`` (derived from the sections alone),
+    ``auto`` (``gt`` for dense inputs, ``sections`` for sparse ones), or one
+    to three comma-separated NIfTI silhouette files
+    (:func:`slicerecon.io.projections.read_projection_files`)."""
     smooth: bool = False
     """Taubin-smooth the merged mesh."""
     carve: bool = True
@@ -112,7 +114,6 @@ class ReconstructConfig:
         for name, value, choices in (
             ("planner", self.planner, PLANNERS),
             ("method", self.method, METHODS),
-            ("projections", self.projections, PROJECTION_SOURCES),
             ("format", self.mesh_format, MESH_FORMATS),
         ):
             if value not in choices:
@@ -182,7 +183,7 @@ def prepare_inputs(
     slices: int | None = None,
     every: int | None = None,
     axis: int | str = "z",
-    projections: str = "auto",
+    projections: str | Sequence[str | os.PathLike[str]] = "auto",
 ) -> tuple[CrossSections, Projections, Volume | None]:
     """Turn a loaded input into cross-sections, projections and (maybe) ground truth.
 
@@ -190,6 +191,11 @@ def prepare_inputs(
     ``slices`` / ``every`` planes and kept as ground truth. A volume that
     annotates only some planes (see :func:`looks_sparse`) and contour inputs
     are used as they are, without ground truth.
+
+    ``projections`` is ``"gt"`` (from the dense mask), ``"sections"``
+    (derived from the sections), ``"auto"`` (``gt`` when there is a dense
+    mask), or one to three NIfTI silhouette files, as a sequence of paths or
+    one comma-separated string (:mod:`slicerecon.io.projections`).
 
     Returns
     -------
@@ -199,8 +205,14 @@ def prepare_inputs(
     """
     from .sampling import projections_from_sections, projections_from_volume, sample_sections
 
-    if projections not in PROJECTION_SOURCES:
-        raise OptionError(f"projections must be one of {PROJECTION_SOURCES} (got {projections!r})")
+    if isinstance(projections, str):
+        files = [] if projections in PROJECTION_SOURCES else [
+            f.strip() for f in projections.split(",") if f.strip()
+        ]
+    else:
+        files = [os.fspath(f) for f in projections]
+    if not files and projections not in PROJECTION_SOURCES:
+        raise OptionError(f"projections must be one of {PROJECTION_SOURCES} or silhouette files")
     ax = axis_index(axis)
     truth: Volume | None = None
     if isinstance(data, Volume):
@@ -218,6 +230,10 @@ def prepare_inputs(
         if slices is not None or every is not None:
             raise OptionError("--slices/--every apply to dense masks; this input is already sparse")
     sections.require_foreground()
+    if files:
+        from .io.projections import read_projection_files
+
+        return sections, read_projection_files(files, sections), truth
     source = projections
     if source == "auto":
         source = "gt" if truth is not None else "sections"
