@@ -257,11 +257,16 @@ def planning_occupancy(sections: CrossSections, projections: Projections) -> np.
     """
     from .partition.hull import visual_hull
 
-    hull = visual_hull(projections, sections.grid_shape)
+    return _exact_on_planes(visual_hull(projections, sections.grid_shape), sections)
+
+
+def _exact_on_planes(hull: np.ndarray, sections: CrossSections) -> np.ndarray:
+    """A copy of ``hull`` whose section planes hold the section masks."""
+    occupancy = hull.copy()
     if sections.is_on_grid:
-        view = np.moveaxis(hull, sections.axis, 0)
+        view = np.moveaxis(occupancy, sections.axis, 0)
         view[np.round(sections.indices).astype(np.int64)] = sections.masks
-    return hull
+    return occupancy
 
 
 def reconstruct(
@@ -317,8 +322,11 @@ def reconstruct(
     if method in WHOLE_SHAPE_METHODS:
         return _reconstruct_whole_shape(sections, projections, method=method, smooth=smooth)
     timings: dict[str, float] = {}
+    from .partition.hull import visual_hull
+
     with _timed(timings, "plan"):
-        occupancy = planning_occupancy(sections, projections)
+        hull = visual_hull(projections, sections.grid_shape)
+        occupancy = _exact_on_planes(hull, sections)
 
         def part_reconstruction(box):  # type: ignore[no-untyped-def]
             return part_voxels(sections, box)
@@ -333,11 +341,9 @@ def reconstruct(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none"
         )
     if carve:
-        from .partition.hull import visual_hull
         from .surface.carve import carve as carve_by_hull
 
         with _timed(timings, "carve"):
-            hull = visual_hull(projections, sections.grid_shape)
             mesh = carve_by_hull(mesh, hull, sections.affine)
     return Reconstruction(mesh, plan, sections, projections, timings)
 

@@ -161,6 +161,7 @@ def _separate_pinches(verts: NDArray[np.float64], faces: NDArray[np.int64]) -> N
         return verts
     verts = verts.copy()
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    edges = edges[np.isin(edges[:, 0], pinched)]  # only the pinched vertices' edges
     for v in pinched:
         neighbours = edges[edges[:, 0] == v, 1]
         if neighbours.size == 0:
