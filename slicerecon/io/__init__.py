@@ -200,17 +200,8 @@ def load_input(
 
 def _vti_volume(path: Path, *, label: int | None) -> Volume:
     """A label map in a VTK XML image (``.vti``): one label, or every non-zero voxel."""
-    from ..errors import LabelError
+    from .nifti import label_mask
     from .vti import read_vti
 
     image = read_vti(path)
-    values = np.asarray(image.values)
-    if label is None:
-        mask = values != 0
-    else:
-        present = np.unique(values)
-        if label not in present:
-            shown = ", ".join(str(v) for v in present[present != 0][:20])
-            raise LabelError(f"{path}: label {label} is not in the image (labels: {shown})")
-        mask = values == label
-    return Volume(mask, image.affine)
+    return Volume(label_mask(np.asarray(image.values), label, path), image.affine)

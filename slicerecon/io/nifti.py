@@ -148,6 +148,42 @@ def _read_labels(p: Path, img: nib.Nifti1Pair) -> NDArray[Any]:
     return data
 
 
+def label_mask(data: NDArray[Any], label: int | None, source: Path) -> NDArray[np.bool_]:
+    """The voxels of one label of a label map (``None``: every non-zero voxel).
+
+    Shared by the label-map readers (NIfTI, VTK images) so that they select
+    labels and report missing ones the same way.
+
+    Raises
+    ------
+    EmptyMaskError
+        If every voxel is 0.
+    LabelError
+        If ``label`` is absent (the message lists the labels present).
+    """
+    if label is None:
+        mask = data != 0
+        if not mask.any():
+            raise EmptyMaskError(
+                f"{source} is empty: every voxel is 0, there is nothing to reconstruct"
+            )
+        return mask
+    mask = data == label
+    if not mask.any():
+        present = _label_counts(data)
+        if not present:
+            raise EmptyMaskError(
+                f"{source} is empty: every voxel is 0, so label {label} is absent too"
+            )
+        listed = ", ".join(str(v) for v in list(present)[:20])
+        more = f" (and {len(present) - 20} more)" if len(present) > 20 else ""
+        raise LabelError(
+            f"label {label} is absent from {source}; labels present: {listed}{more}. "
+            "Pick one of these"
+        )
+    return mask
+
+
 def _label_counts(data: NDArray[Any]) -> dict[int, int]:
     """Non-zero label values of an integer-valued array and their voxel counts."""
     if data.dtype.kind in "bu" and data.dtype.itemsize <= 2:
@@ -192,25 +228,7 @@ def read_nifti(path: str | os.PathLike[str], *, label: int | None = None) -> Vol
     if label is not None and (isinstance(label, bool) or not isinstance(label, int | np.integer)):
         raise OptionError(f"label must be an integer label value (got {label!r})")
     p, img = _load(path)
-    data = _read_labels(p, img)
-    if label is None:
-        mask = data != 0
-        if not mask.any():
-            raise EmptyMaskError(f"{p} is empty: every voxel is 0, there is nothing to reconstruct")
-    else:
-        mask = data == label
-        if not mask.any():
-            present = _label_counts(data)
-            if not present:
-                raise EmptyMaskError(
-                    f"{p} is empty: every voxel is 0, so label {label} is absent too"
-                )
-            listed = ", ".join(str(v) for v in list(present)[:20])
-            more = f" (and {len(present) - 20} more)" if len(present) > 20 else ""
-            raise LabelError(
-                f"label {label} is absent from {p}; labels present: {listed}{more}. "
-                "Pick one of these"
-            )
+    mask = label_mask(_read_labels(p, img), label, p)
     volume = Volume(mask, img.affine)
     logger.info(
         "read %s: %s, label %s, %d foreground voxels",
