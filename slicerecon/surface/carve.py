@@ -41,6 +41,11 @@ _TEST_OFFSET = 0.5
 this many voxels along any axis: sub-voxel excursions (voxelisation noise of
 the hull around a smooth surface) are left alone."""
 
+_OUTSIDE_HULL = (
+    "the reconstruction lies entirely outside the projections' visual hull; "
+    "check that the projections belong to these sections (or use --no-carve)"
+)
+
 _REACH = 2
 """Voxels by which the carved region is grown around the samples found outside."""
 
@@ -93,10 +98,7 @@ def carve(
     grid = Volume(hull_mask, np.asarray(affine, dtype=np.float64))
     outside, fraction_out = _outside_voxels(mesh, grid, seed=seed)
     if fraction_out == 1.0:
-        raise EmptyMaskError(
-            "the reconstruction lies entirely outside the projections' visual hull; "
-            "check that the projections belong to these sections (or use --no-carve)"
-        )
+        raise EmptyMaskError(_OUTSIDE_HULL)
     if not outside.any():
         logger.debug("carve: the surface stays inside the hull")
         return mesh
@@ -119,10 +121,7 @@ def carve(
     cutter = volume_to_mesh(Volume(region, sub_affine).crop(pad=1), level=1.0 - HULL_LEVEL)
     solid = to_manifold(mesh) - to_manifold(cutter)
     if solid.is_empty() or solid.volume() <= 0:
-        raise EmptyMaskError(
-            "the reconstruction lies entirely outside the projections' visual hull; "
-            "check that the projections belong to these sections (or use --no-carve)"
-        )
+        raise EmptyMaskError(_OUTSIDE_HULL)
     carved = from_manifold(solid)
     check_closed(carved, "carve")
     logger.debug(

@@ -150,11 +150,8 @@ def _repair_ambiguous_blocks(
         blocks = _ambiguous_blocks(fixed) & near
         if not blocks.any():
             blocks = near
-        ni, nj, nk = fixed.shape
-        for i in (0, 1):
-            for j in (0, 1):
-                for k in (0, 1):
-                    fixed[i : ni - 1 + i, j : nj - 1 + j, k : nk - 1 + k] |= blocks
+        for corner in _block_corners(fixed).values():
+            corner |= blocks  # the corners are views of ``fixed``: fill the whole blocks
     return fixed, int(np.count_nonzero(fixed) - np.count_nonzero(mask))
 
 
