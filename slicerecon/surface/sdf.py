@@ -166,8 +166,9 @@ def _box_field(
         _fill_between(field, samples, w, used, distances)
         first, last = int(used[0]), int(used[-1])
         if bounded and extend_to_box:
-            field[samples < w[first]] = np.minimum(distances[first], far)
-            field[samples > w[last]] = np.minimum(distances[last], far)
+            # <= and >=: a box holding one plane has no interpolated sample on it.
+            field[samples <= w[first]] = np.minimum(distances[first], far)
+            field[samples >= w[last]] = np.minimum(distances[last], far)
         elif used.size == 1:
             near = (samples >= w[first] - 0.5) & (samples < w[first] + 0.5)
             field[near] = np.minimum(distances[first], far)
