@@ -222,7 +222,8 @@ def main() -> None:
         "never seen in training or its evaluation), longest side "
         f"{args.voxels} voxels, {args.slices} planes along z (fewer for flat shapes: as many "
         "as they occupy), ground-truth projections, "
-        "loft surfaces; `reconstruct()` + `evaluate()` (20 000 surface samples). The learned "
+        "the default surface (`hybrid`, carved by the hull); `reconstruct()` + `evaluate()` "
+        "(20 000 surface samples). The learned "
         "planners are the shipped actors (`slicerecon/policy/weights/`, see its README).",
         "",
         "## Volume IoU and Chamfer-L1 (mm) per family",
@@ -273,7 +274,7 @@ def main() -> None:
         "The curves are the training logs' `eval_iou`: the environment's surrogate IoU",
         "(union of the parts' nearest-plane reconstructions against the shape, on the",
         "training evaluation shapes, seeds 10 000+), with the heuristic's value on the",
-        "same shapes dashed. It is a cheap proxy, not the loft IoU of the table above.",
+        "same shapes dashed. It is a cheap proxy, not the surface IoU of the table above.",
         "",
     ]
     if errors:

@@ -328,8 +328,10 @@ def reconstruct(
         hull = visual_hull(projections, sections.grid_shape)
         occupancy = _exact_on_planes(hull, sections)
 
+        guide = hull if planner != "none" else None
+
         def part_reconstruction(box):  # type: ignore[no-untyped-def]
-            return part_voxels(sections, box)
+            return part_voxels(sections, box, hull=guide)
 
         plan = plan_partition(
             occupancy, planner=planner, reconstruct=part_reconstruction, max_parts=max_parts,
@@ -338,7 +340,8 @@ def reconstruct(
     with _timed(timings, "surface"):
         boxes = [part.box for part in plan.parts]
         mesh = reconstruct_parts(
-            sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none"
+            sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
+            hull=guide,
         )
     if carve:
         from .surface.carve import carve as carve_by_hull

@@ -121,7 +121,9 @@ def test_cross_sections_positions_and_gaps_in_mm():
     np.testing.assert_allclose(cs.positions, (106.0, 115.0, 118.0))
     np.testing.assert_allclose(cs.gaps, (9.0, 3.0))
     assert cs.plane_axes == (0, 1)
-    np.testing.assert_allclose(cs.plane_to_world(1, [[0, 0], [2, 4]]), [[10, -5, 115], [11, -3, 115]])
+    np.testing.assert_allclose(
+        cs.plane_to_world(1, [[0, 0], [2, 4]]), [[10, -5, 115], [11, -3, 115]]
+    )
 
 
 def test_contours_flag_holes_and_match_area():

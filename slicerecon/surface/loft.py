@@ -32,9 +32,10 @@ ends are capped. The exact algorithm, with its costs and thresholds, is in
    :data:`HOLE_OVERSHOOT` beyond the slab, and subtracted from the slab.
 7. **Ends.** Without a box, the first and last planes are capped flat (a
    single plane becomes a slab half a voxel thick each side). With a box and
-   ``extend_to_box``, the first / last plane inside the box is extruded as a
-   prism to the box face; a box holding no plane is filled with the slab of
-   the planes either side of it.
+   ``extend_to_box``, the first / last plane inside the box is carried to the
+   box face: as a prism, or, given the visual ``hull``, through one ring per
+   layer whose extent changes (:mod:`~slicerecon.surface.extension`); a box
+   holding no plane is filled with the slab of the planes either side of it.
 8. All solids are united with manifold3d (exact, robust to the coplanar caps
    of consecutive slabs) and intersected with the box.
 
@@ -61,6 +62,7 @@ from skimage.measure import find_contours
 
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Box, CrossSections
+from .extension import LayerMap, check_hull, extension_maps, identity_map
 from .merge import from_manifold, solid_from_arrays, union_solids
 
 __all__ = [
@@ -127,7 +129,11 @@ class _Plane(NamedTuple):
 
 # -- public API -------------------------------------------------------------------------
 def loft(
-    sections: CrossSections, *, box: Box | None = None, extend_to_box: bool = False
+    sections: CrossSections,
+    *,
+    box: Box | None = None,
+    extend_to_box: bool = False,
+    hull: NDArray[np.bool_] | None = None,
 ) -> trimesh.Trimesh:
     """Loft a closed surface through the contours of the section planes.
 
@@ -140,10 +146,14 @@ def loft(
         (in continuous index coordinates it spans ``[lo - 0.5, hi - 0.5]``).
         Planes outside the box along the axis are not used.
     extend_to_box : bool, default False
-        With a box: extrude the first and last plane inside the box as
-        prisms to the box faces, and fill a box holding no plane with the
-        slab between the planes either side of it (clipped to the box).
-        Ignored without a box.
+        With a box: carry the first and last plane inside the box to the box
+        faces (prisms, or following ``hull``), and fill a box holding no
+        plane with the slab between the planes either side of it (clipped to
+        the box). Ignored without a box.
+    hull : ndarray of shape sections.grid_shape, bool, optional
+        The visual hull of the projections. With ``extend_to_box``, the
+        extensions to the box faces follow its extent layer by layer
+        (:mod:`~slicerecon.surface.extension`) instead of being prisms.
 
     Returns
     -------
@@ -157,7 +167,7 @@ def loft(
     EmptyMaskError
         If no plane used holds foreground (inside the box, when given).
     """
-    solid = loft_solid(sections, box=box, extend_to_box=extend_to_box)
+    solid = loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
     if solid is None:
         where = "inside the box" if box is not None else "on any plane"
         raise EmptyMaskError(f"no section foreground {where}: nothing to loft")
@@ -165,11 +175,18 @@ def loft(
 
 
 def loft_solid(
-    sections: CrossSections, *, box: Box | None = None, extend_to_box: bool = False
+    sections: CrossSections,
+    *,
+    box: Box | None = None,
+    extend_to_box: bool = False,
+    hull: NDArray[np.bool_] | None = None,
 ) -> manifold3d.Manifold | None:
     """The lofted solid in voxel index coordinates, or None when there is nothing to loft.
 
-    Same parameters as :func:`loft`. The solid is in continuous index
+    Same parameters as :func:`loft`, and ``hull``: the visual hull on the
+    reference grid (shape ``sections.grid_shape``), which the extensions to
+    the box faces follow (:mod:`~slicerecon.surface.extension`); without it
+    they are prisms. The solid is in continuous index
     coordinates ``(i, j, k)`` of the reference grid; map it to world mm with
     ``from_manifold(solid, transform=sections.affine)``. Solids of several
     parts of the same sections are united in these coordinates, where shared
@@ -187,6 +204,7 @@ def loft_solid(
         raise InputError(f"box must be a slicerecon Box (got {type(box).__name__})")
     if not isinstance(extend_to_box, bool | np.bool_):
         raise OptionError(f"extend_to_box must be True or False (got {extend_to_box!r})")
+    check_hull(hull, sections.grid_shape)
 
     a, b = sections.plane_axes
     grid = sections.grid_shape
@@ -223,16 +241,19 @@ def loft_solid(
         return None
     planes = [_plane(masks[p], float(w_all[p]), window) for p in chosen]
 
-    ends: tuple[float | None, float | None] = (None, None)
+    ends: tuple[list[LayerMap] | None, list[LayerMap] | None] = (None, None)
     if crossing:
         pass  # the crossing slab is cut at the box faces below
     elif span is not None and extend_to_box:
+        assert box is not None
         ends = (
-            span[0] if planes[0].w > span[0] + 1e-9 else None,
-            span[1] if planes[-1].w < span[1] - 1e-9 else None,
+            _extension(hull, box, sections.axis, planes[0].w, 0)
+            if planes[0].w > span[0] + 1e-9 else None,
+            _extension(hull, box, sections.axis, planes[-1].w, 1)
+            if planes[-1].w < span[1] - 1e-9 else None,
         )
     elif len(planes) == 1:
-        ends = (planes[0].w - 0.5, planes[0].w + 0.5)
+        ends = ([identity_map(planes[0].w - 0.5)], [identity_map(planes[0].w + 0.5)])
 
     parts = _solids(planes, window, ends, hole=False)
     solid = union_solids(parts)
@@ -305,6 +326,15 @@ def correspondence_is_simple(sections: CrossSections, box: Box) -> bool:
         if any(degree_lo[i] >= 2 and degree_up[j] >= 2 for i, j in links):
             return False
     return True
+
+
+def _extension(
+    hull: NDArray[np.bool_] | None, box: Box, axis: int, anchor: float, side: int
+) -> list[LayerMap]:
+    """Rings' maps from the outermost plane to the box face (a prism without a hull)."""
+    if hull is None:
+        return [identity_map(box.lo[axis] - 0.5 if side == 0 else box.hi[axis] - 0.5)]
+    return extension_maps(hull, box, axis, anchor, side)
 
 
 def _plane_to_index(axis: int) -> NDArray[np.float64]:
@@ -520,7 +550,7 @@ def _pieces(
 def _solids(
     planes: list[_Plane],
     window: _Window,
-    ends: tuple[float | None, float | None],
+    ends: tuple[list[LayerMap] | None, list[LayerMap] | None],
     *,
     hole: bool,
 ) -> list[manifold3d.Manifold]:
@@ -529,8 +559,9 @@ def _solids(
     Regions linked one-to-one across consecutive planes are chained into one
     tube through all their planes (no Boolean needed between slabs);
     branching links become piece-to-piece lofts, unmatched regions cones.
-    ``ends`` are the axis positions the first / last plane's chains are
-    extruded to (None: capped flat at the plane). Hole solids reach
+    ``ends`` are the maps (in increasing ``w``) that carry the first / last
+    plane's chains to the box faces (None: capped flat at the plane); each
+    map adds a ring, the plane's polygon mapped onto its layer. Hole solids reach
     :data:`HOLE_OVERSHOOT` beyond their end planes so that they open the caps.
     """
     eps = HOLE_OVERSHOOT if hole else 0.0
@@ -582,15 +613,21 @@ def _solids(
             while ii in following[kk]:
                 ii, kk = following[kk][ii], kk + 1
                 rings.append((planes[kk].w, items(planes[kk])[0][ii].polygon))
+            # Rings mapped from one polygon keep its vertices in order: no re-alignment.
+            aligned: set[int] = set()
             if k == 0 and ends[0] is not None:
-                rings.insert(0, (ends[0], rings[0][1]))
+                first = rings[0][1]
+                rings[:0] = [(m.w, m.forward(first)) for m in ends[0]]
+                aligned.update(range(len(ends[0])))
             if kk == last and ends[1] is not None:
-                rings.append((ends[1], rings[-1][1]))
+                final = rings[-1][1]
+                aligned.update(range(len(rings) - 1, len(rings) - 1 + len(ends[1])))
+                rings.extend((m.w, m.forward(final)) for m in ends[1])
             if len(rings) < 2:
                 continue
             rings[0] = (rings[0][0] - eps, rings[0][1])
             rings[-1] = (rings[-1][0] + eps, rings[-1][1])
-            solids.append(_tube(rings))
+            solids.append(_tube(rings, aligned))
     return [s for s in solids if s is not None]
 
 
@@ -648,17 +685,20 @@ def _align_start(lower: NDArray[np.float64], upper: NDArray[np.float64]) -> int:
     return int(np.argmin(np.minimum(gap, 1.0 - gap)))
 
 
-def _band(lower: NDArray[np.float64], upper: NDArray[np.float64]) -> NDArray[np.int64]:
+def _band(
+    lower: NDArray[np.float64], upper: NDArray[np.float64], *, aligned: bool = False
+) -> NDArray[np.int64]:
     """Triangles joining two counter-clockwise polygons, lower below upper.
 
     Indices ``0..n-1`` are the lower vertices and ``n..n+m-1`` the upper ones
     (in their given order). The upper polygon is read from the vertex chosen
-    by :func:`_align_start`; the arc-length parameters of both polygons are
+    by :func:`_align_start` (from vertex 0 when ``aligned``: the upper polygon
+    is the lower one mapped, vertex for vertex); the arc-length parameters of both polygons are
     merged in increasing order and each step advances on one polygon, adding
     one triangle, so every vertex of both is used.
     """
     n, m = lower.shape[0], upper.shape[0]
-    start = 0 if upper is lower else _align_start(lower, upper)
+    start = 0 if aligned or upper is lower else _align_start(lower, upper)
     s = _arc_parameters(lower)
     t = _arc_parameters(np.roll(upper, -start, axis=0))
     params = np.concatenate([s[1:], t[1:]])
@@ -676,14 +716,20 @@ def _band(lower: NDArray[np.float64], upper: NDArray[np.float64]) -> NDArray[np.
     )
 
 
-def _tube(rings: list[tuple[float, NDArray[np.float64]]]) -> manifold3d.Manifold | None:
-    """Closed solid through counter-clockwise polygons at increasing ``w``, capped at both ends."""
+def _tube(
+    rings: list[tuple[float, NDArray[np.float64]]], aligned: set[int] | None = None
+) -> manifold3d.Manifold | None:
+    """Closed solid through counter-clockwise polygons at increasing ``w``, capped at both ends.
+
+    ``aligned`` holds the ``k`` whose rings ``k`` and ``k + 1`` correspond
+    vertex for vertex (see :func:`_band`).
+    """
     sizes = [poly.shape[0] for _, poly in rings]
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     verts = np.vstack([np.column_stack([poly, np.full(poly.shape[0], w)]) for w, poly in rings])
     faces = []
     for k in range(len(rings) - 1):
-        band = _band(rings[k][1], rings[k + 1][1])
+        band = _band(rings[k][1], rings[k + 1][1], aligned=aligned is not None and k in aligned)
         n = sizes[k]
         faces.append(np.where(band < n, band + offsets[k], band - n + offsets[k + 1]))
     faces.append(_cap(rings[0][1])[:, ::-1] + offsets[0])

@@ -69,7 +69,12 @@ def _check_inputs(sections: CrossSections, box: Box) -> None:
 
 
 def reconstruct_part(
-    sections: CrossSections, box: Box, *, method: str = "loft", extend_to_box: bool = True
+    sections: CrossSections,
+    box: Box,
+    *,
+    method: str = "loft",
+    extend_to_box: bool = True,
+    hull: NDArray[np.bool_] | None = None,
 ) -> trimesh.Trimesh | None:
     """Reconstruct one part from the sections inside its box.
 
@@ -83,6 +88,9 @@ def reconstruct_part(
         Surface method (see the module docstring).
     extend_to_box : bool, default True
         Extend the part to the box faces along the section axis.
+    hull : ndarray of shape sections.grid_shape, bool, optional
+        The projections' visual hull; the extensions follow its extent
+        (:mod:`~slicerecon.surface.extension`). Without it they are prisms.
 
     Returns
     -------
@@ -100,16 +108,21 @@ def reconstruct_part(
     if method == "hybrid":
         method = "loft" if correspondence_is_simple(sections, box) else "sdf"
     if method == "loft":
-        solid = loft_solid(sections, box=box, extend_to_box=extend_to_box)
+        solid = loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
         return None if solid is None else from_manifold(solid, transform=sections.affine)
     try:
-        return sdf_mesh(sections, box=box, extend_to_box=extend_to_box)
+        return sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull)
     except EmptyMaskError:
         return None
 
 
 def part_voxels(
-    sections: CrossSections, box: Box, *, method: str = "sdf", extend_to_box: bool = True
+    sections: CrossSections,
+    box: Box,
+    *,
+    method: str = "sdf",
+    extend_to_box: bool = True,
+    hull: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
     """Voxel occupancy of a part's reconstruction on the reference grid, inside its box.
 
@@ -123,7 +136,7 @@ def part_voxels(
         ``"sdf"``: signed-distance interpolation sampled at the voxel centres
         (fast: a few ms for a 100³ box). ``"loft"``: the lofted mesh
         rasterized at the voxel centres (slower, exact for the loft).
-    extend_to_box : bool, default True
+    extend_to_box, hull
         As for :func:`reconstruct_part`.
 
     Returns
@@ -146,11 +159,13 @@ def part_voxels(
             f"box {box.to_dict()} must lie inside the reference grid {sections.grid_shape}"
         )
     if method == "sdf":
-        field, _ = sdf_field(sections, box=box, extend_to_box=extend_to_box)
+        field, _ = sdf_field(sections, box=box, extend_to_box=extend_to_box, hull=hull)
         return field < 0
     from ..rasterize import mesh_to_mask
 
-    mesh = reconstruct_part(sections, box, method="loft", extend_to_box=extend_to_box)
+    mesh = reconstruct_part(
+        sections, box, method="loft", extend_to_box=extend_to_box, hull=hull
+    )
     if mesh is None:
         return np.zeros(box.shape, dtype=bool)
     affine = sections.affine.copy()
@@ -165,6 +180,7 @@ def reconstruct_parts(
     method: str = "loft",
     smooth: bool = False,
     extend_to_box: bool = True,
+    hull: NDArray[np.bool_] | None = None,
 ) -> trimesh.Trimesh:
     """Reconstruct every part and merge them into one watertight mesh.
 
@@ -179,7 +195,7 @@ def reconstruct_parts(
     smooth : bool, default False
         Taubin-smooth the merged mesh (:func:`~slicerecon.surface.smooth.taubin_smooth`
         with its defaults).
-    extend_to_box : bool, default True
+    extend_to_box, hull
         As for :func:`reconstruct_part`.
 
     Returns
@@ -201,14 +217,18 @@ def reconstruct_parts(
     for box in boxes:
         _check_inputs(sections, box)
     if method == "hybrid":
-        solids = [_hybrid_solid(sections, b, extend_to_box=extend_to_box) for b in boxes]
+        solids = [
+            _hybrid_solid(sections, b, extend_to_box=extend_to_box, hull=hull) for b in boxes
+        ]
         kept = [s for s in solids if s is not None]
         if not kept:
             raise EmptyMaskError("no part's box holds any section foreground")
         mesh = from_manifold(union_solids(kept), transform=sections.affine)
         check_closed(mesh, "reconstruct_parts")
     elif method == "loft":
-        solids = [loft_solid(sections, box=b, extend_to_box=extend_to_box) for b in boxes]
+        solids = [
+            loft_solid(sections, box=b, extend_to_box=extend_to_box, hull=hull) for b in boxes
+        ]
         kept = [s for s in solids if s is not None]
         if not kept:
             raise EmptyMaskError("no part's box holds any section foreground")
@@ -218,7 +238,7 @@ def reconstruct_parts(
         check_closed(mesh, "reconstruct_parts")
     else:
         # Implicit union: the minimum of the parts' signed distances, meshed once.
-        mesh = sdf_parts_mesh(sections, boxes, extend_to_box=extend_to_box)
+        mesh = sdf_parts_mesh(sections, boxes, extend_to_box=extend_to_box, hull=hull)
     logger.debug(
         "merged %d parts (%s): %d faces, %.6g mm^3", len(boxes), method, len(mesh.faces),
         mesh.volume,
@@ -229,13 +249,13 @@ def reconstruct_parts(
 
 
 def _hybrid_solid(
-    sections: CrossSections, box: Box, *, extend_to_box: bool
+    sections: CrossSections, box: Box, *, extend_to_box: bool, hull: NDArray[np.bool_] | None
 ) -> manifold3d.Manifold | None:
     """One part of the ``"hybrid"`` method as a solid in voxel index coordinates."""
     if correspondence_is_simple(sections, box):
-        return loft_solid(sections, box=box, extend_to_box=extend_to_box)
+        return loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
     try:
-        mesh = sdf_mesh(sections, box=box, extend_to_box=extend_to_box)
+        mesh = sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull)
     except EmptyMaskError:
         return None
     logger.debug("part %s: contours split, merge or appear; signed-distance surface", box.to_dict())

@@ -12,9 +12,10 @@ Extent along the axis (the same semantics as :func:`~slicerecon.surface.loft.lof
 * without a box, the shape spans the first to the last plane (a single plane
   is a slab half a voxel thick on each side);
 * with a box, only planes inside the box are used; with ``extend_to_box``,
-  the first / last plane is extended unchanged (a prism) to the box faces,
-  and a box holding no plane is filled by interpolating between the planes
-  either side of it.
+  the first / last plane is extended to the box faces (unchanged, a prism, or
+  following the visual hull's extent when a ``hull`` is given:
+  :mod:`~slicerecon.surface.extension`), and a box holding no plane is filled
+  by interpolating between the planes either side of it.
 
 In-plane distances are computed on the box's crop grown by one pixel (beyond
 it counts as background), so that they see the shape just past the box
@@ -47,6 +48,7 @@ from scipy import ndimage
 
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Box, CrossSections, Volume
+from .extension import LayerMap, check_hull, extension_maps, interpolate_maps
 from .marching import field_to_mesh
 
 __all__ = [
@@ -98,13 +100,16 @@ def plane_signed_distance(
 
 
 # -- validation -------------------------------------------------------------------------
-def _check(sections: CrossSections, upsample: int, extend_to_box: bool) -> int:
+def _check(
+    sections: CrossSections, upsample: int, extend_to_box: bool, hull: object = None
+) -> int:
     if not isinstance(sections, CrossSections):
         raise InputError(f"SDF interpolation needs CrossSections (got {type(sections).__name__})")
     if isinstance(upsample, bool) or not isinstance(upsample, int | np.integer) or upsample < 1:
         raise OptionError(f"upsample must be a positive integer (got {upsample!r})")
     if not isinstance(extend_to_box, bool | np.bool_):
         raise OptionError(f"extend_to_box must be True or False (got {extend_to_box!r})")
+    check_hull(hull, sections.grid_shape)
     return int(upsample)
 
 
@@ -125,12 +130,19 @@ def _grid_box(sections: CrossSections, box: Box | None) -> Box:
 
 # -- fields -----------------------------------------------------------------------------
 def _box_field(
-    sections: CrossSections, box: Box, *, bounded: bool, upsample: int, extend_to_box: bool
+    sections: CrossSections,
+    box: Box,
+    *,
+    bounded: bool,
+    upsample: int,
+    extend_to_box: bool,
+    hull: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float32]:
     """Interpolated signed distance on the samples of ``box``, axis first.
 
     ``bounded`` says whether the box restricts the planes (a user box) or is
-    the whole grid (no box: all planes, no extension).
+    the whole grid (no box: all planes, no extension). ``hull`` guides the
+    extensions to the box faces (:mod:`~slicerecon.surface.extension`).
 
     Returns
     -------
@@ -167,12 +179,49 @@ def _box_field(
         first, last = int(used[0]), int(used[-1])
         if bounded and extend_to_box:
             # <= and >=: a box holding one plane has no interpolated sample on it.
-            field[samples <= w[first]] = np.minimum(distances[first], far)
-            field[samples >= w[last]] = np.minimum(distances[last], far)
+            for side, plane in ((0, first), (1, last)):
+                sel = np.flatnonzero(samples <= w[plane] if side == 0 else samples >= w[plane])
+                base = np.minimum(distances[plane], far)
+                if hull is None:
+                    field[sel] = base
+                    continue
+                maps = extension_maps(hull, box, axis, float(w[plane]), side)
+                own = maps[0].unchanged(float(w[plane]))
+                ordered = [own, *maps] if side == 1 else [*maps, own]
+                _extend(field, sel, samples, base, ordered, (rows[0], cols[0]))
         elif used.size == 1:
             near = (samples >= w[first] - 0.5) & (samples < w[first] + 0.5)
             field[near] = np.minimum(distances[first], far)
     return np.ascontiguousarray(field[:, inner[0], inner[1]])
+
+
+def _extend(
+    field: NDArray[np.float32],
+    sel: NDArray[np.int64],
+    samples: NDArray[np.float64],
+    base: NDArray[np.float32],
+    maps: list[LayerMap],
+    origin: tuple[int, int],
+) -> None:
+    """Fill samples ``sel`` with the plane's distance ``base`` carried through ``maps``.
+
+    ``maps`` (one slab's, sorted by ``w``, the plane's own identity first or
+    last) are interpolated linearly in ``w``, as the loft's rings are; each
+    sample's pixel centres are mapped back onto the plane and ``base`` (on the
+    crop starting at in-plane index ``origin``) is read there bilinearly.
+    """
+    u = np.arange(base.shape[0], dtype=np.float64) + origin[0]
+    v = np.arange(base.shape[1], dtype=np.float64) + origin[1]
+    grid = np.stack(np.meshgrid(u, v, indexing="ij"), axis=-1)
+    for k in sel:
+        layer = interpolate_maps(maps, float(samples[k]))
+        if layer.is_identity():
+            field[k] = base
+            continue
+        source = layer.inverse(grid) - np.asarray(origin, dtype=np.float64)
+        field[k] = ndimage.map_coordinates(
+            base, [source[..., 0], source[..., 1]], order=1, mode="nearest"
+        )
 
 
 def _fill_between(
@@ -224,6 +273,7 @@ def sdf_field(
     box: Box | None = None,
     upsample: int = 1,
     extend_to_box: bool = False,
+    hull: NDArray[np.bool_] | None = None,
 ) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
     """The interpolated signed distance on the (box of the) reference grid.
 
@@ -241,6 +291,10 @@ def sdf_field(
     extend_to_box : bool, default False
         With a box: extend the first / last plane to the box faces and fill a
         box holding no plane (see the module docstring). Ignored without a box.
+    hull : ndarray of shape sections.grid_shape, bool, optional
+        The visual hull of the projections: the extensions to the box faces
+        follow its extent layer by layer (:mod:`~slicerecon.surface.extension`)
+        instead of repeating the outermost plane.
 
     Returns
     -------
@@ -260,11 +314,11 @@ def sdf_field(
     OptionError
         If ``upsample`` is not a positive integer or the box lies outside the grid.
     """
-    upsample = _check(sections, upsample, extend_to_box)
+    upsample = _check(sections, upsample, extend_to_box, hull)
     region = _grid_box(sections, box)
     field = _box_field(
         sections, region, bounded=box is not None, upsample=upsample,
-        extend_to_box=extend_to_box,
+        extend_to_box=extend_to_box, hull=hull,
     )
     out = np.ascontiguousarray(np.moveaxis(field, 0, sections.axis))
     affine = sections.affine @ _to_index(sections, region.lo, upsample, pad=0)
@@ -278,12 +332,13 @@ def sdf_interpolate(
     box: Box | None = None,
     upsample: int = 1,
     extend_to_box: bool = False,
+    hull: NDArray[np.bool_] | None = None,
 ) -> Volume:
     """Shape-based interpolation of the sections onto the (box of the) reference grid.
 
     Parameters
     ----------
-    sections, box, upsample, extend_to_box
+    sections, box, upsample, extend_to_box, hull
         As for :func:`sdf_field`.
 
     Returns
@@ -295,7 +350,9 @@ def sdf_interpolate(
         ``upsample=1`` and planes on grid indices, every plane is reproduced
         exactly.
     """
-    field, affine = sdf_field(sections, box=box, upsample=upsample, extend_to_box=extend_to_box)
+    field, affine = sdf_field(
+        sections, box=box, upsample=upsample, extend_to_box=extend_to_box, hull=hull
+    )
     return Volume(field < 0, affine)
 
 
@@ -305,12 +362,13 @@ def sdf_mesh(
     box: Box | None = None,
     upsample: int = 1,
     extend_to_box: bool = False,
+    hull: NDArray[np.bool_] | None = None,
 ) -> trimesh.Trimesh:
     """Closed surface of the SDF-interpolated shape (marching cubes), world mm.
 
     Parameters
     ----------
-    sections, box, upsample, extend_to_box
+    sections, box, upsample, extend_to_box, hull
         As for :func:`sdf_field`.
 
     Returns
@@ -324,11 +382,11 @@ def sdf_mesh(
     EmptyMaskError
         If no sample is inside.
     """
-    upsample = _check(sections, upsample, extend_to_box)
+    upsample = _check(sections, upsample, extend_to_box, hull)
     region = _grid_box(sections, box)
     field = _box_field(
         sections, region, bounded=box is not None, upsample=upsample,
-        extend_to_box=extend_to_box,
+        extend_to_box=extend_to_box, hull=hull,
     )
     return _mesh(sections, _mirror_pad(field), region.lo, upsample)
 
@@ -339,6 +397,7 @@ def sdf_parts_mesh(
     *,
     upsample: int = 1,
     extend_to_box: bool = True,
+    hull: NDArray[np.bool_] | None = None,
 ) -> trimesh.Trimesh:
     """Closed surface of the union of several parts' SDF interpolations, world mm.
 
@@ -353,7 +412,7 @@ def sdf_parts_mesh(
         Binary masks on parallel planes.
     boxes : sequence of Box
         The parts' boxes (clipped to the grid; they may touch or overlap).
-    upsample, extend_to_box
+    upsample, extend_to_box, hull
         As for :func:`sdf_field`.
 
     Returns
@@ -368,7 +427,7 @@ def sdf_parts_mesh(
     EmptyMaskError
         If no part holds any inside sample.
     """
-    upsample = _check(sections, upsample, extend_to_box)
+    upsample = _check(sections, upsample, extend_to_box, hull)
     regions = [_grid_box(sections, b) for b in boxes]
     if not regions:
         raise OptionError("give at least one box (part) to reconstruct")
@@ -381,7 +440,7 @@ def sdf_parts_mesh(
     union: NDArray[np.float32] | None = None
     for region in regions:
         part = _box_field(sections, region, bounded=True, upsample=upsample,
-                          extend_to_box=extend_to_box)
+                          extend_to_box=extend_to_box, hull=hull)
         if not np.any(part < 0):
             continue
         padded = np.moveaxis(_mirror_pad(part), 0, axis)

@@ -124,7 +124,9 @@ def test_appearing_component_closes_half_way() -> None:
 
 @pytest.mark.parametrize("axis", [0, 1, 2])
 @pytest.mark.parametrize(
-    "diagonal", [(0.8, 1.2, 2.5), (-0.8, 1.2, 2.5), (1.0, -1.0, -0.5)], ids=["aniso", "flip", "flip2"]
+    "diagonal",
+    [(0.8, 1.2, 2.5), (-0.8, 1.2, 2.5), (1.0, -1.0, -0.5)],
+    ids=["aniso", "flip", "flip2"],
 )
 def test_anisotropic_and_mirrored_affines(sphere: Volume, axis: int, diagonal) -> None:
     volume = Volume(sphere.mask, np.diag([*diagonal, 1.0]))

@@ -15,7 +15,8 @@ from slicerecon.surface.smooth import taubin_smooth
 
 def _box(lo, hi) -> trimesh.Trimesh:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    return trimesh.creation.box(extents=hi - lo, transform=trimesh.transformations.translation_matrix((lo + hi) / 2))
+    centre = trimesh.transformations.translation_matrix((lo + hi) / 2)
+    return trimesh.creation.box(extents=hi - lo, transform=centre)
 
 
 def _closed(mesh: trimesh.Trimesh) -> None:
