@@ -176,6 +176,9 @@ RoiOpt = Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")
 IrregularOpt = Annotated[
     bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
 ]
+WeightsOpt = Annotated[
+    Path | None, typer.Option(help="Actor weights for --planner policy (default: shipped).")
+]
 
 
 # ----------------------------------------------------------------------------- run
@@ -189,9 +192,7 @@ def run(
     every: EveryOpt = None,
     axis: AxisOpt = "z",
     planner: PlannerOpt = "heuristic",
-    weights: Annotated[
-        Path | None, typer.Option(help="Actor weights for --planner policy (default: shipped).")
-    ] = None,
+    weights: WeightsOpt = None,
     method: MethodOpt = "hybrid",
     projections: ProjectionsOpt = "auto",
     gt: Annotated[
@@ -275,6 +276,7 @@ def batch(
     every: EveryOpt = None,
     axis: AxisOpt = "z",
     planner: PlannerOpt = "heuristic",
+    weights: WeightsOpt = None,
     method: MethodOpt = "hybrid",
     projections: ProjectionsOpt = "auto",
     mesh_format: FormatOpt = "stl",
@@ -308,6 +310,7 @@ def batch(
         every=every,
         axis=axis,
         planner=planner,
+        weights=None if weights is None else str(weights),
         method=method,
         projections=projections,
         smooth=smooth,

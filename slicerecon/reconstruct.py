@@ -120,6 +120,13 @@ class ReconstructConfig:
                 raise OptionError(f"--{name} must be one of {', '.join(choices)} (got {value!r})")
         if self.max_parts < 1:
             raise OptionError(f"max_parts must be >= 1 (got {self.max_parts})")
+        if self.weights is not None:
+            if self.planner != "policy":
+                raise OptionError(
+                    f"--weights apply to --planner policy only (planner is {self.planner!r})"
+                )
+            if not Path(self.weights).is_file():
+                raise OptionError(f"policy weights file not found: {self.weights}")
 
 
 @dataclass

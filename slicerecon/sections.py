@@ -455,6 +455,36 @@ class CrossSections:
         """True when every plane lies on an integer index of the reference grid."""
         return bool(np.allclose(self.indices, np.round(self.indices), atol=1e-6))
 
+    def planes_in(self, box: Box, *, bridge: bool = False) -> NDArray[np.int64]:
+        """Indices of the planes inside ``box`` along the section axis.
+
+        The box spans ``[lo - 0.5, hi - 0.5]`` in continuous index coordinates;
+        planes on its faces count as inside.
+
+        Parameters
+        ----------
+        box : Box
+            A box on the reference grid.
+        bridge : bool, default False
+            When the box holds no plane, return the nearest plane on either
+            side of it instead (none when it lies beyond the first or last
+            plane): the slab that crosses the box.
+
+        Returns
+        -------
+        ndarray of shape (n,), int64
+            Increasing plane indices.
+        """
+        w = self.indices
+        lo, hi = box.lo[self.axis] - 0.5, box.hi[self.axis] - 0.5
+        inside = np.flatnonzero((w >= lo - 1e-9) & (w <= hi + 1e-9))
+        if inside.size or not bridge:
+            return inside.astype(np.int64)
+        below, above = np.flatnonzero(w < lo), np.flatnonzero(w > hi)
+        if below.size == 0 or above.size == 0:
+            return np.zeros(0, dtype=np.int64)
+        return np.array([below[-1], above[0]], dtype=np.int64)
+
     def plane_to_world(self, plane: int, points_px: ArrayLike) -> NDArray[np.float64]:
         """Map in-plane index coordinates on plane ``plane`` to world mm.
 

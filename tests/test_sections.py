@@ -115,6 +115,19 @@ def _ring_sections() -> CrossSections:
     return CrossSections(masks, [2.0, 5.0, 6.0], "z", aff, (40, 40, 10))
 
 
+def test_planes_in_a_box_include_its_faces_and_bridge_empty_boxes():
+    cs = _ring_sections()  # planes at z = 2, 5, 6
+    # A box [lo, hi) spans lo - 0.5 .. hi - 0.5 along z: planes on faces count.
+    np.testing.assert_array_equal(cs.planes_in(Box((0, 0, 0), (40, 40, 10))), [0, 1, 2])
+    np.testing.assert_array_equal(cs.planes_in(Box((0, 0, 3), (40, 40, 6))), [1])
+    np.testing.assert_array_equal(cs.planes_in(Box((0, 0, 6), (40, 40, 7))), [2])
+    between = Box((0, 0, 3), (40, 40, 5))  # 2.5 .. 4.5: no plane
+    assert cs.planes_in(between).size == 0
+    np.testing.assert_array_equal(cs.planes_in(between, bridge=True), [0, 1])
+    beyond = Box((0, 0, 7), (40, 40, 10))  # past the last plane: nothing to bridge
+    assert cs.planes_in(beyond, bridge=True).size == 0
+
+
 def test_cross_sections_positions_and_gaps_in_mm():
     cs = _ring_sections()
     np.testing.assert_allclose(cs.normal, (0, 0, 1))

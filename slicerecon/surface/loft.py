@@ -225,18 +225,14 @@ def loft_solid(
     masks = sections.masks[:, rows[0] : rows[1], cols[0] : cols[1]]
     w_all = sections.indices
 
-    if span is None:
-        chosen = np.arange(sections.n_planes)
-    else:
-        chosen = np.flatnonzero((w_all >= span[0] - 1e-9) & (w_all <= span[1] + 1e-9))
-    crossing = chosen.size == 0 and span is not None and extend_to_box
+    chosen = np.arange(sections.n_planes) if box is None else sections.planes_in(box)
+    crossing = chosen.size == 0 and box is not None and extend_to_box
     if crossing:
         # A box between planes: the slab of the planes either side, clipped below.
-        below = np.flatnonzero(w_all < span[0])  # type: ignore[index]
-        above = np.flatnonzero(w_all > span[1])  # type: ignore[index]
-        if below.size == 0 or above.size == 0:
+        assert box is not None
+        chosen = sections.planes_in(box, bridge=True)
+        if chosen.size == 0:
             return None
-        chosen = np.array([below[-1], above[0]])
     if not _has_foreground(masks[chosen], box, rows, cols, (a, b)):
         return None
     planes = [_plane(masks[p], float(w_all[p]), window) for p in chosen]
@@ -305,9 +301,8 @@ def correspondence_is_simple(sections: CrossSections, box: Box) -> bool:
     inside = box.intersect(Box((0, 0, 0), sections.grid_shape))
     if inside is None:
         return True
-    lo_w, hi_w = inside.lo[sections.axis] - 0.5, inside.hi[sections.axis] - 0.5
     w_all = sections.indices
-    chosen = np.flatnonzero((w_all >= lo_w - 1e-9) & (w_all <= hi_w + 1e-9))
+    chosen = sections.planes_in(inside)
     if chosen.size < 2:
         return True
     window = _Window(inside.lo[a], inside.lo[b], sections.spacing[[a, b]])

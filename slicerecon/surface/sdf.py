@@ -163,16 +163,10 @@ def _box_field(
     field = np.full((samples.size, *crop.shape[1:]), far, dtype=np.float32)
 
     w = sections.indices
-    span = (box.lo[axis] - 0.5, box.hi[axis] - 0.5)
     if not bounded:
         used = np.arange(sections.n_planes)
     else:
-        used = np.flatnonzero((w >= span[0] - 1e-9) & (w <= span[1] + 1e-9))
-        if used.size == 0 and extend_to_box:
-            below = np.flatnonzero(w < span[0])
-            above = np.flatnonzero(w > span[1])
-            if below.size and above.size:
-                used = np.array([below[-1], above[0]])
+        used = sections.planes_in(box, bridge=extend_to_box)
     if used.size and crop[used].any():
         distances = {int(p): plane_signed_distance(crop[p], spacing) for p in used}
         _fill_between(field, samples, w, used, distances)

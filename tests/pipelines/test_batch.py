@@ -408,3 +408,18 @@ def test_resume_key_follows_the_weights_file_contents(tmp_path: Path) -> None:
     assert case_key(case, config) == first
     weights.write_bytes(b"second")
     assert case_key(case, config) != first
+
+
+def test_batch_checks_the_weights_before_any_case(tmp_path, capsys):
+    indir = tmp_path / "in"
+    indir.mkdir()
+    write_nifti(make_shape("sphere"), indir / "a.nii.gz")
+    weights = tmp_path / "actor.safetensors"
+    weights.write_bytes(b"stand-in: never read, the planner is not policy")
+    out = tmp_path / "o"
+    args = ["batch", str(indir), "-o", str(out), "--workers", "0"]
+    assert main([*args, "--planner", "policy", "--weights", str(tmp_path / "none.pt")]) == 2
+    assert "weights file not found" in capsys.readouterr().err
+    assert main([*args, "--weights", str(weights)]) == 2
+    assert "policy only" in capsys.readouterr().err
+    assert not (out / "a").exists()
