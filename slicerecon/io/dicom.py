@@ -83,7 +83,7 @@ _DICOMDIR_SOP_CLASS_UID = "1.2.840.10008.1.3.10"
 _NON_IMAGE_MODALITIES = frozenset(
     {"RTSTRUCT", "SEG", "RTPLAN", "RTRECORD", "SR", "KO", "PR", "REG", "DOC", "FID", "PLAN"}
 )
-_PARSE_ERRORS: tuple[type[BaseException], ...] = (
+PARSE_ERRORS: tuple[type[BaseException], ...] = (
     OSError,
     EOFError,
     ValueError,
@@ -96,6 +96,8 @@ _PARSE_ERRORS: tuple[type[BaseException], ...] = (
     RuntimeError,
     struct.error,
 )
+"""What pydicom raises on corrupt or truncated files and malformed values (the
+readers turn these into one :class:`~slicerecon.errors.FormatError`)."""
 
 
 # ----------------------------------------------------------------------------- files
@@ -114,7 +116,7 @@ def _dcmread(path: Path, *, stop_before_pixels: bool) -> Any:
     import pydicom
     from pydicom.errors import InvalidDicomError
 
-    errors: tuple[type[BaseException], ...] = (InvalidDicomError, *_PARSE_ERRORS)
+    errors: tuple[type[BaseException], ...] = (InvalidDicomError, *PARSE_ERRORS)
     try:
         return pydicom.dcmread(path, stop_before_pixels=stop_before_pixels)
     except errors as exc:
@@ -143,7 +145,7 @@ def _floats(ds: Any, keyword: str, count: int, path: Path) -> NDArray[np.float64
         raw = ds[keyword].value
         values = np.asarray([float(v) for v in (raw if isinstance(raw, Sequence)
                                                 and not isinstance(raw, str) else [raw])])
-    except _PARSE_ERRORS as exc:
+    except PARSE_ERRORS as exc:
         raise FormatError(f"{path}: {keyword} is not numeric ({exc})") from exc
     if values.shape != (count,) or not np.all(np.isfinite(values)):
         raise FormatError(
@@ -155,7 +157,7 @@ def _floats(ds: Any, keyword: str, count: int, path: Path) -> NDArray[np.float64
 def _optional_float(item: Any, keyword: str) -> float | None:
     try:
         value = float(item[keyword].value) if keyword in item else None
-    except _PARSE_ERRORS:
+    except PARSE_ERRORS:
         return None
     return value if value is not None and math.isfinite(value) and value > 0 else None
 
@@ -217,7 +219,7 @@ def _slice_from(ds: Any, path: Path) -> _Slice | None:
     frames = ds.get("NumberOfFrames", 1)
     try:
         n_frames = int(frames) if frames not in (None, "") else 1
-    except _PARSE_ERRORS as exc:
+    except PARSE_ERRORS as exc:
         raise FormatError(f"{path}: NumberOfFrames is not a number ({frames!r})") from exc
     if n_frames > 1:
         raise InputError(
@@ -233,7 +235,7 @@ def _slice_from(ds: Any, path: Path) -> _Slice | None:
         raise FormatError(f"{path}: PixelSpacing must be positive (got {spacing.tolist()})")
     try:
         rows, columns = int(ds.Rows), int(ds.Columns)
-    except _PARSE_ERRORS as exc:
+    except PARSE_ERRORS as exc:
         raise FormatError(f"{path}: Rows/Columns are not numbers ({exc})") from exc
     return _Slice(
         path=path,
@@ -500,7 +502,7 @@ def _slice_values(item: _Slice) -> NDArray[np.float64]:
     try:
         pixels = ds.pixel_array
         values = np.asarray(apply_rescale(pixels, ds), dtype=np.float64)
-    except _PARSE_ERRORS as exc:
+    except PARSE_ERRORS as exc:
         raise FormatError(
             f"cannot decode the pixel data of {item.path} ({type(exc).__name__}: {exc}); "
             "the file is corrupt or uses a compression pydicom cannot decode here"
@@ -631,7 +633,7 @@ def _seg_segments(ds: Any, path: Path) -> dict[int, str]:
     for item in ds.SegmentSequence:
         try:
             number = int(item.SegmentNumber)
-        except _PARSE_ERRORS as exc:
+        except PARSE_ERRORS as exc:
             raise FormatError(f"{path}: a SegmentSequence item lacks SegmentNumber") from exc
         segments[number] = str(item.get("SegmentLabel", "") or "")
     return segments
@@ -691,7 +693,7 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
     try:
         n_frames = int(ds.get("NumberOfFrames", 1) or 1)
         rows, columns = int(ds.Rows), int(ds.Columns)
-    except _PARSE_ERRORS as exc:
+    except PARSE_ERRORS as exc:
         raise FormatError(f"{path}: NumberOfFrames / Rows / Columns are missing ({exc})") from exc
     per_frame = ds.get("PerFrameFunctionalGroupsSequence")
     if per_frame is None or len(per_frame) != n_frames:
@@ -717,7 +719,7 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
         positions.append(_floats(plane, "ImagePositionPatient", 3, where))
         try:
             segment_numbers.append(int(ident.ReferencedSegmentNumber))
-        except _PARSE_ERRORS as exc:
+        except PARSE_ERRORS as exc:
             raise FormatError(f"{where}: ReferencedSegmentNumber is missing") from exc
         if measures is not None and spacing is None:
             spacing = _floats(measures, "PixelSpacing", 2, where)
@@ -802,7 +804,7 @@ def _seg_frames(ds: Any, path: Path, n_frames: int) -> NDArray[np.bool_]:
         )
     try:
         pixels = np.asarray(ds.pixel_array)
-    except _PARSE_ERRORS as exc:
+    except PARSE_ERRORS as exc:
         raise FormatError(
             f"cannot decode the pixel data of {path} ({type(exc).__name__}: {exc})"
         ) from exc

@@ -34,23 +34,12 @@ from ..errors import (
     SlicereconError,
 )
 from ..sections import CrossSections
+from .dicom import PARSE_ERRORS
 from .polygons import sections_from_polygons
 
 __all__ = ["list_rois", "read_rtstruct"]
 
 logger = logging.getLogger(__name__)
-
-_PARSE_ERRORS: tuple[type[BaseException], ...] = (
-    OSError,
-    EOFError,
-    ValueError,
-    TypeError,
-    KeyError,
-    IndexError,
-    AttributeError,
-    NotImplementedError,
-    OverflowError,
-)
 
 
 def _read_dataset(path: str | os.PathLike[str]) -> tuple[Any, Path]:
@@ -58,7 +47,7 @@ def _read_dataset(path: str | os.PathLike[str]) -> tuple[Any, Path]:
     import pydicom
     from pydicom.errors import InvalidDicomError
 
-    errors: tuple[type[BaseException], ...] = (InvalidDicomError, *_PARSE_ERRORS)
+    errors: tuple[type[BaseException], ...] = (InvalidDicomError, *PARSE_ERRORS)
     p = Path(path)
     if not p.exists():
         raise InputError(f"RTSTRUCT file not found: {p}")
@@ -85,7 +74,7 @@ def _rois(ds: Any, path: Path) -> list[tuple[int, str]]:
     for n, item in enumerate(ds.StructureSetROISequence):
         try:
             number = int(item.ROINumber)
-        except _PARSE_ERRORS as exc:
+        except PARSE_ERRORS as exc:
             raise FormatError(
                 f"{path}: StructureSetROISequence[{n}] has no valid ROINumber"
             ) from exc
@@ -153,7 +142,7 @@ def _choose_roi(rois: list[tuple[int, str]], roi: int | str | None, path: Path) 
 def _contour_points(item: Any, where: str, path: Path) -> NDArray[np.float64]:
     try:
         data = np.asarray([float(v) for v in item.ContourData], dtype=np.float64)
-    except _PARSE_ERRORS as exc:
+    except PARSE_ERRORS as exc:
         raise FormatError(f"{path}: {where} has no valid ContourData ({exc})") from exc
     if data.size % 3 or not np.all(np.isfinite(data)):
         raise FormatError(
