@@ -260,3 +260,13 @@ def test_file_errors(case, tmp_path):
     ds.save_as(tmp_path / "noroi.dcm")
     with pytest.raises(FormatError, match="no StructureSetROISequence"):
         read_rtstruct(tmp_path / "noroi.dcm")
+
+
+@pytest.mark.parametrize("keep", [0.3, 0.6, 0.9])
+def test_truncated_file_is_one_clear_error(case, tmp_path, keep):
+    data = Path(case["path"]).read_bytes()
+    cut = tmp_path / "truncated.dcm"
+    cut.write_bytes(data[: int(len(data) * keep)])
+    with pytest.raises((FormatError, InputError)) as info:
+        read_rtstruct(cut, roi="Tumour", image_dir=case["series"])
+    assert str(cut) in str(info.value) or "truncated" in str(info.value)
