@@ -61,6 +61,11 @@ VARIANTS = (
     Variant("itk-mci", "itk-mci", "none"),
 )
 
+_PROJECTION_TEXT = {
+    "gt": "projections from the dense mask (`--projections gt`)",
+    "sections": "projections derived from the sections alone (`--projections sections`)",
+}
+
 FIELDS = (
     "shape", "setting", "planes", "variant", "method", "planner", "volume_iou", "surface_iou",
     "chamfer_l1_mm", "hd95_mm", "volume_error", "watertight", "parts", "seconds", "error",
@@ -116,6 +121,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--slices", default="12", help="comma-separated sparse plane counts")
     parser.add_argument("--axis", default="z", help="section axis: x, y or z")
     parser.add_argument(
+        "--projections", default="gt", choices=("gt", "sections"),
+        help="silhouettes from the dense mask (the paper's prior) or derived from the sections "
+        "(what a user with contours only has)",
+    )
+    parser.add_argument(
         "--methods", default=",".join(v.label for v in VARIANTS),
         help="comma-separated variants (labels as in the table)",
     )
@@ -150,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
                                     shape_name, count, available)
                     count = available
                 sections, projections, truth = prepare_inputs(
-                    volume, slices=count, axis=axis, projections="gt"
+                    volume, slices=count, axis=axis, projections=args.projections
                 )
                 assert truth is not None
                 for variant in variants:
@@ -214,7 +224,7 @@ def _write(
         f"Command: `{command}`",
         "",
         f"Written by `benchmarks/compare_methods.py`; raw numbers in `{csv_path.name}`. "
-        f"Sections along {args.axis}, projections from the dense mask (`--projections gt`), "
+        f"Sections along {args.axis}, {_PROJECTION_TEXT[args.projections]}, "
         f"{args.n_points} surface samples per mesh, seed 0. Every method runs in one process "
         "on the same sections; each was warmed up once before timing. Seconds are wall "
         "time of `reconstruct()` (planning + surface + carve), measured on a machine "
