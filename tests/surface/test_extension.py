@@ -111,3 +111,43 @@ def test_a_hull_on_another_grid_is_refused() -> None:
     with pytest.raises(GeometryError, match="grid"):
         loft_solid(sections, box=Box((0, 0, 2), (60, 30, 62)), extend_to_box=True,
                    hull=np.ones((4, 4, 4), dtype=bool))
+
+
+def test_maps_follow_a_hull_that_narrows_along_x() -> None:
+    # Sections perpendicular to x (axis 0): in-plane axes are y and z. The hull
+    # narrows linearly in y away from the anchor layer, by one voxel per layer
+    # on each side.
+    hull = np.zeros((12, 40, 10), dtype=bool)
+    for i in range(12):
+        half = 15 - i
+        hull[i, 20 - half : 20 + half, 2:8] = True
+    box = Box((0, 0, 0), (12, 40, 10))
+    maps = extension_maps(hull, box, 0, 2.0, 1)  # anchor plane at x = 2, slab up to 11.5
+    assert [m.w for m in maps][-1] == pytest.approx(11.5)
+    # On layer i the y extent is [20 - half, 20 + half) in pixels, i.e. edges
+    # 19.5 - half .. 19.5 + half; z keeps its extent.
+    for m in maps[:-1]:
+        half = 15 - m.w
+        np.testing.assert_allclose(m.target[0], (19.5 - half, 19.5 + half))
+        np.testing.assert_allclose(m.target[1], (1.5, 7.5))
+    # A point half-way to the upper y edge on the plane stays half-way.
+    layer = maps[3]
+    (y0, y1), (s0, s1) = layer.target[0], layer.source[0]
+    mid = layer.forward(np.array([[0.5 * (s0 + s1) + 0.25 * (s1 - s0), 4.0]]))
+    assert mid[0, 0] == pytest.approx(0.5 * (y0 + y1) + 0.25 * (y1 - y0))
+
+
+def test_loft_and_sdf_extensions_agree() -> None:
+    # Both surface methods carry the same contour through the same maps, so
+    # their extension slabs hold nearly the same voxels.
+    tube = _tube(slope=0.5)
+    sections = _sections(tube, [24, 40])
+    box = Box((0, 0, 2), (60, 30, 62))
+    hull = _hull(tube)
+    slabs = np.r_[2:24, 41:62]
+    masks = []
+    for method in ("loft", "sdf"):
+        mesh = reconstruct_part(sections, box, method=method, hull=hull)
+        masks.append(mesh_to_mask(mesh, tube.affine, tube.shape)[:, :, slabs])
+    agreement = (masks[0] & masks[1]).sum() / (masks[0] | masks[1]).sum()
+    assert agreement >= 0.9
