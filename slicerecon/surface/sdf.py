@@ -180,6 +180,9 @@ def _box_field(
                     field[sel] = base
                     continue
                 maps = extension_maps(hull, box, axis, float(w[plane]), side)
+                if not maps:  # the plane lies on the face: nothing to extend
+                    field[sel] = base
+                    continue
                 own = maps[0].unchanged(float(w[plane]))
                 ordered = [own, *maps] if side == 1 else [*maps, own]
                 _extend(field, sel, samples, base, ordered, (rows[0], cols[0]))

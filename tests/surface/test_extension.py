@@ -151,3 +151,17 @@ def test_loft_and_sdf_extensions_agree() -> None:
         masks.append(mesh_to_mask(mesh, tube.affine, tube.shape)[:, :, slabs])
     agreement = (masks[0] & masks[1]).sum() / (masks[0] | masks[1]).sum()
     assert agreement >= 0.9
+
+
+@pytest.mark.parametrize("method", ["loft", "sdf"])
+def test_a_plane_on_the_box_face_needs_no_extension(method: str) -> None:
+    # Contour inputs put planes at any position; one exactly on a face (2.5
+    # is the lower face of a box starting at index 3) has no slab to fill.
+    tube = _tube(slope=0.0)
+    masks = np.stack([tube.mask[:, :, 10]] * 3)
+    sections = CrossSections(masks, np.array([2.5, 10.0, 20.0]), 2, tube.affine, tube.shape)
+    box = Box((0, 0, 3), (60, 30, 25))
+    mesh = reconstruct_part(sections, box, method=method, hull=_hull(tube))
+    assert mesh is not None and mesh.is_watertight and mesh.is_volume
+    z = mesh.bounds[:, 2]
+    assert z[0] == pytest.approx(2.5, abs=0.51) and z[1] == pytest.approx(24.5, abs=0.51)
