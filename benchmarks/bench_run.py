@@ -40,7 +40,7 @@ from slicerecon.surface.marching import volume_to_mesh
 def cases() -> dict[str, Volume]:
     """Masks on grids of about 256 voxels per side."""
     return {
-        "sphere r=124": make_shape("sphere", radius=124.0, margin=2),
+        "sphere r=126": make_shape("sphere", radius=126.0, margin=2),  # a 256³ mask
         "chair x2.5": make_shape(
             "chair", seat_width=100.0, seat_depth=100.0, seat_thickness=12.5, leg_height=100.0,
             leg_width=12.5, back_height=112.5, back_thickness=12.5,
