@@ -78,6 +78,8 @@ class LayerMap(NamedTuple):
 def _piecewise(
     points: NDArray[np.float64], source: NDArray[np.float64], target: NDArray[np.float64]
 ) -> NDArray[np.float64]:
+    """Map ``points (..., 2)`` so that each axis's ``source`` edges land on its ``target``
+    edges: linear between them, shifted with the nearer edge beyond them."""
     out = np.empty_like(points, dtype=np.float64)
     for ax in (0, 1):
         x = points[..., ax]
