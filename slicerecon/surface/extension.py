@@ -144,14 +144,15 @@ def _edges(layer: NDArray[np.bool_], origin: tuple[int, int]) -> NDArray[np.floa
 
 
 def extension_maps(
-    hull: NDArray[np.bool_], box: Box, axis: int, anchor: float, side: int
+    hull: NDArray[np.bool_] | None, box: Box, axis: int, anchor: float, side: int
 ) -> list[LayerMap]:
     """The layer maps of one extension slab, in increasing ``w``.
 
     Parameters
     ----------
-    hull : ndarray of shape (I, J, K), bool
-        The visual hull on the reference grid.
+    hull : ndarray of shape (I, J, K), bool, or None
+        The visual hull on the reference grid; None gives the prism (the
+        face's identity map).
     box : Box
         The part's box (inside the grid).
     axis : int
@@ -168,27 +169,31 @@ def extension_maps(
         One map per layer centre strictly between the anchor and the face, and
         one for the face itself (the map of the layer next to it); runs of
         equal maps (counting the anchor's identity) are thinned to their
-        ends, so a prism is the face's identity map alone.
+        ends, so a prism is the face's identity map alone. Empty when the
+        anchor lies on the face (no slab).
 
     Raises
     ------
     GeometryError
         If the hull is not 3-D or ``side`` is not 0 or 1.
     """
-    if hull.ndim != 3:
-        raise GeometryError(f"the hull must be a 3-D mask (got {hull.ndim} dimensions)")
     if side not in (0, 1):
         raise GeometryError(f"side must be 0 (below) or 1 (above) (got {side!r})")
+    lo, hi = box.lo[axis], box.hi[axis]
+    face = lo - 0.5 if side == 0 else hi - 0.5
+    if (face - anchor) * (1 if side else -1) <= 0:
+        return []
+    if hull is None:
+        return [identity_map(face)]
+    if hull.ndim != 3:
+        raise GeometryError(f"the hull must be a 3-D mask (got {hull.ndim} dimensions)")
     a, b = (ax for ax in range(3) if ax != axis)
     footprint = np.moveaxis(hull, axis, 0)[:, box.lo[a] : box.hi[a], box.lo[b] : box.hi[b]]
     origin = (box.lo[a], box.lo[b])
-    lo, hi = box.lo[axis], box.hi[axis]
     base_layer = int(np.clip(np.floor(anchor + 0.5), lo, hi - 1))
     if side == 0:
-        face = lo - 0.5
         layers = list(range(base_layer - 1, lo - 1, -1))  # from the anchor outward
     else:
-        face = hi - 0.5
         layers = list(range(base_layer + 1, hi))
     source = _edges(footprint[base_layer], origin)
     if source is None:
@@ -200,7 +205,6 @@ def extension_maps(
         previous = LayerMap(float(layer), source, previous.target if target is None else target)
         maps.append(previous)
     maps.append(previous._replace(w=face))
-    maps = [m for m in maps if (m.w - anchor) * (face - anchor) > 0]
     # Thin from the anchor outward, the anchor's own (identity) map first.
     return sorted(_thin([previous.unchanged(anchor), *maps])[1:], key=lambda m: m.w)
 

@@ -243,9 +243,9 @@ def loft_solid(
     elif span is not None and extend_to_box:
         assert box is not None
         ends = (
-            _extension(hull, box, sections.axis, planes[0].w, 0)
+            extension_maps(hull, box, sections.axis, planes[0].w, 0)
             if planes[0].w > span[0] + 1e-9 else None,
-            _extension(hull, box, sections.axis, planes[-1].w, 1)
+            extension_maps(hull, box, sections.axis, planes[-1].w, 1)
             if planes[-1].w < span[1] - 1e-9 else None,
         )
     elif len(planes) == 1:
@@ -321,15 +321,6 @@ def correspondence_is_simple(sections: CrossSections, box: Box) -> bool:
         if any(degree_lo[i] >= 2 and degree_up[j] >= 2 for i, j in links):
             return False
     return True
-
-
-def _extension(
-    hull: NDArray[np.bool_] | None, box: Box, axis: int, anchor: float, side: int
-) -> list[LayerMap]:
-    """Rings' maps from the outermost plane to the box face (a prism without a hull)."""
-    if hull is None:
-        return [identity_map(box.lo[axis] - 0.5 if side == 0 else box.hi[axis] - 0.5)]
-    return extension_maps(hull, box, axis, anchor, side)
 
 
 def _plane_to_index(axis: int) -> NDArray[np.float64]:

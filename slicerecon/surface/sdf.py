@@ -176,9 +176,6 @@ def _box_field(
             for side, plane in ((0, first), (1, last)):
                 sel = np.flatnonzero(samples <= w[plane] if side == 0 else samples >= w[plane])
                 base = np.minimum(distances[plane], far)
-                if hull is None:
-                    field[sel] = base
-                    continue
                 maps = extension_maps(hull, box, axis, float(w[plane]), side)
                 if not maps:  # the plane lies on the face: nothing to extend
                     field[sel] = base
