@@ -19,20 +19,8 @@ round trip gives the same arrays back only when ``affine[:3, 2]`` points to that
 side (``det(affine[:3, :3]) > 0``); otherwise the reader returns the same world
 geometry with the slice axis reversed.
 
-Use from a test module (pytest runs with ``--import-mode=importlib``, so load it by path)::
-
-    import importlib.util, sys
-    from pathlib import Path
-
-    def _load_factory():
-        name = "slicerecon_tests_dicom_factory"
-        if name not in sys.modules:
-            spec = importlib.util.spec_from_file_location(
-                name, Path(__file__).with_name("dicom_factory.py"))
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[name] = module
-            spec.loader.exec_module(module)
-        return sys.modules[name]
+Use from a test module: ``tests/io`` is on pytest's ``pythonpath``
+(``pyproject.toml``), so ``import dicom_factory as factory``.
 
 Public API
 ----------

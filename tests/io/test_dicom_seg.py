@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
+import dicom_factory as factory  # tests/io, on pytest's pythonpath
 import numpy as np
 import pydicom
 import pytest
@@ -13,21 +10,6 @@ import pytest
 from slicerecon.errors import EmptyMaskError, GeometryError, InputError, LabelError
 from slicerecon.io import load_input
 from slicerecon.io.dicom import dicom_info, read_dicom_seg
-
-
-def _load_factory():
-    name = "slicerecon_tests_dicom_factory"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(
-            name, Path(__file__).with_name("dicom_factory.py")
-        )
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
-factory = _load_factory()
 
 
 def _oblique_affine(spacing=(0.7, 1.2, 3.0), origin=(55.0, -80.5, 12.25)):

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import importlib.util
 import logging
-import sys
 from pathlib import Path
 
+import dicom_factory as factory  # tests/io, on pytest's pythonpath
 import numpy as np
 import pydicom
 import pytest
@@ -26,15 +25,6 @@ TUMOUR_SLICES = range(3, 11)
 HOLE_SLICES = (5, 6)
 
 
-def _load_factory():
-    name = "slicerecon_tests_dicom_factory"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(
-            name, Path(__file__).with_name("dicom_factory.py"))
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
 
 
 def _ds(values) -> list[str]:
@@ -109,7 +99,6 @@ def write_rtstruct(path, rois, *, modality="RTSTRUCT"):
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
     """An MR series on an axial LPS grid and an RTSTRUCT with three ROIs drawn on it."""
-    factory = _load_factory()
     root = tmp_path_factory.mktemp("rt")
     affine = factory.affine_from_geometry(
         [1, 0, 0], [0, 1, 0], [0.7, 0.7], [0, 0, 2.0], [-40.0, -35.0, -20.0])
@@ -198,7 +187,6 @@ def test_load_input_finds_the_rtstruct_beside_its_series(case):
 
 
 def test_oblique_image_grid(tmp_path):
-    factory = _load_factory()
     angle = np.deg2rad(20.0)
     row, col = [1.0, 0.0, 0.0], [0.0, np.cos(angle), np.sin(angle)]
     normal = np.cross(row, col)

@@ -9,6 +9,7 @@ import os
 import sys
 from pathlib import Path
 
+import dicom_factory as factory  # tests/io, on pytest's pythonpath
 import numpy as np
 import pytest
 import trimesh
@@ -117,7 +118,6 @@ def test_case_names_keep_what_is_safe_and_differ_where_inputs_differ():
 
 
 def test_discovery_kinds_order_and_unique_names(tmp_path):
-    factory = _load("slicerecon_tests_dicom_factory", TESTS / "io" / "dicom_factory.py")
     rt = _load("slicerecon_tests_rtstruct", TESTS / "io" / "test_rtstruct.py")
     ball = make_shape("sphere", radius=5.0)
     indir = tmp_path / "in"
@@ -161,7 +161,6 @@ def test_discovery_kinds_order_and_unique_names(tmp_path):
 
 
 def test_dicom_series_and_rtstruct_beside_its_images_reconstruct(tmp_path):
-    factory = _load("slicerecon_tests_dicom_factory", TESTS / "io" / "dicom_factory.py")
     rt = _load("slicerecon_tests_rtstruct", TESTS / "io" / "test_rtstruct.py")
     ball = make_shape("sphere", radius=6.0)
     affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 2], [0, 0, 0])
