@@ -29,6 +29,7 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import GeometryError, InputError, OptionError
+from .sections import check_affine
 
 __all__ = ["mesh_to_mask", "require_closed"]
 
@@ -75,13 +76,7 @@ def require_closed(mesh: trimesh.Trimesh) -> None:
 def _check_grid(
     affine: ArrayLike, shape: tuple[int, int, int]
 ) -> tuple[NDArray[np.float64], tuple[int, int, int]]:
-    aff = np.asarray(affine, dtype=np.float64)
-    if aff.shape != (4, 4) or not np.all(np.isfinite(aff)):
-        raise GeometryError(f"affine must be a finite 4x4 matrix (got shape {aff.shape})")
-    if not np.allclose(aff[3], [0.0, 0.0, 0.0, 1.0]):
-        raise GeometryError(f"affine's last row must be [0, 0, 0, 1] (got {aff[3].tolist()})")
-    if abs(np.linalg.det(aff[:3, :3])) < 1e-12:
-        raise GeometryError("affine is singular: a voxel axis has zero length or axes coincide")
+    aff = check_affine(affine)
     try:
         dims = tuple(int(n) for n in shape)
     except (TypeError, ValueError):

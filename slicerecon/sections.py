@@ -81,7 +81,9 @@ def _readonly(array: ArrayLike, dtype: type | np.dtype | None = None) -> NDArray
     return out
 
 
-def _check_affine(affine: ArrayLike) -> NDArray[np.float64]:
+def check_affine(affine: ArrayLike) -> NDArray[np.float64]:
+    """A read-only float copy of a voxel→world affine, or GeometryError (not 4×4,
+    non-finite, last row not ``[0, 0, 0, 1]``, singular)."""
     aff = np.asarray(affine, dtype=np.float64)
     if aff.shape != (4, 4):
         raise GeometryError(f"affine must be a 4x4 matrix (got shape {aff.shape})")
@@ -147,7 +149,7 @@ class Volume:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mask", _as_mask(self.mask, 3, "volume mask"))
-        object.__setattr__(self, "affine", _check_affine(self.affine))
+        object.__setattr__(self, "affine", check_affine(self.affine))
 
     # -- geometry -----------------------------------------------------------------
     @property
@@ -400,7 +402,7 @@ class CrossSections:
         if indices.size > 1 and np.any(np.diff(indices) <= 0):
             raise GeometryError("plane positions must be strictly increasing (duplicate planes?)")
         object.__setattr__(self, "indices", _readonly(indices, np.float64))
-        object.__setattr__(self, "affine", _check_affine(self.affine))
+        object.__setattr__(self, "affine", check_affine(self.affine))
         shape = tuple(int(s) for s in self.grid_shape)
         if len(shape) != 3 or min(shape) < 1:
             raise GeometryError(f"grid_shape must be three positive sizes (got {self.grid_shape})")
@@ -609,7 +611,7 @@ class Projection:
     def __post_init__(self) -> None:
         object.__setattr__(self, "axis", axis_index(self.axis))
         object.__setattr__(self, "image", _as_mask(self.image, 2, "projection image"))
-        object.__setattr__(self, "affine", _check_affine(self.affine))
+        object.__setattr__(self, "affine", check_affine(self.affine))
 
     @property
     def image_axes(self) -> tuple[int, int]:

@@ -21,8 +21,8 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import EmptyMaskError, GeometryError, InputError, OptionError
-from ..sections import Volume
+from ..errors import EmptyMaskError, InputError, OptionError
+from ..sections import Volume, check_affine
 
 __all__ = ["volume_to_mesh", "field_to_mesh"]
 
@@ -216,7 +216,7 @@ def field_to_mesh(
         raise InputError("field holds NaN or infinite values; fill them with an outside value")
     if inside not in _INSIDE_CHOICES:
         raise OptionError(f"inside must be one of {_INSIDE_CHOICES} (got {inside!r})")
-    aff = _check_affine(affine)
+    aff = check_affine(affine)
     level = float(level)
     if not np.isfinite(level):
         raise OptionError(f"level must be finite (got {level})")
@@ -239,15 +239,6 @@ def _check_step(step_size: int) -> int:
     return int(step_size)
 
 
-def _check_affine(affine: ArrayLike) -> NDArray[np.float64]:
-    aff = np.asarray(affine, dtype=np.float64)
-    if aff.shape != (4, 4) or not np.all(np.isfinite(aff)):
-        raise GeometryError(f"affine must be a finite 4x4 matrix (got shape {aff.shape})")
-    if not np.allclose(aff[3], [0.0, 0.0, 0.0, 1.0]):
-        raise GeometryError(f"affine's last row must be [0, 0, 0, 1] (got {aff[3].tolist()})")
-    if abs(np.linalg.det(aff[:3, :3])) < 1e-12:
-        raise GeometryError("affine is singular: a voxel axis has zero length or axes coincide")
-    return aff
 
 
 def _march(
