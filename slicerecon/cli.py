@@ -29,6 +29,9 @@ app = typer.Typer(
 )
 
 EXIT_INPUT = 2
+DEFAULT_MAX_MEMORY_GB = 8.0
+"""Default of ``--max-memory``; equal to ``slicerecon.io.limits.DEFAULT_MEMORY_BUDGET_GB``
+(a test checks it), written here so that ``--help`` imports nothing heavy."""
 _state: dict[str, bool] = {"debug": False}
 
 
@@ -59,90 +62,72 @@ def _root(
 
 
 # ---------------------------------------------------------------------------- info
-def _volume_info(volume: Any) -> dict[str, Any]:
-    import numpy as np
-
-    info: dict[str, Any] = {
-        "kind": "dense mask",
-        "shape": list(volume.shape),
-        "spacing_mm": [round(float(s), 6) for s in volume.spacing],
-        "oblique": volume.is_oblique,
-        "foreground_voxels": int(np.count_nonzero(volume.mask)),
-        "volume_mm3": round(volume.volume_mm3, 3),
-    }
-    if not volume.is_empty:
-        lo, hi = volume.bounding_box_mm()
-        info["bounding_box_mm"] = {"min": lo.round(3).tolist(), "max": hi.round(3).tolist()}
-        for name, ax in (("x", 0), ("y", 1), ("z", 2)):
-            planes = volume.occupied_planes(ax)
-            info[f"planes_{name}"] = {
-                "occupied": int(planes.size),
-                "first": int(planes[0]),
-                "last": int(planes[-1]),
-            }
-    return info
-
-
-def _sections_info(sections: Any) -> dict[str, Any]:
-    import numpy as np
-
-    gaps = sections.gaps
-    return {
-        "kind": "cross-sections",
-        "planes": sections.n_planes,
-        "axis": "xyz"[sections.axis],
-        "positions_mm": [round(float(p), 4) for p in sections.positions],
-        "gap_mm": None
-        if gaps.size == 0
-        else {"min": round(float(gaps.min()), 4), "max": round(float(gaps.max()), 4)},
-        "uniform_spacing": bool(gaps.size == 0 or np.ptp(gaps) < 1e-6),
-        "in_plane_shape": list(sections.masks.shape[1:]),
-        "grid_shape": list(sections.grid_shape),
-        "spacing_mm": [round(float(s), 6) for s in sections.spacing],
-    }
+MaxMemoryOpt = Annotated[
+    float,
+    typer.Option(
+        "--max-memory",
+        help="Memory budget per case, GiB: larger inputs are refused before reading.",
+    ),
+]
 
 
 @app.command()
 def info(
     input: Annotated[Path, typer.Argument(help="NIfTI, DICOM dir/SEG/RTSTRUCT, contours, mesh.")],
-    label: Annotated[int | None, typer.Option(help="Label value or segment number.")] = None,
-    roi: Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")] = None,
+    label: Annotated[
+        str | None, typer.Option(help="Also describe one structure (number or name).")
+    ] = None,
+    roi: Annotated[str | None, typer.Option(help="Another name for --label.")] = None,
     allow_irregular: Annotated[
         bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
     ] = False,
+    max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
-    """Describe an input: grid, spacing, labels, planes, bounding box (mm)."""
-    from .io import detect_kind, load_input
-    from .reconstruct import _roi
-    from .sections import Volume
+    """Describe an input: grid, spacing, every structure with its planes and extent (mm)."""
+    from .io.describe import describe_input
 
-    kind = detect_kind(input)
-    details: dict[str, Any] = {"path": str(input), "format": kind.kind}
-    if kind.kind == "nifti":
-        from .io.nifti import nifti_labels
-
-        details["labels"] = nifti_labels(input).to_dict()["labels"]
-    elif kind.kind in ("dicom-series", "dicom-seg"):
-        from .io.dicom import dicom_info
-
-        details["dicom"] = dicom_info(input)
-    elif kind.kind == "rtstruct":
-        from .io.rtstruct import list_rois
-
-        details["rois"] = list_rois(input)
-    data = load_input(input, label=label, roi=_roi(roi), allow_irregular=allow_irregular)
-    details.update(_volume_info(data) if isinstance(data, Volume) else _sections_info(data))
+    details = describe_input(
+        input, label=label if label is not None else roi, allow_irregular=allow_irregular,
+        memory_budget_gb=max_memory,
+    )
     if as_json:
         typer.echo(json.dumps(details, indent=2, default=str))
         return
     from rich.console import Console
     from rich.table import Table
 
+    console = Console()
     table = Table(title=str(input), show_header=False)
+    lists = {k: v for k, v in details.items() if k in ("structures", "segments", "rois")}
     for key, value in details.items():
+        if key in lists:
+            continue
         table.add_row(key, json.dumps(value, default=str) if not isinstance(value, str) else value)
-    Console().print(table)
+    console.print(table)
+    for key, records in lists.items():
+        if not records:
+            console.print(f"{key}: none")
+            continue
+        columns = list(dict.fromkeys(k for record in records for k in record))
+        listing = Table(*columns, title=key)
+        for record in records:
+            listing.add_row(*[_cell(record.get(c)) for c in columns])
+        console.print(listing)
+
+
+def _cell(value: Any) -> str:
+    """A short human form of one value of ``info``'s structure records."""
+    if value is None:
+        return ""
+    if isinstance(value, dict) and {"min", "max"} <= value.keys():
+        lo, hi = value["min"], value["max"]
+        return " ".join(f"{a:g}..{b:g}" for a, b in zip(lo, hi, strict=True))
+    if isinstance(value, dict) and {"count", "first", "last"} <= value.keys():
+        return f"{value['count']} ({value.get('axis', '')} {value['first']}..{value['last']})"
+    if isinstance(value, dict) and {"first", "last"} <= value.keys():
+        return f"{value['first']:g}..{value['last']:g}"
+    return value if isinstance(value, str) else json.dumps(value, default=str)
 
 
 _METHOD_HELP = (
@@ -171,8 +156,12 @@ SmoothOpt = Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mes
 CarveOpt = Annotated[
     bool, typer.Option("--carve/--no-carve", help="Cut the surface to the projections' hull.")
 ]
-LabelOpt = Annotated[int | None, typer.Option(help="Label value or segment number.")]
-RoiOpt = Annotated[str | None, typer.Option(help="RTSTRUCT ROI name or number.")]
+LabelOpt = Annotated[
+    str | None,
+    typer.Option(help="Structure to keep: a label value, a SEG segment or an RTSTRUCT ROI, "
+                 "by number or name."),
+]
+RoiOpt = Annotated[str | None, typer.Option(help="Another name for --label (RTSTRUCT ROIs).")]
 IrregularOpt = Annotated[
     bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
 ]
@@ -204,6 +193,7 @@ def run(
     label: LabelOpt = None,
     roi: RoiOpt = None,
     allow_irregular: IrregularOpt = False,
+    max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
 ) -> None:
     """Reconstruct one input; write mesh, plan.json, metrics.json and preview.png."""
     from rich.console import Console
@@ -224,6 +214,7 @@ def run(
         label=label,
         roi=roi,
         allow_irregular=allow_irregular,
+        max_memory_gb=max_memory,
     )
     console = Console(stderr=True)
     with console.status("reading") as status:
@@ -285,6 +276,7 @@ def batch(
     label: LabelOpt = None,
     roi: RoiOpt = None,
     allow_irregular: IrregularOpt = False,
+    max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
 ) -> None:
     """Reconstruct every case in INDIR on Dask; write OUTDIR/<case>/ and OUTDIR/summary.csv.
 
@@ -319,6 +311,7 @@ def batch(
         label=label,
         roi=roi,
         allow_irregular=allow_irregular,
+        max_memory_gb=max_memory,
     )
     if not logging.getLogger().handlers:
         logging.getLogger("distributed").setLevel(logging.ERROR)  # keep the bar readable
@@ -367,9 +360,12 @@ def batch(
 def evaluate(
     prediction: Annotated[Path, typer.Argument(help="Predicted mesh or mask.")],
     ground_truth: Annotated[Path, typer.Argument(help="Ground-truth mesh or mask.")],
-    label: Annotated[int | None, typer.Option(help="Label of the ground truth.")] = None,
+    label: Annotated[
+        str | None, typer.Option(help="Structure of the ground truth (number or name).")
+    ] = None,
     n_points: Annotated[int, typer.Option(help="Surface samples per mesh.")] = 50_000,
     seed: Annotated[int, typer.Option(help="Sampling seed.")] = 0,
+    max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
 ) -> None:
     """Print metrics of PREDICTION against GROUND_TRUTH as JSON."""
     from .io import detect_kind, load_input
@@ -377,10 +373,10 @@ def evaluate(
     from .metrics import evaluate as evaluate_metrics
     from .sections import Volume
 
-    def load(path: Path, lab: int | None) -> Any:
+    def load(path: Path, lab: str | None) -> Any:
         if detect_kind(path).kind == "mesh":
             return read_mesh(path)
-        data = load_input(path, label=lab)
+        data = load_input(path, label=lab, memory_budget_gb=max_memory)
         if not isinstance(data, Volume):
             raise SlicereconError(f"{path} holds contours; evaluate needs a mesh or a dense mask")
         return data
@@ -420,7 +416,7 @@ def evaluate_dataset(
     projections: ProjectionsOpt = "auto",
     mesh_format: FormatOpt = "stl",
     smooth: SmoothOpt = False,
-    label: Annotated[int | None, typer.Option(help="Label value to keep.")] = None,
+    label: LabelOpt = None,
     n_points: Annotated[int, typer.Option(help="Surface samples per mesh.")] = 50_000,
     seed: Annotated[int, typer.Option(help="Sampling seed.")] = 0,
     title: Annotated[str | None, typer.Option("--title", help="Report title.")] = None,
@@ -627,28 +623,72 @@ def dataset_list(
         typer.echo(f"real (missing packages): {', '.join(missing)}")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``slicerecon`` console script."""
-    import click
+def _usage_line(exc: Exception) -> str:
+    """One line for a usage error raised by typer's click: the message and where help is."""
+    message = exc.format_message() if hasattr(exc, "format_message") else str(exc)
+    message = " ".join(str(message).split()) or "a command is required"
+    ctx = getattr(exc, "ctx", None)
+    if ctx is not None:
+        return f"error: {message} (see '{ctx.command_path} --help')"
+    return f"error: {message}"
 
+
+def _click_exceptions() -> tuple[type[BaseException], ...]:
+    """The usage-error base classes of the click that typer runs on.
+
+    Recent typer releases bundle their own copy of click, whose exceptions do
+    not derive from the installed ``click``'s; older ones use ``click`` itself.
+    Both are caught, so every usage error reaches :func:`main`'s one-line rule.
+    """
+    import typer.exceptions
+
+    bases: list[type[BaseException]] = [typer.exceptions.TyperException]
+    try:
+        import click
+    except ImportError:  # pragma: no cover - typer always brings a click
+        pass
+    else:
+        bases.append(click.ClickException)
+    return tuple(bases)
+
+
+def _exit_code(exc: BaseException) -> int | None:
+    """The exit code of a click/typer ``Exit`` (``--help``, ``--version``), else None."""
+    code = getattr(exc, "exit_code", None)
+    name = type(exc).__name__
+    return int(code) if name == "Exit" and code is not None else None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``slicerecon`` console script.
+
+    Exit codes: 0 success; 2 bad input or usage error (one ``error:`` line on
+    stderr); 1 a batch finished with failed cases; 130 interrupted (Ctrl-C).
+    """
+    usage_errors = _click_exceptions()
     try:
         result = app(args=argv, prog_name="slicerecon", standalone_mode=False)
     except SlicereconError as exc:
         if _state["debug"]:
             raise
-        typer.echo(f"error: {exc}", err=True)
+        typer.echo(f"error: {' '.join(str(exc).split())}", err=True)
         return EXIT_INPUT
-    except click.exceptions.Exit as exc:
-        return int(exc.exit_code)
-    except click.ClickException as exc:
-        exc.show()
-        return int(exc.exit_code)
-    except click.exceptions.Abort:
-        typer.echo("aborted", err=True)
-        return 130
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         return 130
+    except (*usage_errors, RuntimeError) as exc:
+        code = _exit_code(exc)
+        if code is not None:
+            return code
+        if type(exc).__name__ == "Abort":
+            typer.echo("interrupted", err=True)
+            return 130
+        if not isinstance(exc, usage_errors):
+            raise
+        if _state["debug"]:
+            raise
+        typer.echo(_usage_line(exc), err=True)
+        return EXIT_INPUT
     return int(result) if isinstance(result, int) else 0
 
 

@@ -15,6 +15,7 @@ __all__ = [
     "EmptyMaskError",
     "LabelError",
     "GeometryError",
+    "MemoryBudgetError",
     "OptionError",
     "DependencyError",
 ]
@@ -42,6 +43,10 @@ class LabelError(InputError):
 
 class GeometryError(InputError):
     """Inconsistent geometry: non-parallel planes, irregular spacing, open meshes."""
+
+
+class MemoryBudgetError(InputError):
+    """An input asks for more memory than the budget allows (``--max-memory``)."""
 
 
 class OptionError(SlicereconError):

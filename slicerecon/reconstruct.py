@@ -22,6 +22,7 @@ import numpy as np
 import trimesh
 
 from .errors import OptionError
+from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid
 from .sections import CrossSections, Projections, Volume, axis_index
 
 __all__ = [
@@ -87,10 +88,12 @@ class ReconstructConfig:
     (``docs/method.md``, section 7): nothing the silhouettes rule out is kept."""
     mesh_format: str = "stl"
     """Output mesh format: stl, ply or obj."""
-    label: int | None = None
-    """Label value / segment number to keep (default: all non-zero)."""
+    label: int | str | None = None
+    """The structure to keep, by number or name: a label value, a SEG segment
+    number or label, an RTSTRUCT ROI number or name (default: all non-zero, or
+    the only segment / ROI)."""
     roi: str | None = None
-    """RTSTRUCT ROI name or number."""
+    """RTSTRUCT ROI name or number (another name for ``label``)."""
     allow_irregular: bool = False
     """Accept DICOM series with uneven slice spacing."""
     max_parts: int = 8
@@ -100,6 +103,9 @@ class ReconstructConfig:
     ``il_rl`` actor)."""
     n_points: int = 50_000
     """Surface samples per mesh for the distance metrics."""
+    max_memory_gb: float = DEFAULT_MEMORY_BUDGET_GB
+    """Memory budget of one case, GiB: inputs whose grid would need more are
+    refused before anything is allocated (:mod:`slicerecon.io.limits`)."""
     seed: int = 0
     """Seed of every random choice (surface sampling)."""
 
@@ -118,6 +124,7 @@ class ReconstructConfig:
         ):
             if value not in choices:
                 raise OptionError(f"--{name} must be one of {', '.join(choices)} (got {value!r})")
+        check_budget(self.max_memory_gb)
         if self.max_parts < 1:
             raise OptionError(f"max_parts must be >= 1 (got {self.max_parts})")
         if self.weights is not None:
@@ -191,6 +198,7 @@ def prepare_inputs(
     every: int | None = None,
     axis: int | str = "z",
     projections: str | Sequence[str | os.PathLike[str]] = "auto",
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> tuple[CrossSections, Projections, Volume | None]:
     """Turn a loaded input into cross-sections, projections and (maybe) ground truth.
 
@@ -203,6 +211,10 @@ def prepare_inputs(
     (derived from the sections), ``"auto"`` (``gt`` when there is a dense
     mask), or one to three NIfTI silhouette files, as a sequence of paths or
     one comma-separated string (:mod:`slicerecon.io.projections`).
+
+    The grid the reconstruction will work on (the cropped mask, or the
+    sections' grid) is checked against ``memory_budget_gb``, GiB
+    (:func:`slicerecon.io.limits.check_grid`), before anything is allocated on it.
 
     Returns
     -------
@@ -224,6 +236,8 @@ def prepare_inputs(
     truth: Volume | None = None
     if isinstance(data, Volume):
         volume = data.crop(pad=3)
+        check_grid(volume.shape, what="the reconstruction grid",
+                   memory_budget_gb=memory_budget_gb)
         if looks_sparse(volume, ax):
             logger.info("the mask annotates only some planes: using them as sections")
             sections = _sparse_volume_to_sections(volume, ax)
@@ -237,6 +251,8 @@ def prepare_inputs(
         if slices is not None or every is not None:
             raise OptionError("--slices/--every apply to dense masks; this input is already sparse")
     sections.require_foreground()
+    check_grid(sections.grid_shape, what="the reconstruction grid",
+               memory_budget_gb=memory_budget_gb)
     if files:
         from .io.projections import read_projection_files
 
@@ -421,9 +437,10 @@ def run_case(
         data = load_input(
             input_path,
             label=config.label,
-            roi=_roi(config.roi),
+            roi=config.roi,
             image_dir=image_dir,
             allow_irregular=config.allow_irregular,
+            memory_budget_gb=config.max_memory_gb,
         )
     with _timed(timings, "sections"):
         sections, projections, truth = prepare_inputs(
@@ -432,10 +449,13 @@ def run_case(
             every=config.every,
             axis=config.axis,
             projections=config.projections,
+            memory_budget_gb=config.max_memory_gb,
         )
     if ground_truth is not None:
         with _timed(timings, "read"):
-            gt_data = load_input(ground_truth, label=config.label)
+            gt_data = load_input(
+                ground_truth, label=config.label, memory_budget_gb=config.max_memory_gb
+            )
         if not isinstance(gt_data, Volume):
             raise OptionError("--gt must be a dense mask or a closed mesh, not contours")
         truth = gt_data
@@ -485,9 +505,3 @@ def run_case(
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     }
     return summary
-
-
-def _roi(roi: str | None) -> int | str | None:
-    if roi is None:
-        return None
-    return int(roi) if roi.strip().lstrip("-").isdigit() else roi

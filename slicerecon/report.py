@@ -613,17 +613,15 @@ class _TruthCache:
 def _truth_surface(path: Path, config: dict[str, Any]) -> trimesh.Trimesh | None:
     from .io import detect_kind, load_input
     from .io.mesh import read_mesh
-    from .reconstruct import _roi
     from .sections import Volume
     from .surface.marching import volume_to_mesh
 
     if detect_kind(path).kind == "mesh":
         return read_mesh(path)
-    roi = config.get("roi")
     data = load_input(
         path,
-        label=_as_int(config.get("label")),
-        roi=_roi(None if roi is None else str(roi)),
+        label=config.get("label"),
+        roi=config.get("roi"),
         allow_irregular=bool(config.get("allow_irregular", False)),
     )
     if not isinstance(data, Volume):

@@ -20,8 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FormatError, InputError
+from ..errors import FormatError, InputError, LabelError, OptionError
 from ..sections import CrossSections, Volume
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid, reading
+from .selection import parse_selector
 
 __all__ = ["InputKind", "detect_kind", "load_input", "MESH_SUFFIXES", "NIFTI_SUFFIXES"]
 
@@ -63,30 +65,19 @@ def _suffix(path: Path) -> str:
     return ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
 
 
-def _dicom_modality(path: Path) -> str | None:
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
-    try:
-        ds = pydicom.dcmread(
-            path, stop_before_pixels=True, specific_tags=["Modality", "SOPClassUID"]
-        )
-    except (InvalidDicomError, OSError, ValueError, EOFError):
-        return None
-    modality = str(getattr(ds, "Modality", "") or "")
-    if str(getattr(ds, "SOPClassUID", "")) == "1.2.840.10008.5.1.4.1.1.66.4":
-        return "SEG"
-    return modality or "UNKNOWN"
-
-
 def detect_kind(path: str | os.PathLike[str]) -> InputKind:
     """Tell what kind of input ``path`` is, without reading pixel data.
+
+    DICOM files are recognised by content (:func:`slicerecon.io.dicom.dicom_modality`),
+    with or without the 128-byte preamble.
 
     Raises
     ------
     InputError
         If the path does not exist or its kind cannot be told.
     """
+    from .dicom import dicom_modality
+
     p = Path(path)
     if not p.exists():
         raise InputError(f"input not found: {p}")
@@ -94,7 +85,7 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         files = sorted(f for f in p.iterdir() if f.is_file() and not f.name.startswith("."))
         if not files:
             raise InputError(f"directory {p} is empty: expected a DICOM series")
-        rtstructs = [f for f in files if _dicom_modality(f) == "RTSTRUCT"]
+        rtstructs = [f for f in files if dicom_modality(f) == "RTSTRUCT"]
         if len(rtstructs) == 1:
             return InputKind("rtstruct", rtstructs[0], image_dir=p)
         if len(rtstructs) > 1:
@@ -111,7 +102,7 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         return InputKind("vti", p)
     if suffix in CONTOUR_SUFFIXES:
         return InputKind("contours", p)
-    modality = _dicom_modality(p)
+    modality = dicom_modality(p)
     if modality == "SEG":
         return InputKind("dicom-seg", p)
     if modality == "RTSTRUCT":
@@ -130,78 +121,148 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
 def load_input(
     path: str | os.PathLike[str],
     *,
-    label: int | None = None,
+    label: int | str | None = None,
     roi: int | str | None = None,
     image_dir: str | os.PathLike[str] | None = None,
     allow_irregular: bool = False,
     mesh_resolution: int = 128,
     pixel_spacing: float | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> Volume | CrossSections:
     """Read any supported input.
+
+    This is the reading boundary (:func:`slicerecon.io.limits.reading`):
+    whatever a parser raises becomes a :class:`~slicerecon.errors.FormatError`
+    naming the file, and every reader checks geometry and the memory budget
+    before it allocates a grid.
 
     Parameters
     ----------
     path : path-like
         NIfTI file, DICOM series directory, DICOM SEG / RTSTRUCT file, contour
-        file (``.json`` / ``.csv``) or closed mesh (``.stl`` / ``.ply`` /
-        ``.obj`` / ``.off``).
-    label : int, optional
-        Label value (NIfTI, DICOM series) or segment number (SEG) to keep;
-        default: every non-zero voxel / the only segment.
+        file (``.json`` / ``.csv``), VTK image (``.vti``) or closed mesh
+        (``.stl`` / ``.ply`` / ``.obj`` / ``.off``).
+    label : int or str, optional
+        The structure to keep, by number or name
+        (:func:`slicerecon.io.selection.choose_structure`): a label value (NIfTI,
+        VTI, DICOM series), a SegmentNumber or SegmentLabel (SEG), a ROINumber
+        or ROIName (RTSTRUCT). Default: every non-zero voxel of a label map,
+        the only segment or ROI.
     roi : int or str, optional
-        RTSTRUCT ROI number or name; default: the only ROI.
+        Another name for ``label`` (``--roi`` of the command line).
     image_dir : path-like, optional
         The image series an RTSTRUCT refers to; its grid is then used.
     allow_irregular : bool
-        Accept DICOM series with uneven slice spacing (see docs/formats.md).
+        Accept DICOM series with uneven slice spacing, read on their own or as
+        the image series of an RTSTRUCT (see docs/formats.md).
     mesh_resolution : int
         Voxels along the longest side when a mesh is voxelised.
     pixel_spacing : float, optional
         In-plane pixel size, mm, for contour inputs without an image grid.
+    memory_budget_gb : float
+        Refuse inputs whose grid would not fit this budget, GiB
+        (:func:`slicerecon.io.limits.check_grid`).
 
     Returns
     -------
     Volume or CrossSections
         A dense mask, or the annotated planes of a sparse input.
+
+    Raises
+    ------
+    InputError
+        Missing input or one whose kind cannot be told; its subclasses for
+        what the readers find (FormatError, LabelError, GeometryError,
+        EmptyMaskError, MemoryBudgetError).
+    OptionError
+        ``label`` and ``roi`` disagree; ``image_dir`` for an input that is not
+        an RTSTRUCT.
     """
-    kind = detect_kind(path)
-    logger.info("reading %s as %s", kind.path, kind.kind)
+    check_budget(memory_budget_gb)
+    selector = _selector(label, roi)
+    with reading(path):
+        kind = detect_kind(path)
+        if image_dir is not None and kind.kind != "rtstruct":
+            raise OptionError(f"an image series applies to RTSTRUCT inputs only; {path} is "
+                              f"a {kind.kind} input")
+        logger.info("reading %s as %s", kind.path, kind.kind)
+        return _read(kind, selector, image_dir=image_dir, allow_irregular=allow_irregular,
+                     mesh_resolution=mesh_resolution, pixel_spacing=pixel_spacing,
+                     memory_budget_gb=memory_budget_gb)
+
+
+def _selector(label: int | str | None, roi: int | str | None) -> int | str | None:
+    chosen = parse_selector(label)
+    alias = parse_selector(roi)
+    if chosen is not None and alias is not None and chosen != alias:
+        raise OptionError(f"--label {label} and --roi {roi} disagree; give one of them")
+    return chosen if chosen is not None else alias
+
+
+def _read(
+    kind: InputKind,
+    selector: int | str | None,
+    *,
+    image_dir: str | os.PathLike[str] | None,
+    allow_irregular: bool,
+    mesh_resolution: int,
+    pixel_spacing: float | None,
+    memory_budget_gb: float,
+) -> Volume | CrossSections:
+    """Dispatch to the reader of ``kind``."""
+    budget = {"memory_budget_gb": memory_budget_gb}
     if kind.kind == "nifti":
         from .nifti import read_nifti
 
-        return read_nifti(kind.path, label=label)
+        return read_nifti(kind.path, label=selector, **budget)
     if kind.kind == "dicom-series":
         from .dicom import read_dicom_series
 
-        return read_dicom_series(kind.path, allow_irregular=allow_irregular, label=label)
+        return read_dicom_series(
+            kind.path, allow_irregular=allow_irregular, label=selector, **budget
+        )
     if kind.kind == "dicom-seg":
         from .dicom import read_dicom_seg
 
-        return read_dicom_seg(kind.path, segment=label)
+        return read_dicom_seg(kind.path, segment=selector, **budget)
     if kind.kind == "rtstruct":
         from .rtstruct import read_rtstruct
 
         return read_rtstruct(
             kind.path,
-            roi=roi,
+            roi=selector,
             image_dir=image_dir if image_dir is not None else kind.image_dir,
             pixel_spacing=pixel_spacing,
+            allow_irregular=allow_irregular,
+            **budget,
         )
     if kind.kind == "vti":
-        return _vti_volume(kind.path, label=label)
+        return _vti_volume(kind.path, label=selector, memory_budget_gb=memory_budget_gb)
     if kind.kind == "contours":
         from .contours import read_contours
 
-        return read_contours(kind.path, pixel_spacing=pixel_spacing)
+        _single_structure(kind.path, selector)
+        return read_contours(kind.path, pixel_spacing=pixel_spacing, **budget)
     from .mesh import read_mesh_volume
 
+    _single_structure(kind.path, selector)
+    check_grid((mesh_resolution,) * 3, what=str(kind.path), memory_budget_gb=memory_budget_gb)
     return read_mesh_volume(kind.path, resolution=mesh_resolution)
 
 
-def _vti_volume(path: Path, *, label: int | None) -> Volume:
+def _single_structure(path: Path, selector: int | str | None) -> None:
+    """Contour files and meshes hold one structure: a selector other than 1 is an error."""
+    if selector is not None and selector != 1:
+        raise LabelError(
+            f"{path} holds one structure; --label {selector} selects nothing in it "
+            "(leave --label out)"
+        )
+
+
+def _vti_volume(path: Path, *, label: int | str | None, memory_budget_gb: float) -> Volume:
     """A label map in a VTK XML image (``.vti``): one label, or every non-zero voxel."""
     from .nifti import label_mask
     from .vti import read_vti
 
-    image = read_vti(path)
+    image = read_vti(path, memory_budget_gb=memory_budget_gb)
     return Volume(label_mask(np.asarray(image.values), label, path), image.affine)

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 from ..errors import FormatError, InputError, OptionError, SlicereconError
 from ..sections import CrossSections
 from .atomic import atomic_path
+from .limits import DEFAULT_MEMORY_BUDGET_GB
 from .polygons import polygons_from_sections, sections_from_polygons
 
 __all__ = [
@@ -76,7 +77,10 @@ class _Parsed:
 
 # ----------------------------------------------------------------------------- reading
 def read_contours(
-    path: str | os.PathLike[str], *, pixel_spacing: float | None = None
+    path: str | os.PathLike[str],
+    *,
+    pixel_spacing: float | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> CrossSections:
     """Read a contour file (``.json`` or ``.csv``) into cross-sections.
 
@@ -88,6 +92,9 @@ def read_contours(
         In-plane pixel size of the grid the polygons are rasterized on, mm.
         Default: the file's ``grid`` when it has one (JSON), else the longest
         in-plane extent / 256. Given, it overrides the file's grid.
+    memory_budget_gb : float
+        Refuse files whose grid would not fit this budget, GiB, before any
+        plane is rasterized (:func:`slicerecon.io.limits.check_grid`).
 
     Returns
     -------
@@ -102,9 +109,12 @@ def read_contours(
         Malformed content; the message names the JSON path (e.g.
         ``planes[3].polygons[1]``) or CSV line of the offending item.
     GeometryError
-        Polygons not on parallel planes, or not flat.
+        Polygons not on parallel planes, or not flat; non-finite or absurd
+        coordinates.
     EmptyMaskError
         No polygon in the file.
+    MemoryBudgetError
+        The grid the contours need exceeds ``memory_budget_gb``.
     """
     p = Path(path)
     if not p.exists():
@@ -133,6 +143,7 @@ def read_contours(
             normal=parsed.normal,
             empty_positions=parsed.empty_positions,
             polygon_names=parsed.names,
+            memory_budget_gb=memory_budget_gb,
         )
     except OptionError:
         raise

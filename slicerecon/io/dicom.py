@@ -50,13 +50,17 @@ from ..errors import (
     GeometryError,
     InputError,
     LabelError,
-    OptionError,
 )
 from ..sections import Volume
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid
+from .selection import choose_structure, parse_selector
 
 __all__ = [
     "SEG_SOP_CLASS_UID",
     "dicom_info",
+    "dicom_modality",
+    "is_dicom_file",
+    "read_dicom_header",
     "dicom_series_geometry",
     "read_dicom_seg",
     "read_dicom_series",
@@ -101,6 +105,108 @@ readers turn these into one :class:`~slicerecon.errors.FormatError`)."""
 
 
 # ----------------------------------------------------------------------------- files
+def is_dicom_file(path: str | os.PathLike[str]) -> bool:
+    """Whether a file's content is DICOM, from its first bytes (no parsing).
+
+    True for a Part 10 file (the ``DICM`` marker at byte 128) and for a bare
+    dataset without the 128-byte preamble, as older systems and pydicom's own
+    test files write them: its first element is a little-endian tag of group
+    0x0002 (file meta) or 0x0008 (identification) with a plausible VR or length.
+
+    Raises
+    ------
+    FormatError
+        If the file cannot be read at all.
+    """
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(132)
+    except OSError as exc:
+        raise FormatError(f"cannot read {p}: {exc.strerror or exc}") from exc
+    if len(head) == 132 and head[128:132] == b"DICM":
+        return True
+    if len(head) < 8:
+        return False
+    group, element = struct.unpack("<HH", head[:4])
+    if group not in (0x0002, 0x0008) or element > 0x1FFF:
+        return False
+    vr = head[4:6]
+    if vr.isalpha() and vr.isupper():  # explicit VR
+        return True
+    (length,) = struct.unpack("<I", head[4:8])  # implicit VR: a modest element length
+    return length < 1024
+
+
+def read_dicom_header(
+    path: str | os.PathLike[str],
+    *,
+    stop_before_pixels: bool = True,
+    specific_tags: Sequence[str] | None = None,
+) -> Any:
+    """Read a DICOM file with pydicom, with or without its preamble.
+
+    Files without the 128-byte preamble and ``DICM`` marker are read with
+    ``force=True`` when :func:`is_dicom_file` recognises their content. Pixel
+    data, when read, is deferred until it is first used.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    stop_before_pixels : bool
+        Skip the pixel data.
+    specific_tags : sequence of str, optional
+        Read only these keywords (a fast sniff).
+
+    Returns
+    -------
+    pydicom.Dataset
+
+    Raises
+    ------
+    FormatError
+        If the content is not DICOM, or pydicom fails on it (the file is named).
+    """
+    import pydicom
+
+    p = Path(path)
+    if not is_dicom_file(p):
+        raise FormatError(f"{p} is corrupt or not a DICOM file: its content is not DICOM")
+    marker = _has_dicom_marker(p)
+    try:
+        return pydicom.dcmread(
+            p,
+            stop_before_pixels=stop_before_pixels,
+            specific_tags=list(specific_tags) if specific_tags is not None else None,
+            defer_size=None if stop_before_pixels else "64 KB",
+            force=not marker,
+        )
+    except Exception as exc:  # noqa: BLE001 - every pydicom failure names the file
+        raise FormatError(
+            f"{p} is corrupt or not a valid DICOM file ({type(exc).__name__}: "
+            f"{' '.join(str(exc).split())[:200]}); remove or replace it"
+        ) from exc
+
+
+def dicom_modality(path: str | os.PathLike[str]) -> str | None:
+    """``"SEG"``, ``"RTSTRUCT"``, another Modality (``"UNKNOWN"`` when absent), or
+    None when the file is not DICOM or cannot be parsed."""
+    p = Path(path)
+    try:
+        if not p.is_file() or not is_dicom_file(p):
+            return None
+        ds = read_dicom_header(p, specific_tags=["Modality", "SOPClassUID"])
+    except FormatError:
+        return None
+    if str(getattr(ds, "SOPClassUID", "")) == SEG_SOP_CLASS_UID:
+        return "SEG"
+    modality = str(getattr(ds, "Modality", "") or "")
+    if not modality and "SOPClassUID" not in ds:
+        return None  # forced parse of something that only began like DICOM
+    return modality or "UNKNOWN"
+
+
 def _has_dicom_marker(path: Path) -> bool:
     """True when ``path`` has the DICOM Part 10 ``DICM`` marker at byte 128."""
     try:
@@ -113,17 +219,7 @@ def _has_dicom_marker(path: Path) -> bool:
 
 def _dcmread(path: Path, *, stop_before_pixels: bool) -> Any:
     """Read a DICOM file, turning every parser failure into a FormatError naming it."""
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
-    errors: tuple[type[BaseException], ...] = (InvalidDicomError, *PARSE_ERRORS)
-    try:
-        return pydicom.dcmread(path, stop_before_pixels=stop_before_pixels)
-    except errors as exc:
-        raise FormatError(
-            f"{path} is corrupt or not a valid DICOM file ({type(exc).__name__}: {exc}); "
-            "remove or replace it"
-        ) from exc
+    return read_dicom_header(path, stop_before_pixels=stop_before_pixels)
 
 
 def _require_path(path: str | os.PathLike[str], *, want_dir: bool) -> Path:
@@ -255,11 +351,11 @@ def _scan_series(directory: Path, *, stop_before_pixels: bool) -> list[_Slice]:
     files = sorted(f for f in directory.iterdir() if f.is_file() and not f.name.startswith("."))
     slices: list[_Slice] = []
     for f in files:
-        if not _has_dicom_marker(f):
+        if not is_dicom_file(f):
             if f.suffix.lower() in _DICOM_SUFFIXES:
                 raise FormatError(
-                    f"{f} is named like a DICOM file but is not one (no 'DICM' marker at "
-                    "byte 128); remove or replace it"
+                    f"{f} is named like a DICOM file but is not one (neither a 'DICM' marker "
+                    "at byte 128 nor a DICOM dataset at its start); remove or replace it"
                 )
             logger.debug("skipping %s: not a DICOM file", f)
             continue
@@ -515,11 +611,54 @@ def _slice_values(item: _Slice) -> NDArray[np.float64]:
     return values
 
 
+def _checked_layout(directory: Path, allow_irregular: bool, memory_budget_gb: float) -> _Layout:
+    """The series' layout, its geometry and size checked before any pixel is decoded."""
+    layout = _layout(
+        _scan_series(directory, stop_before_pixels=False), allow_irregular=allow_irregular
+    )
+    check_geometry(layout.affine, layout.shape, what=str(directory))
+    check_grid(layout.shape, what=str(directory), memory_budget_gb=memory_budget_gb,
+               bytes_per_voxel=6)
+    return layout
+
+
+def read_dicom_series_values(
+    path: str | os.PathLike[str],
+    *,
+    allow_irregular: bool = False,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
+    """The pixel values of a DICOM mask series as a label map, with its affine.
+
+    Parameters
+    ----------
+    path, allow_irregular, memory_budget_gb
+        As for :func:`read_dicom_series`.
+
+    Returns
+    -------
+    values : ndarray of shape (Columns, Rows, planes), float32
+        Values after RescaleSlope / RescaleIntercept.
+    affine : ndarray of shape (4, 4)
+        Voxel index → DICOM patient LPS mm.
+
+    Raises
+    ------
+    InputError, GeometryError, FormatError, MemoryBudgetError
+        As :func:`read_dicom_series`.
+    """
+    directory = _require_path(path, want_dir=True)
+    layout = _checked_layout(directory, allow_irregular, memory_budget_gb)
+    stacked = np.stack([_slice_values(item).astype(np.float32) for item in layout.slices])
+    return np.transpose(stacked[layout.sources], (2, 1, 0)), layout.affine
+
+
 def read_dicom_series(
     path: str | os.PathLike[str],
     *,
     allow_irregular: bool = False,
-    label: int | None = None,
+    label: int | str | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> Volume:
     """Read a binary mask stored as a DICOM image series (one file per slice).
 
@@ -539,9 +678,13 @@ def read_dicom_series(
         to the plane nearest to it (at most half a step away), and every other
         plane copies the nearest slice (nearest-neighbour interpolation along
         the normal). A warning is logged.
-    label : int, optional
+    label : int or str, optional
         Keep the pixels whose value (after RescaleSlope / RescaleIntercept) equals
-        ``label``. Default: every pixel with a non-zero value is foreground.
+        ``label`` (a string of digits counts as the number). Default: every pixel
+        with a non-zero value is foreground.
+    memory_budget_gb : float
+        Refuse series whose grid would not fit this budget, GiB
+        (:func:`slicerecon.io.limits.check_grid`), before decoding any pixel.
 
     Returns
     -------
@@ -559,16 +702,21 @@ def read_dicom_series(
     FormatError
         A corrupt or undecodable file (named in the message).
     LabelError
-        ``label`` occurs in no slice.
+        ``label`` occurs in no slice, or is a name.
     EmptyMaskError
         No foreground pixel at all.
+    MemoryBudgetError
+        The grid exceeds ``memory_budget_gb``.
     """
-    if label is not None and (isinstance(label, bool) or not isinstance(label, int | np.integer)):
-        raise OptionError(f"label must be an integer pixel value (got {label!r})")
+    selector = parse_selector(label)
+    if isinstance(selector, str):
+        raise LabelError(
+            f"label {selector!r} is not in {path}: a mask series names its structures by "
+            "pixel value, not by name; pass a number"
+        )
+    label = selector
     directory = _require_path(path, want_dir=True)
-    layout = _layout(
-        _scan_series(directory, stop_before_pixels=False), allow_irregular=allow_irregular
-    )
+    layout = _checked_layout(directory, allow_irregular, memory_budget_gb)
     planes: list[NDArray[np.bool_]] = []
     seen: set[float] = set()
     for item in layout.slices:
@@ -612,9 +760,7 @@ class _SegGeometry:
 
 def _read_seg_dataset(path: str | os.PathLike[str], *, stop_before_pixels: bool) -> Any:
     p = _require_path(path, want_dir=False)
-    if not _has_dicom_marker(p):
-        raise FormatError(f"{p} is not a DICOM file (no 'DICM' marker at byte 128)")
-    ds = _dcmread(p, stop_before_pixels=stop_before_pixels)
+    ds = read_dicom_header(p, stop_before_pixels=stop_before_pixels)
     sop_class = str(ds.get("SOPClassUID", ""))
     if sop_class != SEG_SOP_CLASS_UID:
         modality = str(ds.get("Modality", "") or "unknown")
@@ -639,39 +785,8 @@ def _seg_segments(ds: Any, path: Path) -> dict[int, str]:
     return segments
 
 
-def _listing(segments: dict[int, str]) -> str:
-    return ", ".join(f"{n}: {label or '(no label)'}" for n, label in sorted(segments.items()))
-
-
 def _choose_segment(segments: dict[int, str], segment: int | str | None, path: Path) -> int:
-    if segment is None:
-        if len(segments) == 1:
-            return next(iter(segments))
-        raise LabelError(
-            f"{path} holds {len(segments)} segments ({_listing(segments)}); "
-            "choose one by number or label"
-        )
-    if isinstance(segment, bool):
-        raise OptionError(f"segment must be a number or a label (got {segment!r})")
-    if isinstance(segment, int | np.integer):
-        if int(segment) in segments:
-            return int(segment)
-    elif isinstance(segment, str):
-        exact = [n for n, lab in segments.items() if lab == segment]
-        folded = [n for n, lab in segments.items() if lab.casefold() == segment.casefold()]
-        matches = exact or folded
-        if len(matches) == 1:
-            return matches[0]
-        if len(matches) > 1:
-            raise LabelError(
-                f"segment label {segment!r} names several segments in {path} "
-                f"({_listing({n: segments[n] for n in matches})}); choose one by number"
-            )
-    else:
-        raise OptionError(f"segment must be a number or a label (got {segment!r})")
-    raise LabelError(
-        f"segment {segment!r} is not in {path}; its segments are: {_listing(segments)}"
-    )
+    return choose_structure(segments, parse_selector(segment), kind="segment", source=path)
 
 
 def _functional(ds: Any, frame_item: Any, sequence: str) -> Any | None:
@@ -821,7 +936,12 @@ def _seg_frames(ds: Any, path: Path, n_frames: int) -> NDArray[np.bool_]:
     return pixels >= 0.5 * max_value
 
 
-def read_dicom_seg(path: str | os.PathLike[str], *, segment: int | str | None = None) -> Volume:
+def read_dicom_seg(
+    path: str | os.PathLike[str],
+    *,
+    segment: int | str | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> Volume:
     """Read one segment of a DICOM SEG (Segmentation Storage) file as a mask.
 
     Parameters
@@ -833,6 +953,9 @@ def read_dicom_seg(path: str | os.PathLike[str], *, segment: int | str | None = 
     segment : int or str, optional
         SegmentNumber or SegmentLabel (exact, then case-insensitive) of the
         segment to read. Default: the only segment; with several, LabelError.
+    memory_budget_gb : float
+        Refuse files whose grid would not fit this budget, GiB
+        (:func:`slicerecon.io.limits.check_grid`), before decoding any frame.
 
     Returns
     -------
@@ -862,6 +985,10 @@ def read_dicom_seg(path: str | os.PathLike[str], *, segment: int | str | None = 
     segments = _seg_segments(ds, p)
     number = _choose_segment(segments, segment, p)
     geometry = _seg_geometry(ds, p)
+    check_geometry(geometry.affine, geometry.shape, what=str(p))
+    check_grid(geometry.shape, what=str(p), memory_budget_gb=memory_budget_gb, bytes_per_voxel=1)
+    check_grid((geometry.frame_plane.size, *geometry.shape[:2]), what=f"{p} (frames)",
+               memory_budget_gb=memory_budget_gb, bytes_per_voxel=2)
     unknown = sorted(set(geometry.frame_segment.tolist()) - set(segments))
     if unknown:
         raise FormatError(f"{p}: frames refer to segments {unknown} missing from SegmentSequence")
@@ -888,7 +1015,7 @@ def _orientation_list(affine: NDArray[np.float64]) -> list[float]:
     return [round(float(v), 6) for v in np.concatenate([cos[:, 0], cos[:, 1]])]
 
 
-def dicom_info(path: str | os.PathLike[str]) -> dict[str, Any]:
+def dicom_info(path: str | os.PathLike[str], *, allow_irregular: bool = True) -> dict[str, Any]:
     """Describe a DICOM image-series directory or a DICOM SEG file (headers only).
 
     Parameters
@@ -916,7 +1043,7 @@ def dicom_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     p = Path(path)
     if p.is_dir():
         slices = _scan_series(p, stop_before_pixels=True)
-        layout = _layout(slices, allow_irregular=True)
+        layout = _layout(slices, allow_irregular=allow_irregular)
         first = layout.slices[0].dataset
         gaps = layout.gaps_mm
         return {

@@ -23,6 +23,8 @@ from numpy.typing import DTypeLike, NDArray
 from ..errors import EmptyMaskError, FormatError, InputError, LabelError, OptionError
 from ..sections import Volume
 from .atomic import atomic_path
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid
+from .selection import parse_selector
 
 __all__ = ["NiftiInfo", "nifti_labels", "read_nifti", "write_nifti"]
 
@@ -117,9 +119,18 @@ def _grid_shape(p: Path, img: nib.Nifti1Pair) -> tuple[int, int, int]:
     return shape[0], shape[1], shape[2]
 
 
-def _read_labels(p: Path, img: nib.Nifti1Pair) -> NDArray[Any]:
-    """The voxel values of ``img`` as a 3-D array, checked to be an integer label map."""
+def _read_labels(
+    p: Path, img: nib.Nifti1Pair, memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB
+) -> NDArray[Any]:
+    """The voxel values of ``img`` as a 3-D array, checked to be an integer label map.
+
+    The header's geometry and declared size are checked before any voxel is read.
+    """
     shape = _grid_shape(p, img)
+    check_geometry(img.affine, shape, what=str(p))
+    itemsize = np.dtype(img.get_data_dtype()).itemsize
+    check_grid(shape, what=str(p), memory_budget_gb=memory_budget_gb,
+               bytes_per_voxel=2 * itemsize + 2)
     try:
         data = np.asanyarray(img.dataobj)
     except Exception as exc:  # truncated data, bad gzip stream, impossible header
@@ -148,7 +159,7 @@ def _read_labels(p: Path, img: nib.Nifti1Pair) -> NDArray[Any]:
     return data
 
 
-def label_mask(data: NDArray[Any], label: int | None, source: Path) -> NDArray[np.bool_]:
+def label_mask(data: NDArray[Any], label: int | str | None, source: Path) -> NDArray[np.bool_]:
     """The voxels of one label of a label map (``None``: every non-zero voxel).
 
     Shared by the label-map readers (NIfTI, VTK images) so that they select
@@ -161,6 +172,7 @@ def label_mask(data: NDArray[Any], label: int | None, source: Path) -> NDArray[n
     LabelError
         If ``label`` is absent (the message lists the labels present).
     """
+    label = _label_value(label, data, source)
     if label is None:
         mask = data != 0
         if not mask.any():
@@ -184,6 +196,18 @@ def label_mask(data: NDArray[Any], label: int | None, source: Path) -> NDArray[n
     return mask
 
 
+def _label_value(label: int | str | None, data: NDArray[Any], source: Path) -> int | None:
+    """A label map's structures are its values: a name can only be a number in text."""
+    selector = parse_selector(label)
+    if selector is None or isinstance(selector, int):
+        return selector
+    present = ", ".join(str(v) for v in list(_label_counts(data))[:20])
+    raise LabelError(
+        f"label {selector!r} is not in {source}: a label map names its structures by "
+        f"value, not by name; labels present: {present or 'none'}"
+    )
+
+
 def _label_counts(data: NDArray[Any]) -> dict[int, int]:
     """Non-zero label values of an integer-valued array and their voxel counts."""
     if data.dtype.kind in "bu" and data.dtype.itemsize <= 2:
@@ -195,7 +219,12 @@ def _label_counts(data: NDArray[Any]) -> dict[int, int]:
     return {int(v): int(c) for v, c in zip(values, counts, strict=True) if v != 0}
 
 
-def read_nifti(path: str | os.PathLike[str], *, label: int | None = None) -> Volume:
+def read_nifti(
+    path: str | os.PathLike[str],
+    *,
+    label: int | str | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> Volume:
     """Read one label (or every non-zero voxel) of a NIfTI label map.
 
     Parameters
@@ -203,8 +232,12 @@ def read_nifti(path: str | os.PathLike[str], *, label: int | None = None) -> Vol
     path : path-like
         A ``.nii`` or ``.nii.gz`` file (NIfTI-1 or NIfTI-2) holding a 3-D label
         map; a 4-D image whose 4th dimension is 1 is accepted.
-    label : int, optional
-        Label value to keep. Default: every non-zero voxel is foreground.
+    label : int or str, optional
+        Label value to keep (a string of digits counts as the number). Default:
+        every non-zero voxel is foreground.
+    memory_budget_gb : float
+        Refuse headers whose declared grid would not fit this budget, GiB
+        (:func:`slicerecon.io.limits.check_grid`), before reading any voxel.
 
     Returns
     -------
@@ -218,17 +251,23 @@ def read_nifti(path: str | os.PathLike[str], *, label: int | None = None) -> Vol
     FormatError
         If the file is corrupt, truncated or not NIfTI.
     LabelError
-        If ``label`` is absent (the message lists the labels present) or the
-        image is not a label map (non-integer or non-finite values).
+        If ``label`` is absent (the message lists the labels present), is a
+        name, or the image is not a label map (non-integer or non-finite values).
     EmptyMaskError
         If the image (or the selected label) holds no foreground voxel.
+    GeometryError
+        Non-finite or absurd voxel spacing or origin.
+    MemoryBudgetError
+        The declared grid exceeds ``memory_budget_gb``.
     OptionError
-        If ``label`` is not an integer.
+        If ``label`` is neither an integer nor a string.
     """
-    if label is not None and (isinstance(label, bool) or not isinstance(label, int | np.integer)):
-        raise OptionError(f"label must be an integer label value (got {label!r})")
+    if label is not None and (
+        isinstance(label, bool) or not isinstance(label, int | np.integer | str)
+    ):
+        raise OptionError(f"label must be an integer label value or a name (got {label!r})")
     p, img = _load(path)
-    mask = label_mask(_read_labels(p, img), label, p)
+    mask = label_mask(_read_labels(p, img, memory_budget_gb), label, p)
     volume = Volume(mask, img.affine)
     logger.info(
         "read %s: %s, label %s, %d foreground voxels",
@@ -236,6 +275,34 @@ def read_nifti(path: str | os.PathLike[str], *, label: int | None = None) -> Vol
         "any non-zero" if label is None else label, int(np.count_nonzero(mask)),
     )
     return volume
+
+
+def read_label_values(
+    path: str | os.PathLike[str], *, memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB
+) -> tuple[NDArray[Any], NDArray[np.float64]]:
+    """The whole label map of a NIfTI file and its affine.
+
+    Parameters
+    ----------
+    path : path-like
+        A ``.nii`` or ``.nii.gz`` label map.
+    memory_budget_gb : float
+        As for :func:`read_nifti`.
+
+    Returns
+    -------
+    values : ndarray of shape (I, J, K)
+        Integer-valued labels, in the file's data type.
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm.
+
+    Raises
+    ------
+    InputError, FormatError, LabelError, GeometryError, MemoryBudgetError
+        As :func:`read_nifti`.
+    """
+    p, img = _load(path)
+    return _read_labels(p, img, memory_budget_gb), np.asarray(img.affine, dtype=np.float64)
 
 
 def nifti_labels(path: str | os.PathLike[str]) -> NiftiInfo:

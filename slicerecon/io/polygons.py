@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import EmptyMaskError, GeometryError, InputError, OptionError
 from ..sections import CrossSections, in_plane_axes
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_coordinates, check_grid
 
 __all__ = [
     "DEFAULT_PIXELS_ACROSS",
@@ -148,6 +149,7 @@ def _as_polygons(
             raise InputError(f"{name}: a polygon needs at least 3 points (got {pts.shape[0]})")
         if not np.all(np.isfinite(pts)):
             raise InputError(f"{name}: holds NaN or infinite coordinates")
+        check_coordinates(pts, what=name)
         diameter = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         vector = _vector_area(pts)
         if np.linalg.norm(vector) <= DEGENERATE_REL * diameter**2:
@@ -382,6 +384,7 @@ def sections_from_polygons(
     axis_tolerance_deg: float = 0.5,
     plane_tolerance_mm: float = 0.01,
     polygon_names: Sequence[str] | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> CrossSections:
     """Rasterize closed polygons lying on parallel planes into cross-sections.
 
@@ -417,6 +420,9 @@ def sections_from_polygons(
         may sit from an integer index of ``reference`` and still be snapped to it.
     polygon_names : sequence of str, optional
         Names of the polygons for error messages (default ``"polygon i"``).
+    memory_budget_gb : float
+        Refuse grids that the reconstruction could not hold in this budget,
+        GiB (:func:`slicerecon.io.limits.check_grid`), before rasterizing.
 
     Returns
     -------
@@ -432,7 +438,10 @@ def sections_from_polygons(
         No polygon (or none enclosing any area, or none covering a pixel centre).
     GeometryError
         Non-parallel or non-planar polygons; planes not parallel to any slice
-        direction of ``reference``, or outside it.
+        direction of ``reference``, or outside it; coordinates that are not
+        finite or lie beyond :data:`slicerecon.io.limits.MAX_COORDINATE_MM`.
+    MemoryBudgetError
+        The grid exceeds ``memory_budget_gb``.
     OptionError
         Bad option values.
     """
@@ -491,6 +500,7 @@ def sections_from_polygons(
     else:
         indices = _reference_indices(grid, along, plane_pos, plane_tolerance_mm)
 
+    check_grid(grid.shape, what="the contours", memory_budget_gb=memory_budget_gb)
     masks = _rasterize_planes(polys, members, grid)
     if not masks.any():
         raise EmptyMaskError(

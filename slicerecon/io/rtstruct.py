@@ -29,36 +29,28 @@ from ..errors import (
     EmptyMaskError,
     FormatError,
     InputError,
-    LabelError,
     OptionError,
     SlicereconError,
 )
 from ..sections import CrossSections
-from .dicom import PARSE_ERRORS
+from .dicom import PARSE_ERRORS, read_dicom_header
+from .limits import DEFAULT_MEMORY_BUDGET_GB
 from .polygons import sections_from_polygons
+from .selection import choose_structure, parse_selector
 
-__all__ = ["list_rois", "read_rtstruct"]
+__all__ = ["list_rois", "read_rtstruct", "roi_contours"]
 
 logger = logging.getLogger(__name__)
 
 
 def _read_dataset(path: str | os.PathLike[str]) -> tuple[Any, Path]:
     """The RTSTRUCT dataset, or InputError / FormatError."""
-    import pydicom
-    from pydicom.errors import InvalidDicomError
-
-    errors: tuple[type[BaseException], ...] = (InvalidDicomError, *PARSE_ERRORS)
     p = Path(path)
     if not p.exists():
         raise InputError(f"RTSTRUCT file not found: {p}")
     if not p.is_file():
         raise InputError(f"{p} is a directory; pass the RTSTRUCT file itself")
-    try:
-        ds = pydicom.dcmread(p, stop_before_pixels=True)
-    except errors as exc:
-        raise FormatError(
-            f"{p} is corrupt or not a DICOM file ({type(exc).__name__}: {exc})"
-        ) from exc
+    ds = read_dicom_header(p, stop_before_pixels=True)
     modality = str(ds.get("Modality", "") or "")
     if modality != "RTSTRUCT" or "StructureSetROISequence" not in ds:
         raise FormatError(
@@ -106,37 +98,12 @@ def list_rois(path: str | os.PathLike[str]) -> list[tuple[int, str]]:
     return _rois(ds, p)
 
 
-def _listing(rois: list[tuple[int, str]]) -> str:
-    return ", ".join(f"{number}: {name or '(no name)'}" for number, name in rois)
-
-
 def _choose_roi(rois: list[tuple[int, str]], roi: int | str | None, path: Path) -> tuple[int, str]:
     if not rois:
         raise EmptyMaskError(f"{path} holds no ROI (its StructureSetROISequence is empty)")
-    if roi is None:
-        if len(rois) == 1:
-            return rois[0]
-        raise LabelError(
-            f"{path} holds {len(rois)} ROIs ({_listing(rois)}); choose one by number or name"
-        )
-    if isinstance(roi, bool) or not isinstance(roi, int | np.integer | str):
-        raise OptionError(f"roi must be an ROI number or name (got {roi!r})")
-    if isinstance(roi, str):
-        matches = [r for r in rois if r[1] == roi] or [
-            r for r in rois if r[1].strip().casefold() == roi.strip().casefold()
-        ]
-        if not matches and roi.strip().lstrip("-").isdigit():
-            matches = [r for r in rois if r[0] == int(roi)]
-        if len(matches) > 1:
-            raise LabelError(
-                f"ROI name {roi!r} names several ROIs in {path} ({_listing(matches)}); "
-                "choose one by number"
-            )
-    else:
-        matches = [r for r in rois if r[0] == int(roi)]
-    if not matches:
-        raise LabelError(f"ROI {roi!r} is not in {path}; its ROIs are: {_listing(rois)}")
-    return matches[0]
+    names = dict(rois)
+    number = choose_structure(names, parse_selector(roi), kind="ROI", source=path)
+    return number, names[number]
 
 
 def _contour_points(item: Any, where: str, path: Path) -> NDArray[np.float64]:
@@ -202,12 +169,48 @@ def _roi_polygons(
     return polygons, names, image_uids
 
 
+def roi_contours(
+    path: str | os.PathLike[str],
+) -> list[tuple[int, str, list[NDArray[np.float64]], str]]:
+    """Every ROI of an RTSTRUCT with its closed planar contours, refusing none.
+
+    Parameters
+    ----------
+    path : path-like
+        An RTSTRUCT file.
+
+    Returns
+    -------
+    list of (number, name, polygons, note)
+        In the file's order: ROINumber, ROIName, the closed planar polygons
+        (each an ndarray of shape (N, 3), LPS mm) and, when there are none, a
+        note saying why (``""`` otherwise).
+
+    Raises
+    ------
+    InputError, FormatError
+        Missing file, not an RTSTRUCT, malformed ContourData.
+    """
+    ds, p = _read_dataset(path)
+    out = []
+    for number, name in _rois(ds, p):
+        try:
+            polygons, _, _ = _roi_polygons(ds, number, name, p)
+        except EmptyMaskError as exc:
+            out.append((number, name, [], str(exc).rsplit(" has ", 1)[-1]))
+        else:
+            out.append((number, name, polygons, ""))
+    return out
+
+
 def read_rtstruct(
     path: str | os.PathLike[str],
     *,
     roi: int | str | None = None,
     image_dir: str | os.PathLike[str] | None = None,
     pixel_spacing: float | None = None,
+    allow_irregular: bool = False,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> CrossSections:
     """Read the closed planar contours of one ROI of an RTSTRUCT as cross-sections.
 
@@ -228,6 +231,12 @@ def read_rtstruct(
         In-plane pixel size, mm, of the grid built from the contours when no
         ``image_dir`` is given (default: longest in-plane extent / 256).
         Ignored, with a warning, with ``image_dir``.
+    allow_irregular : bool
+        Accept an image series with uneven slice spacing
+        (:func:`slicerecon.io.dicom.dicom_series_geometry`).
+    memory_budget_gb : float
+        Refuse contours whose grid would not fit this budget, GiB, before any
+        plane is rasterized (:func:`slicerecon.io.limits.check_grid`).
 
     Returns
     -------
@@ -257,7 +266,9 @@ def read_rtstruct(
     if image_dir is not None:
         from .dicom import dicom_series_geometry
 
-        affine, shape, series_uids = dicom_series_geometry(image_dir)
+        affine, shape, series_uids = dicom_series_geometry(
+            image_dir, allow_irregular=allow_irregular
+        )
         if image_uids and not image_uids & set(series_uids):
             logger.warning(
                 "%s: ROI %d refers to none of the images in %s; its contours are placed "
@@ -269,7 +280,8 @@ def read_rtstruct(
             pixel_spacing = None
     try:
         sections = sections_from_polygons(
-            polygons, pixel_spacing=pixel_spacing, reference=reference, polygon_names=names
+            polygons, pixel_spacing=pixel_spacing, reference=reference, polygon_names=names,
+            memory_budget_gb=memory_budget_gb,
         )
     except OptionError:
         raise

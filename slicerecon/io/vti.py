@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import FormatError, InputError, LabelError, OptionError
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid
 
 __all__ = ["VtiImage", "read_vti"]
 
@@ -172,7 +173,12 @@ def _decode_binary(
     return b"".join(blocks)
 
 
-def read_vti(path: str | os.PathLike[str], *, array: str | None = None) -> VtiImage:
+def read_vti(
+    path: str | os.PathLike[str],
+    *,
+    array: str | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> VtiImage:
     """Read one scalar array of a VTK XML ImageData (``.vti``) file, without VTK.
 
     Parameters
@@ -184,6 +190,9 @@ def read_vti(path: str | os.PathLike[str], *, array: str | None = None) -> VtiIm
         Name of the array to read. Default: the active point scalars
         (``<PointData Scalars=...>``), else the first point array, else the
         first cell array.
+    memory_budget_gb : float
+        Refuse files whose declared extent would not fit this budget, GiB
+        (:func:`slicerecon.io.limits.check_grid`), before decoding any value.
 
     Returns
     -------
@@ -199,6 +208,10 @@ def read_vti(path: str | os.PathLike[str], *, array: str | None = None) -> VtiIm
         unsupported compressor or data type, or the array is not scalar.
     LabelError
         If ``array`` is not in the file (the message lists the arrays present).
+    GeometryError
+        Non-finite or absurd spacing, origin or direction.
+    MemoryBudgetError
+        The declared extent exceeds ``memory_budget_gb``.
     """
     if array is not None and not isinstance(array, str):
         raise OptionError(f"array must be an array name (got {array!r})")
@@ -265,9 +278,21 @@ def read_vti(path: str | os.PathLike[str], *, array: str | None = None) -> VtiIm
             f"{p}: array {element.get('Name')!r} has "
             f"{element.get('NumberOfComponents')} components; a scalar label array is needed"
         )
+    if np.any(extent != np.round(extent)) or np.any(np.abs(extent) > 2**31):
+        raise FormatError(f"{p}: Extent must hold 6 integers (got {extent.tolist()})")
     counts = (extent[1::2] - extent[0::2]).astype(np.int64) + 1
+    if np.any(counts < 1):
+        raise FormatError(f"{p}: Extent {extent.astype(np.int64).tolist()} is empty or reversed")
     if association == "cell":
         counts = np.maximum(counts - 1, 1)
+    start = extent[0::2] + (0.5 if association == "cell" else 0.0)
+    rot = direction.reshape(3, 3)
+    affine = np.eye(4)
+    affine[:3, :3] = rot * spacing  # scales the columns
+    affine[:3, 3] = origin + rot @ (spacing * start)
+    check_geometry(affine, counts.tolist(), what=str(p))
+    check_grid(counts.tolist(), what=str(p), memory_budget_gb=memory_budget_gb,
+               bytes_per_voxel=3 * dtype.itemsize + 2)
     n_values = int(np.prod(counts))
 
     fmt = element.get("format", "ascii")
@@ -303,11 +328,6 @@ def read_vti(path: str | os.PathLike[str], *, array: str | None = None) -> VtiIm
             f"its extent needs {n_values}"
         )
     grid = values.reshape(tuple(int(c) for c in counts), order="F")
-    start = extent[0::2] + (0.5 if association == "cell" else 0.0)
-    rot = direction.reshape(3, 3)
-    affine = np.eye(4)
-    affine[:3, :3] = rot * spacing  # scales the columns
-    affine[:3, 3] = origin + rot @ (spacing * start)
     logger.info(
         "read %s: array %r (%s data, %s), grid %s",
         p, element.get("Name"), association, dtype, "x".join(str(int(c)) for c in counts),

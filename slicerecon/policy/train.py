@@ -17,7 +17,8 @@ One run (``slicerecon train --config il_rl``):
    CSV log gets the mean surrogate IoU (``docs/policy.md``).
 
 Outputs in ``out``: ``log.csv``, ``checkpoint.pt`` (networks, optimizers,
-buffers, counters, RNG states; ``resume=True`` continues from it),
+buffers, counters, RNG states; ``resume=True`` continues from it; plain data
+only, read without unpickling code, see :mod:`slicerecon.policy.checkpoint`),
 ``actor.safetensors`` (the final actor) and ``config.json``; TensorBoard
 event files under ``tb/`` when the ``tensorboard`` package is installed.
 """
@@ -43,6 +44,7 @@ import torch
 
 from ..errors import FormatError, InputError, OptionError
 from .buffers import ReplayBuffer
+from .checkpoint import load_checkpoint, save_checkpoint
 from .ddpg import DDPG, TARGET_UPDATES
 from .env import CutEnv, Observation, ShapePool
 from .networks import NetConfig
@@ -420,6 +422,17 @@ def _rng_state(np_rng: np.random.Generator, env: CutEnv, gen: torch.Generator) -
     }
 
 
+def _resume_state(path: Path, config: TrainConfig) -> dict[str, Any]:
+    """The checkpoint at ``path``, read safely, checked to be of ``config``'s run."""
+    ckpt = load_checkpoint(path)
+    same = {k: v for k, v in config.to_dict().items() if k != "total_updates"}
+    if {k: v for k, v in ckpt["config"].items() if k != "total_updates"} != same:
+        raise OptionError(
+            f"{path} was written by another config; use a fresh --out or the same config"
+        )
+    return ckpt
+
+
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
     from ..io.atomic import atomic_path
 
@@ -465,7 +478,9 @@ def train(
         ``cpu`` or ``cuda``.
     resume : bool, optional
         Continue from ``out/checkpoint.pt`` (networks, optimizers, buffers,
-        counters, RNG states; running episodes restart).
+        counters, RNG states; running episodes restart). The file is read with
+        :func:`slicerecon.policy.checkpoint.load_checkpoint`: tensors and plain
+        data only, never code.
     progress : callable, optional
         ``progress(n_updates, total_updates, last_metrics)`` after every update.
 
@@ -477,6 +492,10 @@ def train(
     ------
     OptionError
         For an unavailable device or a checkpoint of another config.
+    FormatError
+        With ``resume``, for a checkpoint that cannot be loaded safely (it holds
+        Python objects other than tensors and plain data: an old pickled or a
+        tampered file), is damaged, or does not fit the networks of ``config``.
     """
     dev = torch.device(device)
     if dev.type == "cuda" and not torch.cuda.is_available():
@@ -486,6 +505,7 @@ def train(
     ckpt_path = outdir / "checkpoint.pt"
     log_path = outdir / "log.csv"
     start = time.perf_counter()
+    ckpt = _resume_state(ckpt_path, config) if resume and ckpt_path.is_file() else None
 
     torch.manual_seed(config.seed)
     np_rng = np.random.default_rng(config.seed)
@@ -516,24 +536,25 @@ def train(
     heuristic_iou = float("nan")
     elapsed_before = 0.0
 
-    if resume and ckpt_path.is_file():
-        ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
-        same = {k: v for k, v in config.to_dict().items() if k != "total_updates"}
-        if {k: v for k, v in ckpt["config"].items() if k != "total_updates"} != same:
-            raise OptionError(
-                f"{ckpt_path} was written by another config; use a fresh --out or the same config"
-            )
-        agent.load_state_dict(ckpt["agent"])
-        demos.load_state_dict(ckpt["demos"])
-        replay.load_state_dict(ckpt["replay"])
-        rows = list(ckpt["rows"])
-        env_steps = int(ckpt["env_steps"])
-        heuristic_iou = float(ckpt["heuristic_eval_iou"])
-        elapsed_before = float(ckpt["elapsed_s"])
-        torch.set_rng_state(ckpt["rng"]["torch"])
-        np_rng.bit_generator.state = ckpt["rng"]["numpy"]
-        gen.set_state(ckpt["rng"]["sample"])
-        env.rng.bit_generator.state = ckpt["rng"]["env"]
+    if ckpt is not None:
+        try:
+            agent.load_state_dict(ckpt["agent"])
+            demos.load_state_dict(ckpt["demos"])
+            replay.load_state_dict(ckpt["replay"])
+            rows = [dict(row) for row in ckpt["rows"]]
+            env_steps = int(ckpt["env_steps"])
+            heuristic_iou = float(ckpt["heuristic_eval_iou"])
+            elapsed_before = float(ckpt["elapsed_s"])
+            torch.set_rng_state(ckpt["rng"]["torch"])
+            np_rng.bit_generator.state = ckpt["rng"]["numpy"]
+            gen.set_state(ckpt["rng"]["sample"])
+            env.rng.bit_generator.state = ckpt["rng"]["env"]
+        except (KeyError, TypeError, ValueError, RuntimeError, IndexError) as exc:
+            raise FormatError(
+                f"{ckpt_path} does not fit this config's networks, buffers or RNG states "
+                f"({type(exc).__name__}: {' '.join(str(exc).split())[:300]}); it cannot be "
+                "resumed: start a new run with another --out"
+            ) from exc
         logger.info("resumed %s at update %d", ckpt_path, agent.n_updates)
         obs = env.reset()
     else:
@@ -556,9 +577,7 @@ def train(
     last: dict[str, float] = {}
     last_eval = float("nan")
 
-    def save_checkpoint() -> None:
-        from ..io.atomic import atomic_path
-
+    def checkpoint() -> None:
         state = {
             "config": config.to_dict(),
             "agent": agent.state_dict(),
@@ -570,8 +589,7 @@ def train(
             "elapsed_s": elapsed_before + time.perf_counter() - start,
             "rng": _rng_state(np_rng, env, gen),
         }
-        with atomic_path(ckpt_path) as tmp:
-            torch.save(state, tmp)
+        save_checkpoint(state, ckpt_path)
 
     def env_step(random_actions: bool) -> None:
         nonlocal obs, env_steps
@@ -641,7 +659,7 @@ def train(
                         if isinstance(value, float) and not math.isnan(value):
                             writer.add_scalar(key, value, u)
             if u % config.checkpoint_every == 0 or u == config.total_updates:
-                save_checkpoint()
+                checkpoint()
             if progress is not None:
                 progress(u, config.total_updates, {**last, "eval_iou": last_eval})
             if u >= config.total_updates:
@@ -649,7 +667,7 @@ def train(
     if not rows:
         _write_csv(log_path, rows)
     if not ckpt_path.is_file():
-        save_checkpoint()
+        checkpoint()
     if writer is not None:
         writer.close()
     actor_path = save_actor(

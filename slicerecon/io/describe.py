@@ -1,0 +1,290 @@
+"""Describe an input without refusing it: every structure it holds and what each holds.
+
+:func:`describe_input` is what ``slicerecon info`` prints. It accepts every
+input that :func:`slicerecon.io.load_input` reads (an RTSTRUCT beside its image
+series included) and never asks the user to choose a structure: it lists them
+all, each with its number, name, what it holds (voxels and volume, or contours)
+and where (planes, extent in mm). An ROI without contours is listed, not refused.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from ..errors import EmptyMaskError
+from ..sections import AXIS_NAMES, CrossSections, Volume
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, reading
+
+__all__ = ["describe_input", "describe_label_map", "describe_sections", "describe_volume"]
+
+logger = logging.getLogger(__name__)
+
+
+def _round(values: Any, digits: int = 4) -> list[float]:
+    return [round(float(v), digits) for v in np.asarray(values, dtype=np.float64).ravel()]
+
+
+def _box_mm(affine: NDArray[np.float64], lo: NDArray, hi: NDArray) -> dict[str, list[float]]:
+    """World bounds (mm) of the voxel centres in the index box ``[lo, hi)``."""
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    ijk = lo + corners * (np.asarray(hi) - 1 - np.asarray(lo))
+    world = ijk @ affine[:3, :3].T + affine[:3, 3]
+    return {"min": _round(world.min(axis=0), 3), "max": _round(world.max(axis=0), 3)}
+
+
+def _grid(affine: NDArray[np.float64], shape: tuple[int, ...]) -> dict[str, Any]:
+    return {
+        "shape": [int(s) for s in shape],
+        "spacing_mm": _round(np.linalg.norm(affine[:3, :3], axis=0), 6),
+        "origin_mm": _round(affine[:3, 3], 4),
+    }
+
+
+def describe_label_map(
+    values: NDArray[Any],
+    affine: NDArray[np.float64],
+    *,
+    names: dict[int, str] | None = None,
+    axis: int = 2,
+) -> list[dict[str, Any]]:
+    """One record per non-zero label of a label map.
+
+    Parameters
+    ----------
+    values : ndarray of shape (I, J, K), integer-valued
+        The label map.
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm.
+    names : dict of int to str, optional
+        Names of label values, where the input has them.
+    axis : int
+        Grid axis along which planes are counted.
+
+    Returns
+    -------
+    list of dict
+        ``value``, ``name``, ``voxels``, ``volume_mm3``, ``planes`` (the number
+        of planes along ``axis`` holding the label, and the first and last),
+        ``extent_mm`` (``min`` / ``max`` of the voxel centres, world mm).
+    """
+    voxel = float(abs(np.linalg.det(affine[:3, :3])))
+    data = np.asarray(values)
+    present, counts = np.unique(data[data != 0], return_counts=True)
+    out: list[dict[str, Any]] = []
+    for value, count in zip(present.tolist(), counts.tolist(), strict=True):
+        mask = data == value
+        box = ndimage.find_objects(mask.astype(np.uint8))[0]
+        assert box is not None
+        lo = np.array([s.start for s in box])
+        hi = np.array([s.stop for s in box])
+        other = tuple(a for a in range(3) if a != axis)
+        planes = np.flatnonzero(mask[box].any(axis=other)) + lo[axis]
+        out.append({
+            "value": int(value),
+            "name": (names or {}).get(int(value), ""),
+            "voxels": int(count),
+            "volume_mm3": round(count * voxel, 3),
+            "planes": {"axis": AXIS_NAMES[axis], "count": int(planes.size),
+                       "first": int(planes[0]), "last": int(planes[-1])},
+            "extent_mm": _box_mm(affine, lo, hi),
+        })
+    return out
+
+
+def describe_volume(volume: Volume) -> dict[str, Any]:
+    """Grid and foreground of a dense mask (shape, spacing, voxels, planes per axis)."""
+    info: dict[str, Any] = {
+        "kind": "dense mask",
+        "shape": list(volume.shape),
+        "spacing_mm": _round(volume.spacing, 6),
+        "oblique": volume.is_oblique,
+        "foreground_voxels": int(np.count_nonzero(volume.mask)),
+        "volume_mm3": round(volume.volume_mm3, 3),
+    }
+    if not volume.is_empty:
+        lo, hi = volume.bounding_box_mm()
+        info["bounding_box_mm"] = {"min": _round(lo, 3), "max": _round(hi, 3)}
+        for name, ax in zip(AXIS_NAMES, range(3), strict=True):
+            planes = volume.occupied_planes(ax)
+            info[f"planes_{name}"] = {
+                "occupied": int(planes.size), "first": int(planes[0]), "last": int(planes[-1])
+            }
+    return info
+
+
+def describe_sections(sections: CrossSections) -> dict[str, Any]:
+    """Planes of a sparse input: count, axis, positions (mm), gaps, grid."""
+    gaps = sections.gaps
+    areas = [sections.area_mm2(p) for p in range(sections.n_planes)]
+    return {
+        "kind": "cross-sections",
+        "planes": sections.n_planes,
+        "axis": AXIS_NAMES[sections.axis],
+        "positions_mm": _round(sections.positions, 4),
+        "gap_mm": None if gaps.size == 0 else {
+            "min": round(float(gaps.min()), 4), "max": round(float(gaps.max()), 4)
+        },
+        "uniform_spacing": bool(gaps.size == 0 or np.ptp(gaps) < 1e-6),
+        "area_mm2": _round(areas, 2),
+        "in_plane_shape": list(sections.masks.shape[1:]),
+        "grid_shape": list(sections.grid_shape),
+        "spacing_mm": _round(sections.spacing, 6),
+    }
+
+
+def _polygon_record(number: int, name: str, polygons: list[NDArray[np.float64]],
+                    normal: NDArray[np.float64] | None) -> dict[str, Any]:
+    record: dict[str, Any] = {"number": number, "name": name, "contours": len(polygons)}
+    if not polygons:
+        return record
+    points = np.concatenate(polygons)
+    record["extent_mm"] = {"min": _round(points.min(axis=0), 3),
+                           "max": _round(points.max(axis=0), 3)}
+    if normal is not None:
+        positions = np.array([float(p.mean(axis=0) @ normal) for p in polygons])
+        distinct = np.unique(np.round(positions, 2))
+        record["planes"] = int(distinct.size)
+        record["positions_mm"] = {"first": round(float(distinct[0]), 3),
+                                  "last": round(float(distinct[-1]), 3)}
+    return record
+
+
+def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
+    from .polygons import polygon_normal
+    from .rtstruct import roi_contours
+
+    details: dict[str, Any] = {}
+    rois = []
+    for number, name, polygons, note in roi_contours(path):
+        normal = None
+        if polygons:
+            normal = max((polygon_normal(p) for p in polygons), key=lambda na: na[1])[0]
+            normal = normal if normal[np.argmax(np.abs(normal))] > 0 else -normal
+        record = _polygon_record(number, name, polygons, normal)
+        if note:
+            record["note"] = note
+        rois.append(record)
+    details["rois"] = rois
+    if image_dir is not None:
+        from .dicom import dicom_info
+
+        details["image_series"] = {"path": str(image_dir),
+                                   **dicom_info(image_dir, allow_irregular=True)}
+    return details
+
+
+def describe_input(
+    path: str | os.PathLike[str],
+    *,
+    label: int | str | None = None,
+    allow_irregular: bool = False,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> dict[str, Any]:
+    """Describe any input :func:`~slicerecon.io.load_input` reads, structure by structure.
+
+    Parameters
+    ----------
+    path : path-like
+        Any supported input.
+    label : int or str, optional
+        Also describe the planes or voxels of this one structure as they would
+        be reconstructed (``selected``).
+    allow_irregular : bool
+        As for :func:`~slicerecon.io.load_input`.
+    memory_budget_gb : float
+        As for :func:`~slicerecon.io.load_input`.
+
+    Returns
+    -------
+    dict
+        JSON-ready: ``path``, ``format``, the grid where there is one, and the
+        structures: ``structures`` (label maps: value, name, voxels, volume,
+        planes, extent), ``segments`` (SEG), ``rois`` (RTSTRUCT: number, name,
+        contours, planes, extent, or a note why there is nothing), and for
+        single-structure inputs the summary of :func:`describe_volume` or
+        :func:`describe_sections`.
+
+    Raises
+    ------
+    InputError
+        What :func:`~slicerecon.io.load_input` raises for unreadable files;
+        never for a file that holds several structures or empty ones.
+    """
+    from . import detect_kind, load_input
+
+    check_budget(memory_budget_gb)
+    with reading(path):
+        kind = detect_kind(path)
+        details: dict[str, Any] = {"path": str(path), "format": kind.kind}
+        if kind.kind == "nifti":
+            import nibabel as nib
+
+            from .nifti import read_label_values
+
+            values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
+            details["axcodes"] = "".join(str(c) for c in nib.aff2axcodes(affine))
+            details.update(_grid(affine, values.shape))
+            details["structures"] = describe_label_map(values, affine)
+            details["labels"] = {str(s["value"]): s["voxels"] for s in details["structures"]}
+        elif kind.kind == "vti":
+            from .vti import read_vti
+
+            image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
+            details.update(_grid(image.affine, image.values.shape))
+            details["structures"] = describe_label_map(np.asarray(image.values), image.affine)
+        elif kind.kind == "dicom-series":
+            from .dicom import dicom_info, read_dicom_series_values
+
+            # described on the grid --allow-irregular would give: info never refuses
+            details["dicom"] = dicom_info(kind.path, allow_irregular=True)
+            values, affine = read_dicom_series_values(
+                kind.path, allow_irregular=True, memory_budget_gb=memory_budget_gb
+            )
+            details.update(_grid(affine, values.shape))
+            details["structures"] = describe_label_map(values, affine)
+        elif kind.kind == "dicom-seg":
+            from .dicom import dicom_info, read_dicom_seg
+
+            details["dicom"] = dicom_info(kind.path)
+            segments = []
+            for segment in details["dicom"]["segments"]:
+                try:
+                    volume = read_dicom_seg(kind.path, segment=segment["number"],
+                                            memory_budget_gb=memory_budget_gb)
+                except EmptyMaskError:
+                    segments.append({**segment, "voxels": 0})
+                    continue
+                record = describe_label_map(volume.mask.astype(np.uint8), volume.affine)[0]
+                record.pop("value")
+                record.pop("name")
+                segments.append({**segment, **record})
+            details["segments"] = segments
+        elif kind.kind == "rtstruct":
+            details.update(_describe_rtstruct(kind.path, kind.image_dir))
+        elif kind.kind == "mesh":
+            from .mesh import read_mesh
+
+            mesh = read_mesh(kind.path)
+            details["mesh"] = {
+                "vertices": int(len(mesh.vertices)), "faces": int(len(mesh.faces)),
+                "watertight": bool(mesh.is_watertight),
+                "extent_mm": {"min": _round(mesh.bounds[0], 3), "max": _round(mesh.bounds[1], 3)},
+            }
+        single = kind.kind in ("contours", "mesh")
+        if single or label is not None:
+            data = load_input(kind.path, label=label, allow_irregular=allow_irregular,
+                              memory_budget_gb=memory_budget_gb)
+            summary = (describe_volume(data) if isinstance(data, Volume)
+                       else describe_sections(data))
+            if single:
+                details.update(summary)
+            else:
+                details["selected"] = {"label": label, **summary}
+    return details

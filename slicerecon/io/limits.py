@@ -1,0 +1,230 @@
+"""What an input may ask for: the reading boundary, sane geometry and the memory budget.
+
+Three rules every reader follows, kept here so that they are written once:
+
+* **The reading boundary** (:func:`reading`). Whatever a third-party parser
+  raises while a file is read (pydicom, nibabel, json, zlib, XML, struct, ...)
+  becomes one :class:`~slicerecon.errors.FormatError` that names the file. The
+  project's own errors pass through unchanged.
+* **Sane geometry** (:func:`check_geometry`, :func:`check_coordinates`). Voxel
+  sizes, origins and coordinates must be finite and within physical bounds
+  (:data:`MIN_SPACING_MM`, :data:`MAX_SPACING_MM`, :data:`MAX_COORDINATE_MM`):
+  a header that says a voxel is 1e300 mm wide is corrupt, not a huge image.
+* **The memory budget** (:func:`check_grid`). Before any array of a grid is
+  allocated, its declared size (planes × rows × columns) is multiplied by what
+  the pipeline allocates per voxel (:data:`PIPELINE_BYTES_PER_VOXEL`) and
+  compared with the budget (:data:`DEFAULT_MEMORY_BUDGET_GB`, raised with
+  ``--max-memory``). The bound is on the *declared* size, never on the file
+  size or the compression ratio: real masks compress a thousand-fold.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..errors import FormatError, GeometryError, MemoryBudgetError, OptionError, SlicereconError
+
+__all__ = [
+    "DEFAULT_MEMORY_BUDGET_GB",
+    "MAX_COORDINATE_MM",
+    "MAX_SPACING_MM",
+    "MIN_SPACING_MM",
+    "PIPELINE_BYTES_PER_VOXEL",
+    "check_budget",
+    "check_coordinates",
+    "check_geometry",
+    "check_grid",
+    "reading",
+]
+
+DEFAULT_MEMORY_BUDGET_GB = 8.0
+"""Memory a single case may ask for by default, GiB (``--max-memory`` raises it)."""
+
+PIPELINE_BYTES_PER_VOXEL = 40
+"""Bytes the reconstruction pipeline allocates per voxel of its working grid at its
+peak (label data, masks, hull, signed-distance fields, carving; measured by
+``benchmarks/bench_clinical.py``, rounded up)."""
+
+MIN_SPACING_MM = 1e-4
+"""Smallest voxel or plane spacing accepted, mm (0.1 µm)."""
+MAX_SPACING_MM = 1e4
+"""Largest voxel or plane spacing accepted, mm (10 m)."""
+MAX_COORDINATE_MM = 1e6
+"""Largest distance of any grid corner or contour vertex from the origin, mm (1 km)."""
+
+_MESSAGE_CHARS = 240
+
+
+def check_budget(memory_budget_gb: float) -> float:
+    """Validate a memory budget in GiB; return it as a float.
+
+    Raises
+    ------
+    OptionError
+        If the budget is not a positive finite number.
+    """
+    try:
+        value = float(memory_budget_gb)
+    except (TypeError, ValueError):
+        raise OptionError(
+            f"--max-memory must be a number of GiB (got {memory_budget_gb!r})"
+        ) from None
+    if not (math.isfinite(value) and value > 0):
+        raise OptionError(f"--max-memory must be a positive number of GiB (got {value:g})")
+    return value
+
+
+def check_grid(
+    shape: Sequence[int],
+    *,
+    what: str,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+    bytes_per_voxel: float = PIPELINE_BYTES_PER_VOXEL,
+) -> None:
+    """Refuse a grid whose arrays would not fit the memory budget, before allocating them.
+
+    Parameters
+    ----------
+    shape : sequence of int
+        The declared grid size in voxels (any number of axes), e.g. ``(I, J, K)``.
+    what : str
+        What asks for the grid, for the message (e.g. ``"scan.nii.gz"``).
+    memory_budget_gb : float
+        The budget, GiB.
+    bytes_per_voxel : float
+        Bytes allocated per voxel of this grid.
+
+    Raises
+    ------
+    MemoryBudgetError
+        If ``prod(shape) * bytes_per_voxel`` exceeds the budget, or a size is
+        negative. The message gives the grid, the estimate and the limit.
+    """
+    budget = check_budget(memory_budget_gb)
+    sizes = [int(s) for s in shape]
+    if any(s < 0 for s in sizes):
+        raise MemoryBudgetError(f"{what} declares a negative grid size {tuple(sizes)}")
+    voxels = math.prod(sizes)
+    need_gb = voxels * float(bytes_per_voxel) / 2**30
+    if need_gb > budget:
+        grid = " x ".join(str(s) for s in sizes)
+        raise MemoryBudgetError(
+            f"{what}: its grid of {grid} voxels needs about {need_gb:,.1f} GiB, over the "
+            f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} "
+            "if this machine has that much memory"
+        )
+
+
+def check_geometry(affine: ArrayLike, shape: Sequence[int], *, what: str) -> None:
+    """Refuse non-finite or absurd voxel geometry: spacing, origin, grid extent.
+
+    Parameters
+    ----------
+    affine : array_like of shape (4, 4)
+        Voxel index → world mm.
+    shape : sequence of 3 int
+        Grid size in voxels.
+    what : str
+        The source, for the message.
+
+    Raises
+    ------
+    GeometryError
+        Non-finite entries; a voxel spacing outside
+        [:data:`MIN_SPACING_MM`, :data:`MAX_SPACING_MM`]; a grid corner farther
+        than :data:`MAX_COORDINATE_MM` from the origin.
+    """
+    aff = np.asarray(affine, dtype=np.float64)
+    if aff.shape != (4, 4) or not np.all(np.isfinite(aff)):
+        raise GeometryError(f"{what}: the voxel-to-world geometry holds NaN or infinite values")
+    spacing = np.linalg.norm(aff[:3, :3], axis=0)
+    if not np.all(np.isfinite(spacing)) or np.any(spacing < MIN_SPACING_MM) or np.any(
+        spacing > MAX_SPACING_MM
+    ):
+        shown = ", ".join(f"{s:.4g}" for s in spacing)
+        raise GeometryError(
+            f"{what}: voxel spacing ({shown}) mm is outside "
+            f"[{MIN_SPACING_MM:g}, {MAX_SPACING_MM:g}] mm; the header is corrupt"
+        )
+    sizes = np.asarray([max(int(s) - 1, 0) for s in shape], dtype=np.float64)
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]) * sizes
+    world = corners @ aff[:3, :3].T + aff[:3, 3]
+    check_coordinates(world, what=what)
+
+
+def check_coordinates(points: ArrayLike, *, what: str) -> None:
+    """Refuse world coordinates that are not finite or lie beyond :data:`MAX_COORDINATE_MM`.
+
+    Parameters
+    ----------
+    points : array_like of shape (..., 3)
+        World mm.
+    what : str
+        The source, for the message.
+
+    Raises
+    ------
+    GeometryError
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.size == 0:
+        return
+    if not np.all(np.isfinite(pts)):
+        raise GeometryError(f"{what}: coordinates hold NaN or infinite values")
+    far = float(np.abs(pts).max())
+    if far > MAX_COORDINATE_MM:
+        raise GeometryError(
+            f"{what}: coordinates reach {far:.3g} mm, beyond the {MAX_COORDINATE_MM:g} mm "
+            "(1 km) any scanner or drawing spans; the file is corrupt or not in mm"
+        )
+
+
+def _short(exc: BaseException) -> str:
+    try:
+        text = " ".join(str(exc).split())
+    except Exception:  # noqa: BLE001 - a message that cannot even be printed
+        text = ""
+    if len(text) > _MESSAGE_CHARS:
+        text = text[: _MESSAGE_CHARS - 3] + "..."
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+@contextmanager
+def reading(path: str | os.PathLike[str]) -> Iterator[None]:
+    """Turn any failure of a third-party parser while reading ``path`` into a FormatError.
+
+    The project's own errors (:class:`~slicerecon.errors.SlicereconError`)
+    pass through unchanged; ``KeyboardInterrupt`` and ``SystemExit`` too. A
+    ``MemoryError`` becomes a :class:`~slicerecon.errors.MemoryBudgetError`
+    (the declared sizes passed :func:`check_grid`, yet the machine ran out).
+
+    Raises
+    ------
+    FormatError
+        Naming the file, the parser's exception type and its message.
+    """
+    try:
+        yield
+    except SlicereconError:
+        raise
+    except MemoryError as exc:
+        raise MemoryBudgetError(
+            f"reading {Path(path)} ran out of memory: this machine has less free memory than "
+            "the budget (--max-memory) allows; free memory or use a larger machine"
+        ) from exc
+    except RecursionError as exc:
+        raise FormatError(
+            f"cannot read {Path(path)}: it is nested too deeply to parse ({_short(exc)})"
+        ) from exc
+    except Exception as exc:  # noqa: BLE001 - the boundary: every parser failure
+        raise FormatError(
+            f"cannot read {Path(path)}: the file is corrupt or not what its name says "
+            f"({_short(exc)})"
+        ) from exc
