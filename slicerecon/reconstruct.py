@@ -23,7 +23,7 @@ import trimesh
 
 from .errors import OptionError
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid
-from .sections import CrossSections, Projections, Volume, axis_index
+from .sections import AXIS_NAMES, CrossSections, Projections, Volume, axis_index
 
 __all__ = [
     "ReconstructConfig",
@@ -242,8 +242,18 @@ def prepare_inputs(
             logger.info("the mask annotates only some planes: using them as sections")
             sections = _sparse_volume_to_sections(volume, ax)
         else:
+            spanned = int(volume.occupied_planes(ax).size)
             if slices is None and every is None:
-                slices = min(DEFAULT_SLICES, volume.occupied_planes(ax).size)
+                slices = min(DEFAULT_SLICES, spanned)
+            if slices is not None and slices > spanned:
+                raise OptionError(
+                    f"--slices {slices} asks for more planes than the {spanned} the structure "
+                    f"spans along {AXIS_NAMES[ax]}; ask for at most {spanned}"
+                )
+            if spanned == 1:  # a structure on one plane: that plane, a one-slice slab
+                logger.warning("the structure lies on one plane along %s: the reconstruction "
+                               "is a slab one slice thick", AXIS_NAMES[ax])
+                slices, every = None, 1
             sections = sample_sections(volume, n=slices, every=every, axis=ax)
             truth = volume
     else:

@@ -281,7 +281,8 @@ def _side_view(
     ndarray of shape (n_rows, L), bool
         Row ``g`` is the profile of the plane at ``g`` if there is one, the
         signed-distance morph of the two planes around ``g`` if ``g`` lies
-        between planes, and empty outside ``[indices[0], indices[-1]]``.
+        between planes, and empty outside ``[indices[0], indices[-1]]``, except
+        the rows nearest to fractional end planes, which hold their profiles.
     """
     image = np.zeros((n_rows, profiles.shape[1]), dtype=bool)
     lo = max(math.ceil(indices[0]), 0)
@@ -304,6 +305,12 @@ def _side_view(
         w = ((g - indices[i]) / (indices[i + 1] - indices[i]))[:, None]
         # 0 < w < 1 here, so an empty profile (-inf) keeps the row empty, never NaN.
         image[g] = (1.0 - w) * sdf[i] + w * sdf[i + 1] >= 0.0
+    # An end plane between grid rows also marks the row it lies in, so that the
+    # voxel layer holding it (and any box around it) contains it.
+    for end in (0, -1):
+        row = int(np.clip(np.rint(indices[end]), 0, n_rows - 1))
+        if not lo <= row <= hi:
+            image[row] |= profiles[end]
     return image
 
 
@@ -323,7 +330,8 @@ def projections_from_sections(sections: CrossSections) -> Projections:
       inside). Intervals thus slide and grow or shrink from one plane to the
       next; a profile that is empty (an empty plane) stops the silhouette at
       the neighbouring plane. Rows outside ``[first plane, last plane]`` are
-      empty.
+      empty, except that an end plane at a fractional index also fills the row
+      nearest to it (the voxel layer it lies in).
     * Fractional plane indices are allowed: the rows are the integer grid
       indices between them. If no grid index lies between the first and the
       last plane, each profile is put on its nearest grid row.

@@ -209,9 +209,10 @@ def test_side_view_morphs_intervals_between_fractional_planes() -> None:
     expected = np.zeros_like(view)
     for g in range(1, 5):
         expected[10 - g : 30 + g, g] = True
+    expected[10:30, 0] = True  # the voxel layer holding the first plane (z = 0.25) holds it
     np.testing.assert_array_equal(view, expected)
     other = projections_from_sections(sections)["y"].image  # rows x, columns z
-    np.testing.assert_array_equal(other, _rectangle((8, 12), (2, 6), (1, 5)))
+    np.testing.assert_array_equal(other, _rectangle((8, 12), (2, 6), (0, 5)))
 
 
 def test_side_view_stops_at_empty_planes() -> None:

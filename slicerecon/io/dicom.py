@@ -52,7 +52,7 @@ from ..errors import (
     LabelError,
 )
 from ..sections import Volume
-from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid, reading
 from .selection import choose_structure, parse_selector
 
 __all__ = [
@@ -196,13 +196,15 @@ def dicom_modality(path: str | os.PathLike[str]) -> str | None:
     try:
         if not p.is_file() or not is_dicom_file(p):
             return None
-        ds = read_dicom_header(p, specific_tags=["Modality", "SOPClassUID"])
+        with reading(p):  # values are parsed lazily, on access
+            ds = read_dicom_header(p, specific_tags=["Modality", "SOPClassUID"])
+            sop_class = str(getattr(ds, "SOPClassUID", ""))
+            modality = str(getattr(ds, "Modality", "") or "")
     except FormatError:
         return None
-    if str(getattr(ds, "SOPClassUID", "")) == SEG_SOP_CLASS_UID:
+    if sop_class == SEG_SOP_CLASS_UID:
         return "SEG"
-    modality = str(getattr(ds, "Modality", "") or "")
-    if not modality and "SOPClassUID" not in ds:
+    if not modality and not sop_class:
         return None  # forced parse of something that only began like DICOM
     return modality or "UNKNOWN"
 
@@ -359,8 +361,9 @@ def _scan_series(directory: Path, *, stop_before_pixels: bool) -> list[_Slice]:
                 )
             logger.debug("skipping %s: not a DICOM file", f)
             continue
-        ds = _dcmread(f, stop_before_pixels=stop_before_pixels)
-        item = _slice_from(ds, f)
+        with reading(f):  # pydicom parses values lazily: name the file that fails
+            ds = _dcmread(f, stop_before_pixels=stop_before_pixels)
+            item = _slice_from(ds, f)
         if item is not None:
             slices.append(item)
     if not slices:

@@ -144,6 +144,11 @@ def check_geometry(affine: ArrayLike, shape: Sequence[int], *, what: str) -> Non
     aff = np.asarray(affine, dtype=np.float64)
     if aff.shape != (4, 4) or not np.all(np.isfinite(aff)):
         raise GeometryError(f"{what}: the voxel-to-world geometry holds NaN or infinite values")
+    if np.abs(aff).max() > MAX_COORDINATE_MM:
+        raise GeometryError(
+            f"{what}: the voxel-to-world geometry holds {np.abs(aff).max():.3g}, beyond the "
+            f"{MAX_COORDINATE_MM:g} mm (1 km) any scanner spans; the header is corrupt"
+        )
     spacing = np.linalg.norm(aff[:3, :3], axis=0)
     if not np.all(np.isfinite(spacing)) or np.any(spacing < MIN_SPACING_MM) or np.any(
         spacing > MAX_SPACING_MM
@@ -224,7 +229,8 @@ def reading(path: str | os.PathLike[str]) -> Iterator[None]:
             f"cannot read {Path(path)}: it is nested too deeply to parse ({_short(exc)})"
         ) from exc
     except Exception as exc:  # noqa: BLE001 - the boundary: every parser failure
+        p = Path(path)
+        what = "a file in it is corrupt" if p.is_dir() else "the file is corrupt"
         raise FormatError(
-            f"cannot read {Path(path)}: the file is corrupt or not what its name says "
-            f"({_short(exc)})"
+            f"cannot read {p}: {what} or not what its name says ({_short(exc)})"
         ) from exc

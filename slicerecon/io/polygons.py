@@ -385,6 +385,7 @@ def sections_from_polygons(
     plane_tolerance_mm: float = 0.01,
     polygon_names: Sequence[str] | None = None,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+    own_planes: bool = False,
 ) -> CrossSections:
     """Rasterize closed polygons lying on parallel planes into cross-sections.
 
@@ -423,6 +424,15 @@ def sections_from_polygons(
     memory_budget_gb : float
         Refuse grids that the reconstruction could not hold in this budget,
         GiB (:func:`slicerecon.io.limits.check_grid`), before rasterizing.
+    own_planes : bool
+        With ``reference``: when the planes lie between the reference's slices
+        (an RTSTRUCT drawn half a slice off its CT), keep the reference's
+        in-plane pixels but rebuild its slice axis on the planes, with the
+        step of a built grid, so that the planes keep their exact positions
+        and the reconstruction ends half a contour spacing beyond the end
+        planes, as without the reference. Off (the default), planes keep
+        fractional indices on the reference grid (a contour file's own grid
+        round-trips exactly).
 
     Returns
     -------
@@ -499,6 +509,9 @@ def sections_from_polygons(
         indices = _built_indices(plane_pos, plane_tolerance_mm)
     else:
         indices = _reference_indices(grid, along, plane_pos, plane_tolerance_mm)
+        if own_planes and not np.allclose(indices, np.round(indices)):
+            grid = _contour_axis(grid, along, plane_pos, indices, plane_tolerance_mm)
+            indices = _built_indices(plane_pos, plane_tolerance_mm)
 
     check_grid(grid.shape, what="the contours", memory_budget_gb=memory_budget_gb)
     masks = _rasterize_planes(polys, members, grid)
@@ -539,6 +552,37 @@ def _reference_indices(
             f"{grid.axis}); the contours do not belong to this image"
         )
     return indices
+
+
+def _contour_axis(
+    grid: _Grid,
+    along: NDArray[np.float64],
+    plane_pos: NDArray[np.float64],
+    indices: NDArray[np.float64],
+    tolerance_mm: float,
+) -> _Grid:
+    """The reference grid with its slice axis rebuilt on the contour planes.
+
+    Contours drawn between the image's slices keep their exact positions: the
+    in-plane pixels stay the image's, and the slice axis starts on the first
+    contour plane with the step of a built grid (the smallest gap between
+    contour planes), so that every regularly spaced contour plane falls on a
+    whole index, as when the contours are read without the image.
+    """
+    axis = grid.axis
+    column = grid.affine[:3, axis]
+    step_along = float(np.dot(column, along))  # mm along the normal per index, > 0
+    gap = _plane_step(plane_pos)
+    affine = grid.affine.copy()
+    affine[:3, 3] = grid.affine[:3, 3] + column * float(indices[0])
+    affine[:3, axis] = column * (gap / step_along)
+    shape = list(grid.shape)
+    shape[axis] = int(math.ceil(_built_indices(plane_pos, tolerance_mm)[-1])) + 1
+    logger.info(
+        "the contour planes lie between the image's slices (index %.3g): they keep their "
+        "positions on a slice axis of their own, %.4g mm apart", float(indices[0]), gap,
+    )
+    return _Grid(affine, (shape[0], shape[1], shape[2]), axis)
 
 
 def _rasterize_planes(

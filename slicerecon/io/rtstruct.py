@@ -281,7 +281,7 @@ def read_rtstruct(
     try:
         sections = sections_from_polygons(
             polygons, pixel_spacing=pixel_spacing, reference=reference, polygon_names=names,
-            memory_budget_gb=memory_budget_gb,
+            memory_budget_gb=memory_budget_gb, own_planes=True,
         )
     except OptionError:
         raise
