@@ -32,6 +32,8 @@ Public API
     Build the affine above from DICOM terms.
 ``read_uids(paths) -> list[str]``
     The SOPInstanceUIDs of files (e.g. those ``write_series`` returned).
+``write_rtstruct(path, rois, *, preamble=True) -> Path``
+    An RT Structure Set; ``contour_item`` and ``circle`` build its contours.
 """
 
 from __future__ import annotations
@@ -50,9 +52,13 @@ from pydicom.uid import ExplicitVRLittleEndian, generate_uid
 __all__ = [
     "CT_IMAGE_STORAGE",
     "MR_IMAGE_STORAGE",
+    "RTSTRUCT_STORAGE",
     "SEG_STORAGE",
     "affine_from_geometry",
+    "circle",
+    "contour_item",
     "read_uids",
+    "write_rtstruct",
     "write_seg",
     "write_series",
 ]
@@ -425,4 +431,78 @@ def write_seg(
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     ds.save_as(out, enforce_file_format=True)
+    return out
+
+
+RTSTRUCT_STORAGE = "1.2.840.10008.5.1.4.1.1.481.3"
+
+
+def contour_item(
+    points: ArrayLike, *, kind: str = "CLOSED_PLANAR", image_uid: str | None = None
+) -> Dataset:
+    """One ContourSequence item: ``points`` of shape (N, 3), LPS mm."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    item = Dataset()
+    item.ContourGeometricType = kind
+    item.NumberOfContourPoints = len(pts)
+    item.ContourData = _ds(pts)
+    if image_uid:
+        ref = Dataset()
+        ref.ReferencedSOPClassUID = MR_IMAGE_STORAGE
+        ref.ReferencedSOPInstanceUID = image_uid
+        item.ContourImageSequence = DicomSequence([ref])
+    return item
+
+
+def circle(radius: float, centre: Sequence[float], z: float, n: int = 180) -> NDArray:
+    """A counter-clockwise ``n``-gon of radius ``radius`` mm on the axial plane ``z``."""
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    return np.c_[centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t), np.full(n, z)]
+
+
+def write_rtstruct(
+    path: str | Path,
+    rois: Mapping[tuple[int, str], Sequence[Dataset] | None],
+    *,
+    modality: str = "RTSTRUCT",
+    preamble: bool = True,
+) -> Path:
+    """Write an RTSTRUCT; ``rois`` maps (ROINumber, ROIName) to contour items, or None
+    for an ROI without a ContourSequence. ``preamble=False`` writes a bare dataset
+    without the 128-byte preamble and file meta, as older systems do."""
+    sop_uid = generate_uid()
+    ds = Dataset()
+    ds.file_meta = _file_meta(RTSTRUCT_STORAGE, sop_uid)
+    ds.SOPClassUID = RTSTRUCT_STORAGE
+    ds.SOPInstanceUID = sop_uid
+    ds.Modality = modality
+    ds.PatientName = "Synthetic^Phantom"
+    ds.PatientID = "SLICERECON-TEST"
+    ds.StudyInstanceUID = generate_uid()
+    ds.SeriesInstanceUID = generate_uid()
+    ds.StructureSetLabel = "test"
+    frame_uid = generate_uid()
+    roi_items, contour_items = [], []
+    for (number, name), contours in rois.items():
+        roi = Dataset()
+        roi.ROINumber = number
+        roi.ReferencedFrameOfReferenceUID = frame_uid
+        roi.ROIName = name
+        roi.ROIGenerationAlgorithm = "MANUAL"
+        roi_items.append(roi)
+        holder = Dataset()
+        holder.ReferencedROINumber = number
+        holder.ROIDisplayColor = [255, 0, 0]
+        if contours is not None:
+            holder.ContourSequence = DicomSequence(list(contours))
+        contour_items.append(holder)
+    ds.StructureSetROISequence = DicomSequence(roi_items)
+    ds.ROIContourSequence = DicomSequence(contour_items)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if preamble:
+        ds.save_as(out, enforce_file_format=True)
+    else:
+        del ds.file_meta
+        ds.save_as(out, implicit_vr=True, little_endian=True)
     return out
