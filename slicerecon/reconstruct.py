@@ -312,6 +312,7 @@ def reconstruct(
     carve: bool = True,
     max_parts: int = 8,
     weights: str | os.PathLike[str] | None = None,
+    interpolation: str = "linear",
 ) -> Reconstruction:
     """Reconstruct a watertight surface from cross-sections and projections.
 
@@ -334,12 +335,18 @@ def reconstruct(
     smooth : bool
         Taubin-smooth the merged mesh.
     carve : bool
-        Intersect the surface with the projections' visual hull
-        (:func:`slicerecon.surface.carve.carve`); loft and sdf only.
+        Intersect the surface with the projections' visual hull: in the
+        implicit domain for ``sdf`` (one marching cubes,
+        :func:`slicerecon.surface.sdf.sdf_parts_mesh`), by an exact mesh
+        Boolean otherwise (:func:`slicerecon.surface.carve.carve`); not for
+        the whole-shape baselines.
     max_parts : int
         Upper bound on the number of parts.
     weights : path-like, optional
         Actor weights for ``planner="policy"`` (default: the shipped ``il_rl`` actor).
+    interpolation : {"linear", "pchip"}
+        How the signed-distance parts interpolate across planes
+        (:func:`slicerecon.surface.sdf.sdf_field`).
 
     Returns
     -------
@@ -364,19 +371,20 @@ def reconstruct(
         guide = hull if planner != "none" else None
 
         def part_reconstruction(box):  # type: ignore[no-untyped-def]
-            return part_voxels(sections, box, hull=guide)
+            return part_voxels(sections, box, hull=guide, interpolation=interpolation)
 
         plan = plan_partition(
             occupancy, planner=planner, reconstruct=part_reconstruction, max_parts=max_parts,
             weights=weights,
         )
+    implicit_carve = carve and method == "sdf" and not smooth
     with _timed(timings, "surface"):
         boxes = [part.box for part in plan.parts]
         mesh = reconstruct_parts(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
-            hull=guide,
+            hull=guide, interpolation=interpolation, carve=hull if implicit_carve else None,
         )
-    if carve:
+    if carve and not implicit_carve:
         from .surface.carve import carve as carve_by_hull
 
         with _timed(timings, "carve"):

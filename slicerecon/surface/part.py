@@ -75,6 +75,7 @@ def reconstruct_part(
     method: str = "loft",
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
 ) -> trimesh.Trimesh | None:
     """Reconstruct one part from the sections inside its box.
 
@@ -111,7 +112,8 @@ def reconstruct_part(
         solid = loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
         return None if solid is None else from_manifold(solid, transform=sections.affine)
     try:
-        return sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull)
+        return sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull,
+                        interpolation=interpolation)
     except EmptyMaskError:
         return None
 
@@ -123,6 +125,7 @@ def part_voxels(
     method: str = "sdf",
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
 ) -> NDArray[np.bool_]:
     """Voxel occupancy of a part's reconstruction on the reference grid, inside its box.
 
@@ -159,7 +162,8 @@ def part_voxels(
             f"box {box.to_dict()} must lie inside the reference grid {sections.grid_shape}"
         )
     if method == "sdf":
-        field, _ = sdf_field(sections, box=box, extend_to_box=extend_to_box, hull=hull)
+        field, _ = sdf_field(sections, box=box, extend_to_box=extend_to_box, hull=hull,
+                             interpolation=interpolation)
         return field < 0
     from ..rasterize import mesh_to_mask
 
@@ -181,6 +185,8 @@ def reconstruct_parts(
     smooth: bool = False,
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
+    carve: NDArray[np.bool_] | None = None,
 ) -> trimesh.Trimesh:
     """Reconstruct every part and merge them into one watertight mesh.
 
@@ -195,8 +201,11 @@ def reconstruct_parts(
     smooth : bool, default False
         Taubin-smooth the merged mesh (:func:`~slicerecon.surface.smooth.taubin_smooth`
         with its defaults).
-    extend_to_box, hull
+    extend_to_box, hull, interpolation
         As for :func:`reconstruct_part`.
+    carve : ndarray of shape sections.grid_shape, bool, optional
+        ``method="sdf"`` only: intersect the union with this visual hull in the
+        implicit domain (:func:`~slicerecon.surface.sdf.sdf_parts_mesh`).
 
     Returns
     -------
@@ -216,9 +225,12 @@ def reconstruct_parts(
         raise OptionError("give at least one box (part) to reconstruct")
     for box in boxes:
         _check_inputs(sections, box)
+    if carve is not None and method != "sdf":
+        raise OptionError("an implicit carve applies to method 'sdf' only; carve the mesh instead")
     if method == "hybrid":
         solids = [
-            _hybrid_solid(sections, b, extend_to_box=extend_to_box, hull=hull) for b in boxes
+            _hybrid_solid(sections, b, extend_to_box=extend_to_box, hull=hull,
+                          interpolation=interpolation) for b in boxes
         ]
         kept = [s for s in solids if s is not None]
         if not kept:
@@ -238,7 +250,8 @@ def reconstruct_parts(
         check_closed(mesh, "reconstruct_parts")
     else:
         # Implicit union: the minimum of the parts' signed distances, meshed once.
-        mesh = sdf_parts_mesh(sections, boxes, extend_to_box=extend_to_box, hull=hull)
+        mesh = sdf_parts_mesh(sections, boxes, extend_to_box=extend_to_box, hull=hull,
+                              interpolation=interpolation, carve=carve)
     logger.debug(
         "merged %d parts (%s): %d faces, %.6g mm^3", len(boxes), method, len(mesh.faces),
         mesh.volume,
@@ -249,13 +262,15 @@ def reconstruct_parts(
 
 
 def _hybrid_solid(
-    sections: CrossSections, box: Box, *, extend_to_box: bool, hull: NDArray[np.bool_] | None
+    sections: CrossSections, box: Box, *, extend_to_box: bool, hull: NDArray[np.bool_] | None,
+    interpolation: str = "linear",
 ) -> manifold3d.Manifold | None:
     """One part of the ``"hybrid"`` method as a solid in voxel index coordinates."""
     if correspondence_is_simple(sections, box):
         return loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
     try:
-        mesh = sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull)
+        mesh = sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull,
+                        interpolation=interpolation)
     except EmptyMaskError:
         return None
     logger.debug("part %s: contours split, merge or appear; signed-distance surface", box.to_dict())

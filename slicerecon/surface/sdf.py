@@ -52,6 +52,7 @@ from .extension import LayerMap, check_hull, extension_maps, interpolate_maps
 from .marching import field_to_mesh
 
 __all__ = [
+    "INTERPOLATIONS",
     "plane_signed_distance",
     "sdf_field",
     "sdf_interpolate",
@@ -101,7 +102,8 @@ def plane_signed_distance(
 
 # -- validation -------------------------------------------------------------------------
 def _check(
-    sections: CrossSections, upsample: int, extend_to_box: bool, hull: object = None
+    sections: CrossSections, upsample: int, extend_to_box: bool, hull: object = None,
+    interpolation: str = "linear",
 ) -> int:
     if not isinstance(sections, CrossSections):
         raise InputError(f"SDF interpolation needs CrossSections (got {type(sections).__name__})")
@@ -110,6 +112,10 @@ def _check(
     if not isinstance(extend_to_box, bool | np.bool_):
         raise OptionError(f"extend_to_box must be True or False (got {extend_to_box!r})")
     check_hull(hull, sections.grid_shape)
+    if interpolation not in INTERPOLATIONS:
+        raise OptionError(
+            f"interpolation must be one of {', '.join(INTERPOLATIONS)} (got {interpolation!r})"
+        )
     return int(upsample)
 
 
@@ -137,6 +143,7 @@ def _box_field(
     upsample: int,
     extend_to_box: bool,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
 ) -> NDArray[np.float32]:
     """Interpolated signed distance on the samples of ``box``, axis first.
 
@@ -169,7 +176,7 @@ def _box_field(
         used = sections.planes_in(box, bridge=extend_to_box)
     if used.size and crop[used].any():
         distances = {int(p): plane_signed_distance(crop[p], spacing) for p in used}
-        _fill_between(field, samples, w, used, distances)
+        _fill_between(field, samples, w, used, distances, interpolation)
         first, last = int(used[0]), int(used[-1])
         if bounded and extend_to_box:
             # <= and >=: a box holding one plane has no interpolated sample on it.
@@ -218,23 +225,59 @@ def _extend(
         )
 
 
+INTERPOLATIONS = ("linear", "pchip")
+"""How the in-plane signed distances are interpolated across planes."""
+
+
 def _fill_between(
     field: NDArray[np.float32],
     samples: NDArray[np.float64],
     w: NDArray[np.float64],
     used: NDArray[np.int64],
     distances: dict[int, NDArray[np.float32]],
+    interpolation: str = "linear",
 ) -> None:
-    """Linear interpolation of consecutive used planes into ``field`` (axis first)."""
-    for p, q in zip(used[:-1], used[1:], strict=True):
-        lower, upper = distances[int(p)], distances[int(q)]
+    """Interpolate the used planes' distances into ``field`` (axis first) between them.
+
+    ``"linear"``: each slab between consecutive planes on its own (classic
+    shape-based interpolation). ``"pchip"``: per pixel, the piecewise cubic
+    Hermite interpolant through all used planes whose slopes keep each slab
+    monotone (Fritsch & Carlson 1980, scipy's ``PchipInterpolator``): smooth
+    across planes, never overshooting the planes' values, so a pixel is inside
+    between two planes that both hold it, and the plane masks are reproduced.
+    With two planes it is the linear interpolation.
+
+    An empty plane's distance is taken as the constant depth of the deepest
+    region of its non-empty neighbour (linear: of the slab's other plane; pchip:
+    the deeper of both neighbours), so that their regions close off towards it.
+    """
+    order = [int(p) for p in used]
+    if interpolation == "pchip" and len(order) > 2:
+        values = {p: distances[p] for p in order}
+        for i, p in enumerate(order):
+            if _is_empty(values[p]):
+                depths = [-float(distances[q].min()) for q in order[max(i - 1, 0) : i + 2]
+                          if not _is_empty(distances[q])]
+                if depths:
+                    values[p] = np.full_like(values[p], max(depths))
+        if not any(_is_empty(values[p]) for p in order):
+            from scipy.interpolate import PchipInterpolator
+
+            inside = np.flatnonzero((samples >= w[order[0]]) & (samples <= w[order[-1]]))
+            if inside.size:
+                stack = np.stack([values[p] for p in order]).astype(np.float64)
+                curve = PchipInterpolator(w[order], stack, axis=0)
+                field[inside] = curve(samples[inside]).astype(np.float32)
+            return
+    for p, q in zip(order[:-1], order[1:], strict=True):
+        lower, upper = distances[p], distances[q]
         if _is_empty(lower) and _is_empty(upper):
             continue
         if _is_empty(lower):
             lower = np.full_like(upper, -float(upper.min()))
         elif _is_empty(upper):
             upper = np.full_like(lower, -float(lower.min()))
-        last = q == used[-1]
+        last = q == order[-1]
         sel = np.flatnonzero((samples >= w[p]) & ((samples <= w[q]) if last else (samples < w[q])))
         if sel.size == 0:
             continue
@@ -268,6 +311,7 @@ def sdf_field(
     upsample: int = 1,
     extend_to_box: bool = False,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
 ) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
     """The interpolated signed distance on the (box of the) reference grid.
 
@@ -289,6 +333,10 @@ def sdf_field(
         The visual hull of the projections: the extensions to the box faces
         follow its extent layer by layer (:mod:`~slicerecon.surface.extension`)
         instead of repeating the outermost plane.
+    interpolation : {"linear", "pchip"}, default "linear"
+        Across planes: linear per slab (classic shape-based interpolation), or
+        the monotone piecewise cubic through all planes of the box
+        (:data:`INTERPOLATIONS`; see ``docs/method.md``).
 
     Returns
     -------
@@ -308,11 +356,11 @@ def sdf_field(
     OptionError
         If ``upsample`` is not a positive integer or the box lies outside the grid.
     """
-    upsample = _check(sections, upsample, extend_to_box, hull)
+    upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
     region = _grid_box(sections, box)
     field = _box_field(
         sections, region, bounded=box is not None, upsample=upsample,
-        extend_to_box=extend_to_box, hull=hull,
+        extend_to_box=extend_to_box, hull=hull, interpolation=interpolation,
     )
     out = np.ascontiguousarray(np.moveaxis(field, 0, sections.axis))
     affine = sections.affine @ _to_index(sections, region.lo, upsample, pad=0)
@@ -327,12 +375,13 @@ def sdf_interpolate(
     upsample: int = 1,
     extend_to_box: bool = False,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
 ) -> Volume:
     """Shape-based interpolation of the sections onto the (box of the) reference grid.
 
     Parameters
     ----------
-    sections, box, upsample, extend_to_box, hull
+    sections, box, upsample, extend_to_box, hull, interpolation
         As for :func:`sdf_field`.
 
     Returns
@@ -345,7 +394,8 @@ def sdf_interpolate(
         exactly.
     """
     field, affine = sdf_field(
-        sections, box=box, upsample=upsample, extend_to_box=extend_to_box, hull=hull
+        sections, box=box, upsample=upsample, extend_to_box=extend_to_box, hull=hull,
+        interpolation=interpolation,
     )
     return Volume(field < 0, affine)
 
@@ -357,12 +407,13 @@ def sdf_mesh(
     upsample: int = 1,
     extend_to_box: bool = False,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
 ) -> trimesh.Trimesh:
     """Closed surface of the SDF-interpolated shape (marching cubes), world mm.
 
     Parameters
     ----------
-    sections, box, upsample, extend_to_box, hull
+    sections, box, upsample, extend_to_box, hull, interpolation
         As for :func:`sdf_field`.
 
     Returns
@@ -376,11 +427,11 @@ def sdf_mesh(
     EmptyMaskError
         If no sample is inside.
     """
-    upsample = _check(sections, upsample, extend_to_box, hull)
+    upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
     region = _grid_box(sections, box)
     field = _box_field(
         sections, region, bounded=box is not None, upsample=upsample,
-        extend_to_box=extend_to_box, hull=hull,
+        extend_to_box=extend_to_box, hull=hull, interpolation=interpolation,
     )
     return _mesh(sections, _mirror_pad(field), region.lo, upsample)
 
@@ -392,6 +443,8 @@ def sdf_parts_mesh(
     upsample: int = 1,
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
+    carve: NDArray[np.bool_] | None = None,
 ) -> trimesh.Trimesh:
     """Closed surface of the union of several parts' SDF interpolations, world mm.
 
@@ -406,8 +459,14 @@ def sdf_parts_mesh(
         Binary masks on parallel planes.
     boxes : sequence of Box
         The parts' boxes (clipped to the grid; they may touch or overlap).
-    upsample, extend_to_box, hull
+    upsample, extend_to_box, hull, interpolation
         As for :func:`sdf_field`.
+    carve : ndarray of shape sections.grid_shape, bool, optional
+        A visual hull to intersect the union with *implicitly*: the field is
+        the maximum of the parts' union and the hull's own level function
+        (``HULL_LEVEL`` of a voxel inside, as the mesh carve of
+        :func:`slicerecon.surface.carve.carve` places it), so one marching
+        cubes gives the carved surface, with no mesh Boolean.
 
     Returns
     -------
@@ -421,7 +480,7 @@ def sdf_parts_mesh(
     EmptyMaskError
         If no part holds any inside sample.
     """
-    upsample = _check(sections, upsample, extend_to_box, hull)
+    upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
     regions = [_grid_box(sections, b) for b in boxes]
     if not regions:
         raise OptionError("give at least one box (part) to reconstruct")
@@ -434,7 +493,7 @@ def sdf_parts_mesh(
     union: NDArray[np.float32] | None = None
     for region in regions:
         part = _box_field(sections, region, bounded=True, upsample=upsample,
-                          extend_to_box=extend_to_box, hull=hull)
+                          extend_to_box=extend_to_box, hull=hull, interpolation=interpolation)
         if not np.any(part < 0):
             continue
         padded = np.moveaxis(_mirror_pad(part), 0, axis)
@@ -445,8 +504,51 @@ def sdf_parts_mesh(
         np.minimum(union[where], padded, out=union[where])
     if union is None:
         raise EmptyMaskError("no part's box holds any section foreground")
+    if carve is not None:
+        check_hull(carve, sections.grid_shape)
+        np.maximum(union, _hull_level(sections, carve, lo, hi, upsample), out=union)
+        if not np.any(union < 0):
+            raise EmptyMaskError(
+                "the reconstruction lies entirely outside the projections' visual hull"
+            )
     logger.debug("merged %d SDF parts on a %s grid", len(regions), tuple(shape))
     return _mesh(sections, np.moveaxis(union, axis, 0), lo, upsample)
+
+
+HULL_LEVEL = 0.49
+"""Where the implicit carve puts the hull's surface between an inside and an
+outside voxel centre: 0.49 of the way from the outside one, keeping 1 % of a
+voxel more than the hull (the level of :data:`slicerecon.surface.carve.HULL_LEVEL`)."""
+
+
+def _hull_level(
+    sections: CrossSections,
+    hull: NDArray[np.bool_],
+    lo: tuple[int, ...],
+    hi: tuple[int, ...],
+    upsample: int,
+) -> NDArray[np.float32]:
+    """The hull as a level function on the padded samples of the box ``[lo, hi)``.
+
+    ``(HULL_LEVEL - inside) * step`` in mm-like units (step: the smallest voxel
+    spacing), negative inside the hull; samples beyond the grid are outside.
+    Along the section axis each voxel's value is repeated ``upsample`` times.
+    """
+    axis = sections.axis
+    grid = sections.grid_shape
+    padded_lo = [max(v - 1, 0) for v in lo]
+    padded_hi = [min(v + 1, n) for v, n in zip(hi, grid, strict=True)]
+    crop = hull[tuple(slice(a, b) for a, b in zip(padded_lo, padded_hi, strict=True))]
+    inside = np.zeros([h - low + 2 for low, h in zip(lo, hi, strict=True)], dtype=bool)
+    start = [a - (low - 1) for a, low in zip(padded_lo, lo, strict=True)]
+    inside[tuple(slice(s0, s0 + n) for s0, n in zip(start, crop.shape, strict=True))] = crop
+    if upsample > 1:
+        core = np.repeat(np.take(inside, range(1, inside.shape[axis] - 1), axis=axis),
+                         upsample, axis=axis)
+        edge = [np.take(inside, [0], axis=axis), np.take(inside, [-1], axis=axis)]
+        inside = np.concatenate([edge[0], core, edge[1]], axis=axis)
+    step = float(np.min(sections.spacing))
+    return ((HULL_LEVEL - inside.astype(np.float32)) * np.float32(step)).astype(np.float32)
 
 
 def _mirror_pad(field: NDArray[np.float32]) -> NDArray[np.float32]:
