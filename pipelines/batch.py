@@ -37,10 +37,30 @@ always one whole result (or one ``error.json``). A worker that dies (out of
 memory, killed) leaves only a staging folder; Dask runs the case again on
 another worker (up to ``retries`` more times), and that attempt and the end of
 the batch remove the leftovers.
+
+Symbolic links in ``INDIR`` that point outside it are not read unless
+``follow_symlinks=True``; each is recorded as a failed case saying why (see
+:mod:`pipelines.discover`).
+
+Interruption
+------------
+Ctrl-C (SIGINT) raises :class:`KeyboardInterrupt` in the calling process only:
+the worker processes of the local cluster are started with SIGINT blocked, so
+the signal a terminal sends to its whole process group reaches the client
+alone. :func:`run_batch` then stops the workers (each gets about a second,
+then is killed: the cases in flight are abandoned), closes the cluster,
+removes the staging folders of those cases, and re-raises; ``summary.csv``
+keeps its previous contents, every finished ``OUTDIR/<case>/`` stays, and the
+next run resumes. Workers log nothing once they are shutting down (see
+:func:`dask_setup`). A Ctrl-C that comes while the cluster starts or closes,
+or while a case folder is being renamed into place, takes effect once that
+step is done. (On a cluster given by ``scheduler`` the running cases go on
+there and publish their results whole; the next run finds them.)
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import csv
 import hashlib
@@ -48,20 +68,25 @@ import json
 import logging
 import os
 import shutil
+import signal
+import threading
 import time
 import traceback
 import uuid
+import weakref
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from slicerecon import __version__
 from slicerecon.errors import InputError, OptionError
 from slicerecon.io.atomic import atomic_path
-from slicerecon.reconstruct import ReconstructConfig
 
 from .discover import Case, discover_cases
+
+if TYPE_CHECKING:  # imported where used: the worker processes preload this module
+    from slicerecon.reconstruct import ReconstructConfig
 
 __all__ = [
     "KEY_METRICS",
@@ -69,6 +94,7 @@ __all__ = [
     "BatchResult",
     "CaseResult",
     "case_key",
+    "dask_setup",
     "process_case",
     "run_batch",
     "write_summary",
@@ -270,13 +296,57 @@ def case_key(case: Case, config: ReconstructConfig) -> str:
 
 
 # --------------------------------------------------------------------- case folders
+@contextlib.contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) back until the block is done, then deliver it.
+
+    Two things happen. In the main thread, the Python handler is swapped for
+    one that only notes the signal; it is put back afterwards and a noted
+    signal raised again (so the usual :class:`KeyboardInterrupt` comes after
+    the block, whichever thread the kernel gave the signal to). And SIGINT is
+    blocked in this thread's signal mask: threads and processes started inside
+    the block inherit that mask and keep it, so SIGINT never reaches them. That
+    is how the local cluster's worker processes, spawned from its event-loop
+    thread, ignore the Ctrl-C a terminal sends to its whole process group. The
+    mask part is skipped where POSIX signal masks do not exist (Windows).
+    """
+    in_main = threading.current_thread() is threading.main_thread()
+    noted: list[int] = []
+    previous: Any = None
+    if in_main and signal.getsignal(signal.SIGINT) is not None:  # None: set outside Python
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
+    mask = None
+    if hasattr(signal, "pthread_sigmask"):
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+        if mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        if noted:
+            signal.raise_signal(signal.SIGINT)
+
+
 def _write_json(path: Path, payload: dict[str, Any]) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(payload, indent=2, default=str) + "\n")
 
 
 def _clear_stale(outdir: Path, name: str) -> None:
-    """Remove staging folders a killed attempt at case ``name`` left behind."""
+    """Remove staging folders a killed attempt at case ``name`` left behind.
+
+    A process killed between the two renames of :func:`_publish` leaves the
+    previous result as ``.<name>.old-*`` and no ``<name>``: that result is put
+    back rather than deleted.
+    """
+    final = outdir / name
+    if not (final.exists() or final.is_symlink()):
+        olds = sorted(outdir.glob(f".{name}.old-*"), key=lambda p: p.stat().st_mtime_ns)
+        if olds:
+            logger.info("restoring %s from %s", final, olds[-1])
+            os.replace(olds[-1], final)
     for stale in outdir.glob(f".{name}.*"):
         logger.debug("removing leftover %s", stale)
         if stale.is_dir() and not stale.is_symlink():
@@ -287,12 +357,14 @@ def _clear_stale(outdir: Path, name: str) -> None:
 
 
 def _publish(staging: Path, final: Path) -> None:
-    """Put the complete folder ``staging`` in place of ``final`` (renames only)."""
+    """Put the complete folder ``staging`` in place of ``final`` (renames only;
+    a Ctrl-C in between is held back until both are done)."""
     old = None
-    if final.exists() or final.is_symlink():
-        old = final.with_name(f".{final.name}.old-{uuid.uuid4().hex[:12]}")
-        os.replace(final, old)
-    os.replace(staging, final)
+    with _sigint_deferred():
+        if final.exists() or final.is_symlink():
+            old = final.with_name(f".{final.name}.old-{uuid.uuid4().hex[:12]}")
+            os.replace(final, old)
+        os.replace(staging, final)
     if old is not None:
         if old.is_dir() and not old.is_symlink():
             shutil.rmtree(old, ignore_errors=True)
@@ -470,31 +542,159 @@ def _write_report(outdir: Path) -> tuple[Path | None, str]:
 
 
 # ------------------------------------------------------------------------ scheduling
+_CLOSING = frozenset({"closing", "closing_gracefully", "closed", "failed"})
+
+
+class _SilentWhileClosing(logging.Filter):
+    """Drop the log records of a worker that is shutting down."""
+
+    def __init__(self, worker: Any) -> None:
+        super().__init__()
+        self._worker = weakref.ref(worker)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        worker = self._worker()
+        return worker is not None and getattr(worker.status, "name", "") not in _CLOSING
+
+
+def dask_setup(worker: Any) -> None:
+    """Prepare a worker process of the batch's local cluster (Dask's preload hook).
+
+    Dask calls it in each worker process as it starts (the cluster is created
+    with ``preload=["pipelines.batch"]``). The worker ignores SIGINT: a Ctrl-C is
+    for the client to handle (the signal mask the process was spawned with
+    already holds it back; this keeps it so should anything unblock it). And
+    once the worker is shutting down (the end of a batch, or the client closing
+    the cluster after a Ctrl-C while a case runs), its log records are dropped:
+    cancelled tasks and lost connections are expected then, and would otherwise
+    print warnings and tracebacks after the batch has ended.
+    """
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    silent = _SilentWhileClosing(worker)
+    for handler in logging.getLogger("distributed").handlers:
+        handler.addFilter(silent)
+
+
+def _stop_workers_now(cluster: Any, grace_s: float = 1.0) -> None:
+    """Stop the local cluster's worker processes within about ``grace_s`` seconds.
+
+    After a Ctrl-C the cases in flight are abandoned: rather than wait for them
+    (a closing cluster gives each worker 5 s), each worker gets ``grace_s`` to
+    stop and is then killed. Its staging folder is removed afterwards.
+    """
+
+    async def stop() -> None:
+        await asyncio.gather(
+            *(nanny.close(timeout=grace_s, reason="slicerecon-batch-interrupted")
+              for nanny in list(cluster.workers.values())),
+            return_exceptions=True,
+        )
+
+    try:
+        cluster.sync(stop)
+    except Exception:  # noqa: BLE001 - cluster.close() below finishes the job
+        logger.debug("stopping the workers at once failed", exc_info=True)
+
+
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker now, outside :func:`_sigint_deferred`.
+
+    It is started by the first process spawn, and it unblocks SIGINT in the
+    thread that starts it: were that the cluster's event-loop thread, the worker
+    processes spawned after it would receive Ctrl-C again.
+    """
+    try:
+        from multiprocessing import resource_tracker
+    except ImportError:  # pragma: no cover - not on every platform
+        return
+    resource_tracker.ensure_running()
+
+
+def _import_distributed() -> None:
+    """Import :mod:`distributed`, keeping a level the caller set on its logger.
+
+    Its first import sets the ``distributed`` logger to the level of its config
+    (INFO), which would undo e.g. the CLI's "errors only".
+    """
+    log = logging.getLogger("distributed")
+    chosen = log.level
+    import distributed  # noqa: F401
+
+    if chosen != logging.NOTSET:
+        log.setLevel(chosen)
+
+
 @contextlib.contextmanager
 def _dask_client(workers: int, scheduler: str | None, retries: int) -> Iterator[Any]:
+    _import_distributed()
     import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout=20)
+            remote = Client(scheduler, timeout=20)
         except (OSError, TimeoutError) as exc:
             raise OptionError(
                 f"cannot reach the Dask scheduler at {scheduler} ({exc}); check the address "
                 "and that `dask scheduler` is running there"
             ) from exc
-        with client:
-            yield client
+        with remote:
+            yield remote
         return
-    with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
-        cluster = LocalCluster(
-            n_workers=workers,
-            processes=True,
-            threads_per_worker=1,
-            dashboard_address=None,
-        )
-    with cluster, Client(cluster) as client:
+    # Workers log at the level the caller set for "distributed" (the CLI: errors
+    # only), at least WARNING; LocalCluster's own default would reset it to WARNING.
+    quiet = max(logging.getLogger("distributed").getEffectiveLevel(), logging.WARNING)
+    _start_resource_tracker()
+    cluster: Any = None
+    client: Any = None
+    interrupted = False
+    try:
+        # SIGINT is blocked while the cluster starts: its event-loop thread, and
+        # the worker processes that thread spawns (now and on restarts), keep the
+        # blocked mask for good, so a Ctrl-C reaches this thread only. The
+        # assignments happen inside the block, so `finally` always sees them.
+        with _sigint_deferred():
+            with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+                cluster = LocalCluster(
+                    n_workers=workers,
+                    processes=True,
+                    threads_per_worker=1,
+                    dashboard_address=None,
+                    silence_logs=quiet,
+                    preload=[__name__],  # runs dask_setup in each worker process
+                )
+            client = Client(cluster)
         yield client
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
+    finally:
+        with _sigint_deferred():  # a second Ctrl-C does not break the shutdown
+            _close_local(client, cluster, interrupted=interrupted)
+
+
+def _close_local(client: Any, cluster: Any, *, interrupted: bool) -> None:
+    """Close the client, then the local cluster.
+
+    After a Ctrl-C the workers are stopped at once (:func:`_stop_workers_now`)
+    and a failing step is logged rather than raised: the interruption is what
+    the user is told about.
+    """
+    steps: list[Callable[[], Any]] = []
+    if client is not None:
+        steps.append(client.close)
+    if cluster is not None:
+        if interrupted:
+            steps.append(lambda: _stop_workers_now(cluster))
+        steps.append(cluster.close)
+    for step in steps:
+        try:
+            step()
+        except Exception:
+            if not interrupted:
+                raise
+            logger.debug("shutting the local cluster down after a Ctrl-C", exc_info=True)
 
 
 def _run_on_dask(
@@ -516,6 +716,7 @@ def _run_on_dask(
     batches); the thread count is read again after every case, so workers that
     join later are used.
     """
+    _import_distributed()
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
@@ -575,6 +776,7 @@ def run_batch(
     progress: Callable[[CaseResult, int, int], None] | None = None,
     retries: int = 2,
     report: bool = True,
+    follow_symlinks: bool = False,
 ) -> BatchResult:
     """Reconstruct every case in ``indir`` into ``outdir``.
 
@@ -607,6 +809,10 @@ def run_batch(
         ``slicerecon.report.write_report(outdir)`` when that exists. A report
         that fails is logged (and kept in ``BatchResult.report_error``); it
         never fails the batch.
+    follow_symlinks : bool
+        Read symbolic links in ``indir`` that point outside it. By default
+        they are not read: each is a failed case whose error says why (links
+        that stay inside ``indir`` are always read).
 
     Returns
     -------
@@ -618,11 +824,16 @@ def run_batch(
         If ``indir`` is missing or holds no case.
     OptionError
         If ``workers`` or ``retries`` is negative, or the scheduler cannot be reached.
+    KeyboardInterrupt
+        On Ctrl-C, after the local cluster is closed and the staging folders
+        of the cases in flight are removed (see "Interruption" above).
     """
     if workers is not None and workers < 0:
         raise OptionError(f"--workers must be 0 (in-process) or more (got {workers})")
     if retries < 0:
         raise OptionError(f"retries must be 0 or more (got {retries})")
+    from slicerecon.reconstruct import ReconstructConfig
+
     if not isinstance(config, ReconstructConfig):
         raise OptionError(f"config must be a ReconstructConfig (got {type(config).__name__})")
     start = time.perf_counter()
@@ -633,7 +844,7 @@ def run_batch(
             f"OUTDIR must differ from INDIR ({src}): the outputs (JSON files among them) "
             "would be read back as inputs; pass another -o"
         )
-    cases = discover_cases(src, exclude=[out])
+    cases = discover_cases(src, exclude=[out], follow_symlinks=follow_symlinks)
     if not cases:
         raise InputError(
             f"no cases found in {src}: expected NIfTI masks (.nii/.nii.gz), contour files "
@@ -651,6 +862,11 @@ def run_batch(
 
     todo: list[tuple[Case, str]] = []
     for case in cases:
+        if case.error:  # a symbolic link that is not followed: recorded, never opened
+            row = _failure(case, InputError(case.error))
+            _record_failure(out, case, row, "")
+            finish(case, row)
+            continue
         try:
             key = case_key(case, config)
         except InputError as exc:
@@ -668,16 +884,24 @@ def run_batch(
     logger.info("%d case(s): %d to compute, %d finished before", total, len(todo),
                 total - len(todo))
 
-    if todo:
-        if scheduler is None and workers == 0:
+    try:
+        if todo and scheduler is None and workers == 0:
             for case, key in todo:
                 finish(case, process_case(case, out, config, key))
-        else:
+        elif todo:
             n_workers = workers if workers is not None else min(os.cpu_count() or 1, len(todo))
             _run_on_dask(
                 todo, out, config, workers=n_workers, scheduler=scheduler, retries=retries,
                 on_done=finish,
             )
+    except KeyboardInterrupt:
+        logger.info("interrupted: %d of %d case(s) done; summary.csv not rewritten",
+                    len(results), total)
+        if scheduler is None:  # the local workers are gone: nothing writes to OUTDIR now
+            with _sigint_deferred():
+                for case, _ in todo:
+                    _clear_stale(out, case.name)
+        raise
     for case, _ in todo:
         _clear_stale(out, case.name)
 

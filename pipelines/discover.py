@@ -20,6 +20,25 @@ Meshes (``.stl``, ``.ply``, ``.obj``, ``.off``) are not cases: a batch writes
 meshes, and an output directory inside ``INDIR`` must not be read back as
 input. Other files are ignored.
 
+Symbolic links
+--------------
+A link whose target lies inside ``INDIR`` is read like its target (a link to a
+folder inside ``INDIR`` is not searched again: that folder is searched anyway,
+or deliberately not, when hidden or excluded). A link whose target lies
+*outside* ``INDIR`` is not read unless ``follow_symlinks=True`` (nothing under
+``INDIR`` may make a batch read files from elsewhere unless asked); it becomes
+a case of kind ``"symlink"`` whose :attr:`Case.error` says why, and which a
+batch records as failed without opening it:
+
+* a link to a NIfTI or contour file, or to a folder: one such case each;
+* links to other files (possibly DICOM): one such case for their folder, and
+  that folder's DICOM files make no case (a series without some of its
+  slices would be reconstructed wrongly).
+
+A broken link named like an input (NIfTI, contour or DICOM file) is such a case
+too. With ``follow_symlinks=True`` every link is read, folders outside
+``INDIR`` are searched, and no folder is searched twice (no loops).
+
 Case names
 ----------
 A case's name is its path relative to ``INDIR`` without the format suffix,
@@ -33,6 +52,7 @@ sorted input order.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 import os
@@ -48,12 +68,20 @@ __all__ = ["CASE_KINDS", "RESERVED_NAMES", "Case", "discover_cases", "safe_case_
 
 logger = logging.getLogger(__name__)
 
-CASE_KINDS = ("nifti", "contours", "dicom-series", "dicom-seg", "rtstruct", "dicom-unreadable")
-"""The kinds of case :func:`discover_cases` reports."""
+CASE_KINDS = (
+    "nifti", "contours", "dicom-series", "dicom-seg", "rtstruct", "dicom-unreadable", "symlink"
+)
+"""The kinds of case :func:`discover_cases` reports (``symlink``: a link that is not
+followed; see :attr:`Case.error`)."""
 
 NIFTI_SUFFIXES = (".nii.gz", ".nii")
 CONTOUR_SUFFIXES = (".json", ".csv")
 DICOM_SUFFIXES = (".dcm", ".dicom", ".ima")
+MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off")
+FOLLOW_HINT = (
+    "copy the data into INDIR, or pass --follow-symlinks if you trust where the links point"
+)
+"""How to read a link that was not followed (ends :attr:`Case.error`)."""
 MAX_NAME_LENGTH = 96
 """Longest case name; longer ones are cut and get a hash of the full name."""
 
@@ -94,6 +122,9 @@ class Case:
         Folder that names in ``files`` are taken relative to when hashing.
     image_dir : Path or None
         For an RTSTRUCT beside an image series: that folder (its voxel grid).
+    error : str
+        Why the case cannot be read, for a symbolic link that is not followed
+        (kind ``symlink``; ``files`` is then empty); empty otherwise.
     """
 
     name: str
@@ -103,6 +134,7 @@ class Case:
     files: tuple[Path, ...]
     root: Path
     image_dir: Path | None = None
+    error: str = ""
 
 
 def safe_case_name(relpath: str | os.PathLike[str]) -> str:
@@ -203,8 +235,14 @@ def _relpath(path: Path, root: Path) -> str:
     return path.relative_to(root).as_posix()
 
 
-def _folder_cases(folder: Path, files: list[Path], root: Path) -> list[tuple[str, Case]]:
-    """Cases in one folder (not recursing), keyed by their unsanitised base name."""
+def _folder_cases(
+    folder: Path, files: list[Path], root: Path, *, dicom_files: bool = True
+) -> list[tuple[str, Case]]:
+    """Cases in one folder (not recursing), keyed by their unsanitised base name.
+
+    With ``dicom_files=False`` only NIfTI and contour files make cases (the
+    folder's DICOM files are not opened).
+    """
     found: list[tuple[str, Case]] = []
     dicom: dict[str, list[Path]] = {}
     for f in files:
@@ -215,6 +253,8 @@ def _folder_cases(folder: Path, files: list[Path], root: Path) -> list[tuple[str
             continue
         if lower.endswith(CONTOUR_SUFFIXES):
             found.append((_strip_suffix(rel), Case("", f, "contours", rel, (f,), f.parent)))
+            continue
+        if not dicom_files:
             continue
         role = _dicom_role(f)
         if role is not None:
@@ -245,25 +285,131 @@ def _folder_cases(folder: Path, files: list[Path], root: Path) -> list[tuple[str
     return found
 
 
-def _walk(root: Path, skip: Iterable[Path]) -> list[tuple[Path, list[Path]]]:
-    skipped = {p.resolve() for p in skip}
-    out: list[tuple[Path, list[Path]]] = []
-    for here, dirs, names in os.walk(root):
+@dataclass(frozen=True)
+class _Link:
+    """A symbolic link that was not followed: ``kind`` is file, folder or broken."""
+
+    path: Path
+    target: Path
+    kind: str
+
+
+@dataclass(frozen=True)
+class _Folder:
+    """One searched folder: its files and the links in it that were not followed."""
+
+    path: Path
+    files: list[Path]
+    links: list[_Link]
+
+
+def _within(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def _walk(root: Path, skip: Iterable[Path], *, follow_symlinks: bool) -> list[_Folder]:
+    """Search ``root`` (sorted, hidden entries skipped) applying the symlink rules."""
+    real_root = root.resolve()
+    skipped = [p.resolve() for p in skip]
+    searched = {real_root}
+    out: list[_Folder] = []
+
+    def excluded(real: Path) -> bool:
+        return any(_within(real, s) for s in skipped)
+
+    for here, dirs, names in os.walk(root, followlinks=True):
         folder = Path(here)
-        dirs[:] = sorted(
-            d for d in dirs
-            if not d.startswith(".") and (folder / d).resolve() not in skipped
-        )
-        files = [
-            folder / n for n in sorted(names)
-            if not n.startswith(".") and (folder / n).is_file()
-        ]
-        out.append((folder, files))
+        links: list[_Link] = []
+        keep: list[str] = []
+        for d in sorted(dirs):
+            path = folder / d
+            real = path.resolve()
+            if d.startswith(".") or excluded(real):
+                continue
+            if not path.is_symlink():
+                searched.add(real)
+                keep.append(d)
+            elif _within(real, real_root):
+                logger.debug("not searching %s again: it links to %s, inside INDIR", path, real)
+            elif not follow_symlinks:
+                links.append(_Link(path, real, "folder"))
+            elif real in searched or any(_within(real, s) for s in searched if s != real_root):
+                logger.info("not searching %s: %s is searched already", path, real)
+            else:
+                searched.add(real)
+                keep.append(d)
+        dirs[:] = keep
+        files: list[Path] = []
+        for n in sorted(names):
+            path = folder / n
+            if n.startswith("."):
+                continue
+            if path.is_symlink():
+                real = Path(os.path.realpath(path))
+                if not real.exists():
+                    links.append(_Link(path, real, "broken"))
+                    continue
+                if excluded(real):
+                    continue
+                if not follow_symlinks and not _within(real, real_root):
+                    links.append(_Link(path, real, "file"))
+                    continue
+            if path.is_file():
+                files.append(path)
+        out.append(_Folder(folder, files, links))
     return out
 
 
+def _link_cases(folder: _Folder, root: Path) -> tuple[list[tuple[str, Case]], bool]:
+    """Cases for the links of ``folder`` that were not followed, and whether some
+    of them may be DICOM files (then the folder's DICOM files make no case)."""
+    found: list[tuple[str, Case]] = []
+    grouped: list[_Link] = []
+    for link in folder.links:
+        rel = _relpath(link.path, root)
+        lower = link.path.name.lower()
+        hint = FOLLOW_HINT
+        if link.kind == "folder":
+            why = (f"{rel} is a symbolic link to a folder outside INDIR ({link.target}); "
+                   "it was not searched")
+        elif link.kind == "broken":
+            if not lower.endswith(NIFTI_SUFFIXES + CONTOUR_SUFFIXES + DICOM_SUFFIXES):
+                logger.info("ignoring %s: a broken symbolic link to %s", link.path, link.target)
+                continue
+            why = f"{rel} is a broken symbolic link: its target {link.target} does not exist"
+            hint = "fix or remove the link"
+        elif lower.endswith(MESH_SUFFIXES):
+            continue  # never a case
+        elif lower.endswith(NIFTI_SUFFIXES + CONTOUR_SUFFIXES):
+            why = (f"{rel} is a symbolic link to a file outside INDIR ({link.target}); "
+                   "it was not read")
+        else:
+            grouped.append(link)
+            continue
+        logger.info("not reading %s", why)
+        case = Case("", link.path, "symlink", rel, (), link.path.parent, error=f"{why}; {hint}")
+        found.append((_strip_suffix(rel), case))
+    if grouped:
+        rel = _relpath(folder.path, root) if folder.path != root else folder.path.name
+        names = ", ".join(link.path.name for link in grouped[:3])
+        if len(grouped) > 3:
+            names += f" and {len(grouped) - 3} more"
+        why = (
+            f"{rel} holds {len(grouped)} symbolic link(s) to files outside INDIR ({names}); "
+            "they were not read, and the DICOM files of this folder were not used"
+        )
+        logger.info("not reading %s", why)
+        case = Case("", folder.path, "symlink", rel, (), folder.path,
+                    error=f"{why}; {FOLLOW_HINT}")
+        found.append((rel, case))
+    return found, bool(grouped)
+
+
 def discover_cases(
-    indir: str | os.PathLike[str], *, exclude: Iterable[str | os.PathLike[str]] = ()
+    indir: str | os.PathLike[str],
+    *,
+    exclude: Iterable[str | os.PathLike[str]] = (),
+    follow_symlinks: bool = False,
 ) -> list[Case]:
     """List the cases in ``indir`` in a stable, sorted order.
 
@@ -273,6 +419,11 @@ def discover_cases(
         The input directory (searched recursively; hidden entries skipped).
     exclude : iterable of path-like
         Folders not to search (e.g. an output directory inside ``indir``).
+    follow_symlinks : bool
+        Read symbolic links whose target lies outside ``indir`` (and search
+        such folders). By default they are not read: each becomes a case of
+        kind ``symlink`` with :attr:`Case.error` set (see the module
+        docstring). Links that stay inside ``indir`` are always read.
 
     Returns
     -------
@@ -290,8 +441,10 @@ def discover_cases(
     if not root.is_dir():
         raise InputError(f"{root} is not a directory; pass the folder that holds the cases")
     found: list[tuple[str, Case]] = []
-    for folder, files in _walk(root, [Path(p) for p in exclude]):
-        found.extend(_folder_cases(folder, files, root))
+    for folder in _walk(root, [Path(p) for p in exclude], follow_symlinks=follow_symlinks):
+        refused, some_dicom = _link_cases(folder, root)
+        found.extend(refused)
+        found.extend(_folder_cases(folder.path, folder.files, root, dicom_files=not some_dicom))
     found.sort(key=lambda item: item[1].relpath)
     cases: list[Case] = []
     taken: set[str] = {name.casefold() for name in RESERVED_NAMES}
@@ -304,8 +457,6 @@ def discover_cases(
         taken.add(unique.casefold())
         if unique != base:
             logger.debug("case %s is named %s", case.relpath, unique)
-        cases.append(
-            Case(unique, case.path, case.kind, case.relpath, case.files, case.root, case.image_dir)
-        )
+        cases.append(dataclasses.replace(case, name=unique))
     logger.info("found %d case(s) in %s", len(cases), root)
     return cases

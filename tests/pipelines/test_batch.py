@@ -422,3 +422,196 @@ def test_batch_checks_the_weights_before_any_case(tmp_path, capsys):
     assert main([*args, "--weights", str(weights)]) == 2
     assert "policy only" in capsys.readouterr().err
     assert not (out / "a").exists()
+
+
+# ---------------------------------------------------------------------- symbolic links
+def _linked_tree(tmp_path: Path) -> tuple[Path, Path]:
+    """INDIR with links inside it, to outside it, a loop, a broken link and a DICOM folder
+    with a link to an outside file; OUTSIDE with a mask and a folder of masks."""
+    indir, outside = tmp_path / "in", tmp_path / "outside"
+    ball = make_shape("sphere", radius=5.0)
+    write_nifti(ball, indir / "real.nii.gz")
+    write_nifti(ball, outside / "secret.nii.gz")
+    write_nifti(make_shape("sphere", radius=6.0), outside / "cohort" / "p1.nii.gz")
+    (outside / "cohort" / "back").symlink_to(outside / "cohort")  # a loop out there
+    (indir / "inside.nii.gz").symlink_to(indir / "real.nii.gz")
+    (indir / "stolen.nii.gz").symlink_to(outside / "secret.nii.gz")
+    (indir / "cohort").symlink_to(outside / "cohort")
+    (indir / "again").symlink_to(indir)  # a loop inside INDIR
+    (indir / "gone.nii.gz").symlink_to(indir / "missing.nii.gz")
+    (indir / "notes.txt").symlink_to(indir / "missing.txt")  # broken, not an input: ignored
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 1], [0, 0, 0])
+    factory.write_series(indir / "series", ball.mask.astype(np.uint16), affine)
+    (indir / "series" / "extra.dcm").symlink_to(outside / "secret.nii.gz")
+    return indir, outside
+
+
+def test_links_outside_indir_are_not_followed_but_reported(tmp_path):
+    indir, outside = _linked_tree(tmp_path)
+    cases = {c.relpath: c for c in discover_cases(indir)}
+    assert set(cases) == {"real.nii.gz", "inside.nii.gz", "stolen.nii.gz", "cohort",
+                          "gone.nii.gz", "series"}
+    assert cases["inside.nii.gz"].kind == "nifti" and not cases["inside.nii.gz"].error
+    assert cases["real.nii.gz"].kind == "nifti"
+    for rel in ("stolen.nii.gz", "cohort", "gone.nii.gz", "series"):
+        case = cases[rel]
+        assert case.kind == "symlink" and case.files == (), rel
+    for rel in ("stolen.nii.gz", "cohort", "series"):
+        assert "--follow-symlinks" in cases[rel].error, cases[rel].error
+    assert "outside INDIR" in cases["stolen.nii.gz"].error
+    assert str(outside / "secret.nii.gz") in cases["stolen.nii.gz"].error
+    assert "folder outside INDIR" in cases["cohort"].error
+    assert "broken" in cases["gone.nii.gz"].error
+    assert "fix or remove the link" in cases["gone.nii.gz"].error
+    # the series folder holds a link to an outside file: its DICOM files make no case
+    assert "extra.dcm" in cases["series"].error and "DICOM" in cases["series"].error
+
+
+def test_follow_symlinks_reads_outside_targets_without_looping(tmp_path):
+    indir, _ = _linked_tree(tmp_path)
+    cases = {c.relpath: c for c in discover_cases(indir, follow_symlinks=True)}
+    assert set(cases) == {"real.nii.gz", "inside.nii.gz", "stolen.nii.gz", "cohort/p1.nii.gz",
+                          "gone.nii.gz", "series"}
+    assert cases["stolen.nii.gz"].kind == "nifti" and not cases["stolen.nii.gz"].error
+    assert cases["cohort/p1.nii.gz"].kind == "nifti"
+    assert cases["series"].kind == "dicom-series"
+    assert cases["gone.nii.gz"].kind == "symlink"  # a broken link stays unreadable
+
+
+def test_batch_records_unfollowed_links_as_failed_without_reading_them(tmp_path, capsys):
+    indir, _ = _linked_tree(tmp_path)
+    out = tmp_path / "out"
+    args = ["batch", str(indir), "-o", str(out), "--workers", "0", "--slices", "6",
+            "--no-report"]
+    assert main(args) == 1
+    captured = capsys.readouterr()
+    assert "6 cases: 2 ok, 4 failed" in captured.out
+    assert "failed stolen: InputError" in " ".join(captured.err.split())
+    rows = _summary(out)
+    assert {k: r["status"] for k, r in rows.items()} == {
+        "real": "ok", "inside": "ok", "stolen": "failed", "cohort": "failed",
+        "gone": "failed", "series": "failed"}
+    assert rows["stolen"]["kind"] == "symlink" and "outside INDIR" in rows["stolen"]["error"]
+    # the target is a good mask: had it been read, the case would have succeeded
+    assert sorted(p.name for p in (out / "stolen").iterdir()) == ["error.json"]
+    error = json.loads((out / "stolen" / "error.json").read_text())
+    assert error["type"] == "InputError" and "--follow-symlinks" in error["error"]
+
+    followed = run_batch(indir, tmp_path / "out2", CONFIG, workers=0, report=False,
+                         follow_symlinks=True)
+    status = {c.case: c.status for c in followed.cases}
+    assert status["stolen"] == "ok" and status["cohort__p1"] == "ok"
+    assert status["gone"] == "failed"
+
+
+def test_follow_symlinks_option_of_the_batch_command(tmp_path, capsys):
+    indir, outside = tmp_path / "in", tmp_path / "outside"
+    write_nifti(make_shape("sphere", radius=5.0), outside / "p1.nii.gz")
+    indir.mkdir()
+    (indir / "p1.nii.gz").symlink_to(outside / "p1.nii.gz")
+    args = ["batch", str(indir), "-o", str(tmp_path / "out"), "--workers", "0", "--slices", "6",
+            "--no-report"]
+    assert main(args) == 1
+    assert "1 cases: 0 ok, 1 failed" in capsys.readouterr().out
+    assert main([*args, "--follow-symlinks"]) == 0
+    assert "1 cases: 1 ok, 0 failed" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------------- interruption
+def test_a_ctrl_c_in_a_publish_waits_until_both_renames_are_done():
+    import signal
+
+    from pipelines.batch import _sigint_deferred
+
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with _sigint_deferred():
+            signal.raise_signal(signal.SIGINT)
+            done.append("after the signal")
+    assert done == ["after the signal"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_result_left_aside_by_a_killed_publish_is_restored(tmp_path):
+    from pipelines.batch import _clear_stale
+
+    (tmp_path / ".a.old-123456789abc").mkdir()
+    (tmp_path / ".a.old-123456789abc" / "done.json").write_text("{}")
+    (tmp_path / ".a.partial-123456789abc").mkdir()
+    _clear_stale(tmp_path, "a")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a"]
+    assert (tmp_path / "a" / "done.json").read_text() == "{}"
+
+
+def test_interrupted_in_process_batch_keeps_finished_cases_and_resumes(tmp_path, monkeypatch):
+    import slicerecon.reconstruct as reconstruct
+
+    indir = tmp_path / "in"
+    for name, radius in (("a", 5.0), ("b", 6.0), ("c", 5.5)):
+        write_nifti(make_shape("sphere", radius=radius), indir / f"{name}.nii.gz")
+    out = tmp_path / "out"
+    real_run_case = reconstruct.run_case
+
+    def ctrl_c_on_b(path, staging, *args, **kwargs):
+        if Path(path).name == "b.nii.gz":
+            Path(staging).mkdir(parents=True, exist_ok=True)
+            (Path(staging) / "half.stl").write_bytes(b"half")
+            raise KeyboardInterrupt
+        return real_run_case(path, staging, *args, **kwargs)
+
+    monkeypatch.setattr(reconstruct, "run_case", ctrl_c_on_b)
+    with pytest.raises(KeyboardInterrupt):
+        run_batch(indir, out, CONFIG, workers=0, report=False)
+    assert sorted(p.name for p in out.iterdir()) == ["a"]  # no b, no staging, no summary
+    assert (out / "a" / "done.json").is_file()
+    monkeypatch.setattr(reconstruct, "run_case", real_run_case)
+    result = run_batch(indir, out, CONFIG, workers=0, report=False)
+    assert [(c.case, c.status) for c in result.cases] == [
+        ("a", "skipped"), ("b", "ok"), ("c", "ok")]
+    assert not _hidden_or_temporary(out)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals and process groups")
+def test_ctrl_c_prints_one_line_exits_130_and_a_rerun_resumes(tmp_path):
+    """Ctrl-C as a terminal sends it (SIGINT to the whole process group) while a
+    2-worker local cluster computes: one `interrupted` line, exit 130, a clean OUTDIR."""
+    import signal
+    import subprocess
+    import time
+
+    indir, out = tmp_path / "in", tmp_path / "out"
+    for name, radius in (("a", 18.0), ("b", 20.0), ("c", 22.0)):
+        write_nifti(make_shape("sphere", radius=radius), indir / f"{name}.nii.gz")
+    args = ["batch", str(indir), "-o", str(out), "--workers", "2", "--slices", "8",
+            "--no-report"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "slicerecon.cli", *args], stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 180
+        while not (out.is_dir() and any(p.name.startswith(".") for p in out.iterdir())):
+            assert proc.poll() is None and time.monotonic() < deadline, "no case started"
+            time.sleep(0.05)
+        time.sleep(0.5)  # cases in flight, inside the workers
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert proc.returncode == 130, stderr
+    # Rich's transient progress bar leaves an empty line when stderr is not a terminal
+    assert [line for line in stderr.splitlines() if line.strip()] == ["interrupted"], stderr
+    assert stdout == ""
+    assert not _hidden_or_temporary(out)  # no staging folder left
+    finished = sorted(p.name for p in out.iterdir())
+    assert "summary.csv" not in finished
+    for name in finished:  # whatever is there is whole
+        assert (out / name / "done.json").is_file() and (out / name / "mesh.stl").is_file()
+
+    result = run_batch(indir, out, ReconstructConfig(slices=8), workers=0, report=False)
+    assert {c.case: c.status for c in result.cases} == {
+        n: ("skipped" if n in finished else "ok") for n in ("a", "b", "c")}
+    assert not _hidden_or_temporary(out)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import os
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import torch
 
 from slicerecon.errors import FormatError, OptionError
 from slicerecon.policy.buffers import ReplayBuffer
+from slicerecon.policy.checkpoint import load_checkpoint
 from slicerecon.policy.env import CutEnv, ShapePool
 from slicerecon.policy.train import TrainConfig, config_path, load_config, train
 from slicerecon.policy.weights import load_actor
@@ -125,3 +127,68 @@ def test_shapes_without_expert_cuts_give_a_clear_error(tmp_path: Path) -> None:
     """A box and a sphere have no splitting segment: no demonstrations can be collected."""
     with pytest.raises(OptionError, match="no cut"):
         train(_il(shapes=("box", "sphere"), demo_episodes=4), out=tmp_path)
+
+
+class _RunsCode:
+    """Unpickling this object calls ``os.mkdir(marker)``: a stand-in for any code."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = str(marker)
+
+    def __reduce__(self) -> tuple[object, tuple[str]]:
+        return os.mkdir, (self.marker,)
+
+
+def test_resume_refuses_a_checkpoint_that_would_run_code(tmp_path: Path) -> None:
+    cfg = _il_rl(total_updates=4, checkpoint_every=4, log_every=4, eval_every=4)
+    train(cfg, out=tmp_path)
+    ckpt_path = tmp_path / "checkpoint.pt"
+    good = torch.load(ckpt_path, weights_only=True)
+    marker = tmp_path / "code-ran"
+    good["rows"].append({"update": _RunsCode(marker)})  # a tampered, otherwise valid file
+    torch.save(good, ckpt_path)
+    before = ckpt_path.read_bytes()
+    with pytest.raises(FormatError, match="checkpoint.pt") as info:
+        train(cfg.replace(total_updates=8), out=tmp_path, resume=True)
+    assert "loaded safely" in str(info.value) and "mkdir" in str(info.value)
+    assert not marker.exists()  # refused before the object was built
+    assert ckpt_path.read_bytes() == before  # and nothing was overwritten
+    # the payload is live: the unsafe load the trainer used to do would have run it
+    torch.load(ckpt_path, weights_only=False)
+    assert marker.is_dir()
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"", "loaded safely"),
+        (b"not a checkpoint at all", "loaded safely"),
+        ({"config": {}, "rng": {"numpy": np.zeros(3)}}, "loaded safely"),  # pickled numpy
+        ({"config": {}, "agent": {}}, "missing or wrong: demos"),
+        ([1, 2, 3], "not a slicerecon training checkpoint"),
+    ],
+)
+def test_unusable_checkpoints_give_one_clear_error(
+    tmp_path: Path, content: object, message: str
+) -> None:
+    path = tmp_path / "checkpoint.pt"
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        torch.save(content, path)
+    with pytest.raises(FormatError, match=message) as info:
+        load_checkpoint(path)
+    assert str(path) in str(info.value)
+    assert "\n" not in str(info.value)
+    with pytest.raises(FormatError, match=message):
+        train(_il_rl(), out=tmp_path, resume=True)
+
+
+def test_checkpoint_of_other_networks_is_refused_clearly(tmp_path: Path) -> None:
+    cfg = _il_rl(total_updates=4, checkpoint_every=4, log_every=4, eval_every=4)
+    train(cfg, out=tmp_path)
+    ckpt = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    ckpt["agent"]["actor"] = {"weight": torch.zeros(3)}
+    torch.save(ckpt, tmp_path / "checkpoint.pt")
+    with pytest.raises(FormatError, match="does not fit"):
+        train(cfg, out=tmp_path, resume=True)
