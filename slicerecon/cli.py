@@ -8,9 +8,12 @@ code; ``--debug`` shows the full traceback instead.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
+import signal
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -33,6 +36,27 @@ DEFAULT_MAX_MEMORY_GB = 8.0
 """Default of ``--max-memory``; equal to ``slicerecon.io.limits.DEFAULT_MEMORY_BUDGET_GB``
 (a test checks it), written here so that ``--help`` imports nothing heavy."""
 _state: dict[str, bool] = {"debug": False}
+
+
+@contextlib.contextmanager
+def _ctrl_c_after() -> Iterator[None]:
+    """Deliver a Ctrl-C pressed inside the block when it is done.
+
+    trimesh imports its optional dependencies under ``except BaseException`` and
+    would swallow a KeyboardInterrupt raised while the heavy modules load.
+    """
+    noted: list[int] = []
+    try:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
+    except ValueError:  # not the main thread: nothing to defer
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if noted:
+            raise KeyboardInterrupt
 
 
 def _version(value: bool) -> None:
@@ -131,8 +155,9 @@ def _cell(value: Any) -> str:
 
 
 _METHOD_HELP = (
-    "Surface method: hybrid (default: loft where contours correspond simply, sdf "
-    "elsewhere), loft or sdf (per part of the plan), or a whole-shape baseline "
+    "Surface method: sdf (default: signed-distance interpolation across planes), loft "
+    "(the paper's lofting) or hybrid (loft where contours correspond simply, sdf "
+    "elsewhere), per part of the plan; or a whole-shape baseline "
     "that skips the planner and the carve: poisson, sdf-hull or itk-mci "
     '(needs pip install "slicerecon\\[itk]"). See docs/baselines.md.'
 )
@@ -145,6 +170,10 @@ EveryOpt = Annotated[int | None, typer.Option("--every", help="Keep every K-th p
 AxisOpt = Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")]
 PlannerOpt = Annotated[str, typer.Option(help="heuristic, none or policy (learned planner).")]
 MethodOpt = Annotated[str, typer.Option(help=_METHOD_HELP)]
+InterpolationOpt = Annotated[
+    str,
+    typer.Option(help="Across planes: pchip (default: monotone cubic) or linear (classic)."),
+]
 ProjectionsOpt = Annotated[
     str,
     typer.Option(
@@ -182,7 +211,8 @@ def run(
     axis: AxisOpt = "z",
     planner: PlannerOpt = "heuristic",
     weights: WeightsOpt = None,
-    method: MethodOpt = "hybrid",
+    method: MethodOpt = "sdf",
+    interpolation: InterpolationOpt = "pchip",
     projections: ProjectionsOpt = "auto",
     gt: Annotated[
         Path | None, typer.Option("--gt", help="Ground truth (mask or closed mesh).")
@@ -194,11 +224,13 @@ def run(
     roi: RoiOpt = None,
     allow_irregular: IrregularOpt = False,
     max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
+    quiet: Annotated[
+        bool, typer.Option("--quiet", "-q", help="No progress and no summary; errors only.")
+    ] = False,
 ) -> None:
     """Reconstruct one input; write mesh, plan.json, metrics.json and preview.png."""
-    from rich.console import Console
-
-    from .reconstruct import ReconstructConfig, run_case
+    with _ctrl_c_after():
+        from .reconstruct import ReconstructConfig, run_case
 
     config = ReconstructConfig(
         slices=slices,
@@ -207,6 +239,7 @@ def run(
         planner=planner,
         weights=None if weights is None else str(weights),
         method=method,
+        interpolation=interpolation,
         projections=projections,
         smooth=smooth,
         carve=carve,
@@ -216,12 +249,55 @@ def run(
         allow_irregular=allow_irregular,
         max_memory_gb=max_memory,
     )
-    console = Console(stderr=True)
-    with console.status("reading") as status:
-        summary = run_case(
-            input, outdir, config, ground_truth=gt, progress=lambda s: status.update(s)
-        )
-    _print_summary(summary, outdir)
+    with _StageProgress(enabled=not quiet) as progress:
+        summary = run_case(input, outdir, config, ground_truth=gt, progress=progress)
+    if not quiet:
+        _print_summary(summary, outdir)
+
+
+class _StageProgress:
+    """Stage progress on stderr, shown only once a run has taken about two seconds.
+
+    Called with each stage name. A timer starts a rich spinner after
+    :attr:`DELAY_S` seconds naming the current stage, so quick runs print
+    nothing and long ones show where they are.
+    """
+
+    DELAY_S = 2.0
+
+    def __init__(self, *, enabled: bool) -> None:
+        import threading
+
+        self._enabled = enabled
+        self._lock = threading.Lock()
+        self._status: Any = None
+        self._stage = "reading"
+        self._timer = threading.Timer(self.DELAY_S, self._show)
+        self._timer.daemon = True
+
+    def __enter__(self) -> _StageProgress:
+        if self._enabled:
+            self._timer.start()
+        return self
+
+    def _show(self) -> None:
+        from rich.console import Console
+
+        with self._lock:
+            self._status = Console(stderr=True).status(self._stage)
+            self._status.start()
+
+    def __call__(self, stage: str) -> None:
+        with self._lock:
+            self._stage = stage
+            if self._status is not None:
+                self._status.update(stage)
+
+    def __exit__(self, *exc: object) -> None:
+        self._timer.cancel()
+        with self._lock:
+            if self._status is not None:
+                self._status.stop()
 
 
 def _print_summary(summary: dict[str, Any], outdir: Path) -> None:
@@ -263,12 +339,19 @@ def batch(
     no_report: Annotated[
         bool, typer.Option("--no-report", help="Do not write the HTML report.")
     ] = False,
+    follow_symlinks: Annotated[
+        bool,
+        typer.Option("--follow-symlinks",
+                     help="Read symbolic links that point outside INDIR (default: each is a "
+                     "failed case, never opened)."),
+    ] = False,
     slices: SlicesOpt = None,
     every: EveryOpt = None,
     axis: AxisOpt = "z",
     planner: PlannerOpt = "heuristic",
     weights: WeightsOpt = None,
-    method: MethodOpt = "hybrid",
+    method: MethodOpt = "sdf",
+    interpolation: InterpolationOpt = "pchip",
     projections: ProjectionsOpt = "auto",
     mesh_format: FormatOpt = "stl",
     smooth: SmoothOpt = False,
@@ -281,8 +364,10 @@ def batch(
     """Reconstruct every case in INDIR on Dask; write OUTDIR/<case>/ and OUTDIR/summary.csv.
 
     Finished cases are skipped on a re-run (unless --force); a failed case is
-    recorded in OUTDIR/<case>/error.json and summary.csv. Exit code 0 when every
-    case is done, 1 when any failed, 2 for a bad invocation.
+    recorded in OUTDIR/<case>/error.json and summary.csv. Symbolic links that
+    point outside INDIR are failed cases unless --follow-symlinks. Exit code 0
+    when every case is done, 1 when any failed, 2 for a bad invocation, 130
+    when interrupted (Ctrl-C; finished cases are kept and a re-run resumes).
     """
     from rich.console import Console
     from rich.progress import (
@@ -293,9 +378,10 @@ def batch(
         TimeElapsedColumn,
     )
 
-    from pipelines.batch import run_batch
+    with _ctrl_c_after():
+        from pipelines.batch import run_batch
 
-    from .reconstruct import ReconstructConfig
+        from .reconstruct import ReconstructConfig
 
     config = ReconstructConfig(
         slices=slices,
@@ -304,6 +390,7 @@ def batch(
         planner=planner,
         weights=None if weights is None else str(weights),
         method=method,
+        interpolation=interpolation,
         projections=projections,
         smooth=smooth,
         carve=carve,
@@ -341,6 +428,7 @@ def batch(
             progress=advance,
             retries=retries,
             report=not no_report,
+            follow_symlinks=follow_symlinks,
         )
     for failed in (c for c in outcome.cases if c.status == "failed"):
         console.print(f"[red]failed[/] {failed.case}: {failed.error_type}: {failed.error}",
@@ -407,8 +495,8 @@ def evaluate_dataset(
     dataset_dir: Annotated[Path, typer.Argument(help="Directory of NIfTI masks (recursive).")],
     outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Results directory.")],
     method: Annotated[
-        str, typer.Option(help="Comma-separated surface methods, e.g. hybrid,loft,sdf.")
-    ] = "hybrid",
+        str, typer.Option(help="Comma-separated surface methods, e.g. sdf,loft,hybrid.")
+    ] = "sdf",
     planner: Annotated[str, typer.Option(help="Partition planner.")] = "heuristic",
     slices: SlicesOpt = None,
     every: EveryOpt = None,
@@ -689,6 +777,9 @@ def main(argv: list[str] | None = None) -> int:
             raise
         typer.echo(_usage_line(exc), err=True)
         return EXIT_INPUT
+    if result == 130:  # typer turns a KeyboardInterrupt inside a command into Exit(130)
+        typer.echo("interrupted", err=True)
+        return 130
     return int(result) if isinstance(result, int) else 0
 
 

@@ -32,6 +32,7 @@ __all__ = [
     "METHODS",
     "WHOLE_SHAPE_METHODS",
     "PROJECTION_SOURCES",
+    "INTERPOLATIONS",
     "MESH_FORMATS",
     "prepare_inputs",
     "reconstruct",
@@ -46,6 +47,7 @@ WHOLE_SHAPE_METHODS = ("poisson", "sdf-hull", "itk-mci")
 """Methods that reconstruct all the sections at once, without a partition
 (:mod:`slicerecon.surface.baselines`); planners and carving apply to loft/sdf only."""
 PROJECTION_SOURCES = ("auto", "gt", "sections")
+INTERPOLATIONS = ("pchip", "linear")
 MESH_FORMATS = ("stl", "ply", "obj")
 DEFAULT_SLICES = 16
 
@@ -65,11 +67,12 @@ class ReconstructConfig:
     """How the shape is partitioned into cuboid parts: ``heuristic`` (the
     paper's expert), ``none`` (one part: the no-projection baseline) or
     ``policy`` (the shipped learned planner, ``docs/policy.md``)."""
-    method: str = "hybrid"
-    """How each part is reconstructed: ``hybrid`` (the default: ``loft`` where
-    the contours of consecutive planes correspond simply, ``sdf`` where they
-    split, merge or appear), ``loft`` (contour lofting, the paper's method) or
-    ``sdf`` (signed-distance interpolation + marching cubes); or a whole-shape
+    method: str = "sdf"
+    """How each part is reconstructed: ``sdf`` (the default: signed-distance
+    interpolation across planes + marching cubes, carved by the hull in the
+    implicit domain), ``loft`` (contour lofting, the paper's method) or
+    ``hybrid`` (``loft`` where the contours of consecutive planes correspond
+    simply, ``sdf`` where they split, merge or appear); or a whole-shape
     baseline that skips the planner and the carve: ``poisson`` (screened
     Poisson on the contour points), ``sdf-hull`` (signed-distance
     interpolation intersected with the visual hull) or ``itk-mci`` (ITK
@@ -101,6 +104,11 @@ class ReconstructConfig:
     weights: str | None = None
     """Actor weights file for ``planner="policy"`` (default: the shipped
     ``il_rl`` actor)."""
+    interpolation: str = "pchip"
+    """How ``sdf`` (and ``hybrid``'s sdf parts) interpolate the planes' signed
+    distances across planes: ``pchip`` (the default: monotone piecewise cubic
+    through all planes, chosen on the real-anatomy development shapes,
+    ``docs/results.md``) or ``linear`` (classic shape-based interpolation)."""
     n_points: int = 50_000
     """Surface samples per mesh for the distance metrics."""
     max_memory_gb: float = DEFAULT_MEMORY_BUDGET_GB
@@ -121,6 +129,7 @@ class ReconstructConfig:
             ("planner", self.planner, PLANNERS),
             ("method", self.method, METHODS),
             ("format", self.mesh_format, MESH_FORMATS),
+            ("interpolation", self.interpolation, INTERPOLATIONS),
         ):
             if value not in choices:
                 raise OptionError(f"--{name} must be one of {', '.join(choices)} (got {value!r})")
@@ -307,12 +316,12 @@ def reconstruct(
     projections: Projections,
     *,
     planner: str = "heuristic",
-    method: str = "hybrid",
+    method: str = "sdf",
     smooth: bool = False,
     carve: bool = True,
     max_parts: int = 8,
     weights: str | os.PathLike[str] | None = None,
-    interpolation: str = "linear",
+    interpolation: str = "pchip",
 ) -> Reconstruction:
     """Reconstruct a watertight surface from cross-sections and projections.
 
@@ -325,8 +334,8 @@ def reconstruct(
         derived from the sections).
     planner : {"heuristic", "none", "policy"}
         Partition planner (``policy``: a trained actor, needs torch).
-    method : {"hybrid", "loft", "sdf", "poisson", "sdf-hull", "itk-mci"}
-        Surface method. ``hybrid``, ``loft`` and ``sdf`` reconstruct each part of the
+    method : {"sdf", "hybrid", "loft", "poisson", "sdf-hull", "itk-mci"}
+        Surface method. ``sdf``, ``hybrid`` and ``loft`` reconstruct each part of the
         plan. The whole-shape baselines (:data:`WHOLE_SHAPE_METHODS`,
         :mod:`slicerecon.surface.baselines`) run on all the sections at once:
         no planner runs (``planner`` and ``max_parts`` are ignored), the plan
@@ -344,7 +353,7 @@ def reconstruct(
         Upper bound on the number of parts.
     weights : path-like, optional
         Actor weights for ``planner="policy"`` (default: the shipped ``il_rl`` actor).
-    interpolation : {"linear", "pchip"}
+    interpolation : {"pchip", "linear"}
         How the signed-distance parts interpolate across planes
         (:func:`slicerecon.surface.sdf.sdf_field`).
 
@@ -487,6 +496,7 @@ def run_case(
         carve=config.carve,
         max_parts=config.max_parts,
         weights=config.weights,
+        interpolation=config.interpolation,
     )
     timings.update(result.timings)
     metrics = None

@@ -262,7 +262,7 @@ def test_key_changes_with_input_bytes_and_options_only(tmp_path):
     key = case_key(case, CONFIG)
     assert case_key(case, ReconstructConfig(n_points=5000, slices=8)) == key
     for other in (ReconstructConfig(n_points=5000, slices=6),
-                  ReconstructConfig(n_points=5000, slices=8, method="sdf"),
+                  ReconstructConfig(n_points=5000, slices=8, method="loft"),
                   ReconstructConfig(n_points=5000, slices=8, seed=1),
                   ReconstructConfig(n_points=5000, slices=8, mesh_format="obj")):
         assert case_key(case, other) != key
