@@ -53,19 +53,23 @@ SPLIT_FILE = Path(__file__).resolve().with_name("real_split.toml")
 """The committed development / validation split (``benchmarks/draw_real_split.py``)."""
 
 VARIANTS: dict[str, dict[str, Any]] = {
-    "sdf-plain": {"method": "sdf", "planner": "none", "carve": False},
+    "sdf-plain": {"method": "sdf", "planner": "none", "carve": False, "interpolation": "linear"},
     "default": {},
     "loft-heuristic": {"method": "loft", "planner": "heuristic"},
     "itk-mci": {"method": "itk-mci", "planner": "none"},
     "sdf-hull": {"method": "sdf-hull", "planner": "none"},
     "sdf-heuristic": {"method": "sdf", "planner": "heuristic"},
     "hybrid-none": {"method": "hybrid", "planner": "none", "carve": False},
+    "sdf-pchip-none": {"method": "sdf", "planner": "none", "interpolation": "pchip"},
+    "hybrid-linear-heuristic": {"method": "hybrid", "planner": "heuristic",
+                                "interpolation": "linear"},
 }
 """Variant name → keyword arguments of :func:`slicerecon.reconstruct.reconstruct`.
 
 ``default`` passes nothing, so it is whatever the library's defaults are when
-the benchmark runs (at the time of writing: heuristic planner, hybrid
-surface, carved by the visual hull)."""
+the benchmark runs (at the time of writing: heuristic planner, sdf surface
+with PCHIP interpolation across planes, carved by the visual hull).
+``hybrid-linear-heuristic`` is the default before that change."""
 
 VARIANT_NOTES: dict[str, str] = {
     "sdf-plain": "signed-distance interpolation between the planes, one part, not carved: "
@@ -76,6 +80,9 @@ VARIANT_NOTES: dict[str, str] = {
     "sdf-hull": "signed-distance interpolation intersected with the visual hull (whole shape)",
     "sdf-heuristic": "signed-distance interpolation per part of the heuristic plan, carved",
     "hybrid-none": "hybrid surface, one part, not carved",
+    "sdf-pchip-none": "signed-distance interpolation, PCHIP across planes, one part, carved",
+    "hybrid-linear-heuristic": "the default until 2026-11-29: hybrid surface, linear, heuristic "
+    "planner, carved",
 }
 
 DEFAULT_VARIANTS = ("sdf-plain", "default", "loft-heuristic", "itk-mci")
