@@ -50,6 +50,11 @@ PROJECTION_SOURCES = ("auto", "gt", "sections")
 INTERPOLATIONS = ("pchip", "linear")
 MESH_FORMATS = ("stl", "ply", "obj")
 DEFAULT_SLICES = 16
+PLANNING_MAX_GRID = 192
+"""Planners see at most this many voxels along a side: larger grids are planned on
+a pooled copy (:func:`slicerecon.partition.planner.plan_partition`, ``max_grid``)
+and the parts mapped back, so planning costs the same at clinical sizes as on a
+192-voxel shape; the surface is always made at full resolution."""
 
 
 @dataclass(frozen=True)
@@ -362,7 +367,7 @@ def reconstruct(
     Reconstruction
     """
     from .partition.planner import plan_partition
-    from .surface.part import part_voxels, reconstruct_parts
+    from .surface.part import reconstruct_parts
 
     if planner not in PLANNERS:
         raise OptionError(f"planner must be one of {', '.join(PLANNERS)} (got {planner!r})")
@@ -378,13 +383,12 @@ def reconstruct(
         occupancy = _exact_on_planes(hull, sections)
 
         guide = hull if planner != "none" else None
-
-        def part_reconstruction(box):  # type: ignore[no-untyped-def]
-            return part_voxels(sections, box, hull=guide, interpolation=interpolation)
-
+        # No planner's choice at inference depends on the reward's reconstruction
+        # term (it is what training optimises), so parts are not reconstructed
+        # twice: the plan's rewards hold IoU(W_i, O) only.
         plan = plan_partition(
-            occupancy, planner=planner, reconstruct=part_reconstruction, max_parts=max_parts,
-            weights=weights,
+            occupancy, planner=planner, reconstruct=None, max_parts=max_parts, weights=weights,
+            max_grid=PLANNING_MAX_GRID,
         )
     implicit_carve = carve and method == "sdf" and not smooth
     with _timed(timings, "surface"):

@@ -227,6 +227,7 @@ def plan_partition(
     min_remaining: float = 0.02,
     lam: float = 1.0,
     weights: str | os.PathLike[str] | None = None,
+    max_grid: int | None = None,
 ) -> Plan:
     """Partition an occupancy grid into cuboid parts.
 
@@ -249,6 +250,14 @@ def plan_partition(
     weights : path-like, optional
         Actor weights of the ``"policy"`` planner (default: the shipped
         ``il_rl`` actor); an error for the other planners.
+    max_grid : int, optional
+        Plan on a coarser copy of the occupancy when its longest side exceeds
+        this many voxels: blocks of ``f = ceil(longest / max_grid)`` voxels per
+        side are pooled (a block is occupied when any voxel is), the planner
+        runs there, and each part's box is mapped back and tightened around
+        the occupancy it holds (:func:`_refine`). The boxes still cover the
+        occupancy; cut positions are known to ``f`` voxels. Planning cost falls
+        by about ``f³``; grids no larger than ``max_grid`` are planned as they are.
 
     Returns
     -------
@@ -273,6 +282,24 @@ def plan_partition(
         raise OptionError(f"weights apply to the policy planner only (planner is {name!r})")
     occ = np.asarray(occupancy)
     options = {} if weights is None else {"weights": weights}
+    factor = 1
+    if max_grid is not None:
+        if isinstance(max_grid, bool) or int(max_grid) < 8:
+            raise OptionError(f"max_grid must be at least 8 voxels (got {max_grid})")
+        factor = max(1, -(-max(occ.shape) // int(max_grid)))
+    if factor > 1:
+        if reconstruct is not None:
+            raise OptionError("a reward reconstruction needs the full grid: give max_grid=None")
+        coarse = _pool(occ.astype(bool, copy=False), factor)
+        parts = PLANNERS[name](
+            coarse, reconstruct=None, max_parts=int(max_parts),
+            min_remaining=float(min_remaining), lam=float(lam), **options,
+        )
+        shape = tuple(int(s) for s in occ.shape)
+        refined = _refine(parts, occ.astype(bool, copy=False), factor)
+        plan = Plan(name, refined, shape)  # type: ignore[arg-type]
+        logger.info("planner %s on a %dx coarser grid: %d parts", name, factor, len(plan.parts))
+        return plan
     parts = PLANNERS[name](
         occ,
         reconstruct=reconstruct,
@@ -285,3 +312,43 @@ def plan_partition(
     plan = Plan(name, tuple(PlanPart(p.box, p.cut, p.mask_voxels) for p in parts), shape)  # type: ignore[arg-type]
     logger.info("planner %s: %d parts", name, len(plan.parts))
     return plan
+
+
+def _pool(mask: NDArray[np.bool_], factor: int) -> NDArray[np.bool_]:
+    """Any-pooling of a 3-D mask by ``factor`` per axis (the grid padded up to a multiple)."""
+    pad = [(0, (-n) % factor) for n in mask.shape]
+    padded = np.pad(mask, pad)
+    i, j, k = (n // factor for n in padded.shape)
+    return padded.reshape(i, factor, j, factor, k, factor).any(axis=(1, 3, 5))
+
+
+def _refine(parts: list[Part], occupancy: NDArray[np.bool_], factor: int) -> tuple[PlanPart, ...]:
+    """Parts planned on a pooled grid, back on the full grid.
+
+    Each box is scaled by ``factor``, clipped to the grid and tightened to the
+    bounding box of the occupancy it holds that no earlier part took; cut end
+    points go to the centre of their pooled pixel. Every occupied voxel lies in
+    the scaled box of a part that took its block, so the boxes still cover the
+    occupancy.
+    """
+    shape = occupancy.shape
+    taken = np.zeros(shape, dtype=bool)
+    out: list[PlanPart] = []
+    for part in parts:
+        lo = [min(v * factor, n) for v, n in zip(part.box.lo, shape, strict=True)]
+        hi = [min(v * factor, n) for v, n in zip(part.box.hi, shape, strict=True)]
+        region = tuple(slice(a, b) for a, b in zip(lo, hi, strict=True))
+        own = occupancy[region] & ~taken[region]
+        if not own.any():
+            continue
+        tight = Box.of_mask(own)
+        box = Box(tuple(a + t for a, t in zip(lo, tight.lo, strict=True)),  # type: ignore[arg-type]
+                  tuple(a + t for a, t in zip(lo, tight.hi, strict=True)))  # type: ignore[arg-type]
+        taken[region] |= own
+        cut = part.cut
+        if cut is not None:
+            half = (factor - 1) / 2.0
+            cut = Cut(cut.view, tuple(v * factor + half for v in cut.p1),  # type: ignore[arg-type]
+                      tuple(v * factor + half for v in cut.p2))  # type: ignore[arg-type]
+        out.append(PlanPart(box, cut, int(np.count_nonzero(own))))
+    return tuple(out)

@@ -124,9 +124,10 @@ def carve(
         raise EmptyMaskError(_OUTSIDE_HULL)
     carved = from_manifold(solid)
     check_closed(carved, "carve")
-    logger.debug(
-        "carved by the hull: %.6g -> %.6g mm^3", float(mesh.volume), float(carved.volume)
-    )
+    if logger.isEnabledFor(logging.DEBUG):
+        logger.debug(
+            "carved by the hull: %.6g -> %.6g mm^3", float(mesh.volume), float(carved.volume)
+        )
     return carved
 
 

@@ -252,10 +252,7 @@ def reconstruct_parts(
         # Implicit union: the minimum of the parts' signed distances, meshed once.
         mesh = sdf_parts_mesh(sections, boxes, extend_to_box=extend_to_box, hull=hull,
                               interpolation=interpolation, carve=carve)
-    logger.debug(
-        "merged %d parts (%s): %d faces, %.6g mm^3", len(boxes), method, len(mesh.faces),
-        mesh.volume,
-    )
+    logger.debug("merged %d parts (%s): %d faces", len(boxes), method, len(mesh.faces))
     if smooth:
         mesh = taubin_smooth(mesh)
     return mesh

@@ -89,3 +89,18 @@ def test_visual_hull_recovers_orthogonal_shapes_and_contains_any_shape() -> None
 def test_visual_hull_rejects_mismatched_grid() -> None:
     with pytest.raises(GeometryError, match="needs"):
         visual_hull(projections_from_volume(Volume(t_shape())), (32, 32, 31))
+
+
+def test_a_large_grid_is_planned_on_a_pooled_copy_and_still_covered() -> None:
+    from slicerecon.shapes import make_shape
+
+    chair = make_shape("chair", spacing=0.4)  # about 240 voxels tall
+    assert max(chair.shape) > 200
+    full = plan_partition(chair.mask, planner="heuristic")
+    pooled = plan_partition(chair.mask, planner="heuristic", max_grid=100)
+    assert pooled.covers(chair.mask) and full.covers(chair.mask)
+    assert pooled.grid_shape == chair.shape
+    for box in pooled.boxes:  # tightened: every box face touches the occupancy it holds
+        assert Box.of_mask(chair.mask[box.slices]).shape == box.shape
+    small = plan_partition(chair.mask, planner="heuristic", max_grid=1000)
+    assert small.boxes == full.boxes  # no pooling below the limit
