@@ -55,6 +55,19 @@ def _coarse(mask: NDArray[np.bool_], step: int) -> NDArray[np.bool_]:
     return padded.reshape(shape).any(axis=tuple(range(1, 2 * mask.ndim, 2)))
 
 
+def _on_grid(volume: Volume, affine: NDArray[np.float64],
+             shape: tuple[int, int, int]) -> NDArray[np.bool_]:
+    """A sub-grid mask (same voxel axes as ``affine``) placed on the whole grid."""
+    offset = np.rint(np.linalg.solve(affine[:3, :3], volume.affine[:3, 3] - affine[:3, 3]))
+    lo = offset.astype(np.int64)
+    out = np.zeros(shape, dtype=bool)
+    region = tuple(slice(max(a, 0), min(a + n, m))
+                   for a, n, m in zip(lo, volume.shape, shape, strict=True))
+    source = tuple(slice(r.start - a, r.stop - a) for r, a in zip(region, lo, strict=True))
+    out[region] = volume.mask[source]
+    return out
+
+
 def _scale_px(shape: tuple[int, ...]) -> int:
     """Integer zoom so that small panels are not tiny (about 240 pixels across)."""
     return max(1, 240 // max(max(shape), 1))
@@ -111,7 +124,10 @@ def write_preview(
     affine = sections.affine.copy()
     affine[:3, :3] = affine[:3, :3] * step
     affine[:3, 3] = sections.affine[:3, :3] @ np.full(3, (step - 1) / 2.0) + sections.affine[:3, 3]
-    recon = mesh_to_mask(result.mesh, affine, coarse_shape)  # type: ignore[arg-type]
+    if result.occupancy is not None:
+        recon = _coarse(_on_grid(result.occupancy, sections.affine, grid), step)
+    else:
+        recon = mesh_to_mask(result.mesh, affine, coarse_shape)  # type: ignore[arg-type]
     boxes = [part.box for part in result.plan.parts]
     owner = np.full(coarse_shape, -1, dtype=np.int16)
     for i, box in reversed(list(enumerate(boxes))):

@@ -164,6 +164,8 @@ class Reconstruction:
         The inputs the reconstruction used.
     timings : dict of str to float
         Seconds spent per stage.
+    occupancy : Volume or None
+        Voxel centres inside the mesh, when known without rasterizing.
     """
 
     mesh: trimesh.Trimesh
@@ -171,6 +173,10 @@ class Reconstruction:
     sections: CrossSections
     projections: Projections
     timings: dict[str, float] = field(default_factory=dict)
+    occupancy: Volume | None = None
+    """The voxel centres of the sections' grid inside :attr:`mesh`, on a sub-grid,
+    when the method gives them for free (``sdf``: the field's sign); None
+    otherwise. Metrics and previews use it instead of rasterizing the mesh."""
 
 
 @contextmanager
@@ -367,7 +373,7 @@ def reconstruct(
     Reconstruction
     """
     from .partition.planner import plan_partition
-    from .surface.part import reconstruct_parts
+    from .surface.part import reconstruct_surface
 
     if planner not in PLANNERS:
         raise OptionError(f"planner must be one of {', '.join(PLANNERS)} (got {planner!r})")
@@ -393,16 +399,17 @@ def reconstruct(
     implicit_carve = carve and method == "sdf" and not smooth
     with _timed(timings, "surface"):
         boxes = [part.box for part in plan.parts]
-        mesh = reconstruct_parts(
+        surface = reconstruct_surface(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
             hull=guide, interpolation=interpolation, carve=hull if implicit_carve else None,
         )
+        mesh, occupancy = surface.mesh, surface.occupancy
     if carve and not implicit_carve:
         from .surface.carve import carve as carve_by_hull
 
         with _timed(timings, "carve"):
             mesh = carve_by_hull(mesh, hull, sections.affine)
-    return Reconstruction(mesh, plan, sections, projections, timings)
+    return Reconstruction(mesh, plan, sections, projections, timings, occupancy)
 
 
 def _reconstruct_whole_shape(
@@ -507,7 +514,8 @@ def run_case(
     if truth is not None:
         say("evaluate")
         with _timed(timings, "metrics"):
-            metrics = evaluate(result.mesh, truth, n_points=config.n_points, seed=config.seed)
+            metrics = evaluate(result.mesh, truth, n_points=config.n_points, seed=config.seed,
+                               pred_occupancy=result.occupancy)
     say("write")
     with _timed(timings, "write"):
         mesh_path = write_mesh(result.mesh, out / f"mesh.{config.mesh_format}")

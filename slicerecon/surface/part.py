@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import manifold3d
 import numpy as np
@@ -38,13 +39,21 @@ import trimesh
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, InputError, OptionError
-from ..sections import Box, CrossSections
+from ..sections import Box, CrossSections, Volume
 from .loft import correspondence_is_simple, loft_solid
 from .merge import check_closed, from_manifold, to_manifold, union_solids
-from .sdf import sdf_field, sdf_mesh, sdf_parts_mesh
+from .sdf import sdf_field, sdf_mesh, sdf_parts_surface
 from .smooth import taubin_smooth
 
-__all__ = ["METHODS", "VOXEL_METHODS", "reconstruct_part", "reconstruct_parts", "part_voxels"]
+__all__ = [
+    "METHODS",
+    "VOXEL_METHODS",
+    "Surface",
+    "part_voxels",
+    "reconstruct_part",
+    "reconstruct_parts",
+    "reconstruct_surface",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -219,6 +228,44 @@ def reconstruct_parts(
     EmptyMaskError
         If no box holds section foreground.
     """
+    return reconstruct_surface(
+        sections, boxes, method=method, smooth=smooth, extend_to_box=extend_to_box,
+        hull=hull, interpolation=interpolation, carve=carve,
+    ).mesh
+
+
+class Surface(NamedTuple):
+    """A reconstruction and, when known for free, its occupancy at the voxel centres.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        Closed, outward union of the parts, world mm.
+    occupancy : Volume or None
+        Voxel centres inside the mesh on a sub-grid of the reference grid:
+        the sign of the field for ``method="sdf"``; None for lofted surfaces
+        and smoothed meshes (rasterize the mesh instead).
+    """
+
+    mesh: trimesh.Trimesh
+    occupancy: Volume | None
+
+
+def reconstruct_surface(
+    sections: CrossSections,
+    boxes: Sequence[Box],
+    *,
+    method: str = "loft",
+    smooth: bool = False,
+    extend_to_box: bool = True,
+    hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
+    carve: NDArray[np.bool_] | None = None,
+) -> Surface:
+    """As :func:`reconstruct_parts`, with the occupancy when the method gives it for free.
+
+    Parameters and errors as :func:`reconstruct_parts`.
+    """
     method = _check_method(method, METHODS)
     boxes = list(boxes)
     if not boxes:
@@ -227,6 +274,7 @@ def reconstruct_parts(
         _check_inputs(sections, box)
     if carve is not None and method != "sdf":
         raise OptionError("an implicit carve applies to method 'sdf' only; carve the mesh instead")
+    occupancy = None
     if method == "hybrid":
         solids = [
             _hybrid_solid(sections, b, extend_to_box=extend_to_box, hull=hull,
@@ -250,12 +298,13 @@ def reconstruct_parts(
         check_closed(mesh, "reconstruct_parts")
     else:
         # Implicit union: the minimum of the parts' signed distances, meshed once.
-        mesh = sdf_parts_mesh(sections, boxes, extend_to_box=extend_to_box, hull=hull,
-                              interpolation=interpolation, carve=carve)
+        surface = sdf_parts_surface(sections, boxes, extend_to_box=extend_to_box, hull=hull,
+                                    interpolation=interpolation, carve=carve)
+        mesh, occupancy = surface.mesh, surface.occupancy
     logger.debug("merged %d parts (%s): %d faces", len(boxes), method, len(mesh.faces))
     if smooth:
-        mesh = taubin_smooth(mesh)
-    return mesh
+        mesh, occupancy = taubin_smooth(mesh), None
+    return Surface(mesh, occupancy)
 
 
 def _hybrid_solid(

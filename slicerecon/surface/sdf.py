@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 import trimesh
@@ -58,6 +59,8 @@ __all__ = [
     "sdf_interpolate",
     "sdf_mesh",
     "sdf_parts_mesh",
+    "sdf_parts_surface",
+    "SdfSurface",
 ]
 
 logger = logging.getLogger(__name__)
@@ -261,13 +264,7 @@ def _fill_between(
                 if depths:
                     values[p] = np.full_like(values[p], max(depths))
         if not any(_is_empty(values[p]) for p in order):
-            from scipy.interpolate import PchipInterpolator
-
-            inside = np.flatnonzero((samples >= w[order[0]]) & (samples <= w[order[-1]]))
-            if inside.size:
-                stack = np.stack([values[p] for p in order]).astype(np.float64)
-                curve = PchipInterpolator(w[order], stack, axis=0)
-                field[inside] = curve(samples[inside]).astype(np.float32)
+            _pchip_fill(field, samples, w[order], [values[p] for p in order])
             return
     for p, q in zip(order[:-1], order[1:], strict=True):
         lower, upper = distances[p], distances[q]
@@ -283,6 +280,59 @@ def _fill_between(
             continue
         t = ((samples[sel] - w[p]) / (w[q] - w[p])).astype(np.float32)[:, None, None]
         field[sel] = (1.0 - t) * lower[None] + t * upper[None]
+
+
+def _pchip_slopes(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Fritsch-Carlson slopes of the monotone cubic through ``y`` at ``x`` (axis 0).
+
+    The same rule as scipy's ``PchipInterpolator``: zero where the secant
+    slopes change sign or one is zero, else their weighted harmonic mean; the
+    end slopes by the shape-preserving three-point formula (Moler,
+    *Numerical Computing with MATLAB*, 3.6). ``x`` of shape (P,), ``y`` of
+    shape (P, ...), P >= 3.
+    """
+    shape = (-1,) + (1,) * (y.ndim - 1)
+    h = np.diff(x).reshape(shape)
+    m = np.diff(y, axis=0) / h
+    d = np.zeros_like(y)
+    w1 = 2 * h[1:] + h[:-1]
+    w2 = h[1:] + 2 * h[:-1]
+    flat = (np.sign(m[1:]) != np.sign(m[:-1])) | (m[1:] == 0) | (m[:-1] == 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inner = (w1 + w2) / (w1 / m[:-1] + w2 / m[1:])
+    d[1:-1] = np.where(flat, 0.0, inner)
+    for end, (h0, h1, m0, m1) in ((0, (h[0], h[1], m[0], m[1])),
+                                   (-1, (h[-1], h[-2], m[-1], m[-2]))):
+        e = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+        e = np.where(np.sign(e) != np.sign(m0), 0.0, e)
+        e = np.where((np.sign(m0) != np.sign(m1)) & (np.abs(e) > 3 * np.abs(m0)), 3 * m0, e)
+        d[end] = e
+    return d
+
+
+def _pchip_fill(
+    field: NDArray[np.float32],
+    samples: NDArray[np.float64],
+    w: NDArray[np.float64],
+    planes: Sequence[NDArray[np.float32]],
+) -> None:
+    """The monotone cubic through the planes' distances, written into ``field`` layer by layer.
+
+    Cubic Hermite on each slab with :func:`_pchip_slopes`; the extra memory is
+    two stacks of the planes (values and slopes), never the whole grid.
+    """
+    y = np.stack(planes).astype(np.float64)
+    slopes = _pchip_slopes(w, y)
+    inside = np.flatnonzero((samples >= w[0]) & (samples <= w[-1]))
+    slab = np.clip(np.searchsorted(w, samples[inside], side="right") - 1, 0, len(w) - 2)
+    for k, i in zip(inside, slab, strict=True):
+        h = w[i + 1] - w[i]
+        t = (samples[k] - w[i]) / h
+        t2, t3 = t * t, t * t * t
+        h00, h10 = 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t
+        h01, h11 = -2 * t3 + 3 * t2, t3 - t2
+        field[k] = (h00 * y[i] + h10 * h * slopes[i] + h01 * y[i + 1]
+                    + h11 * h * slopes[i + 1])
 
 
 def _is_empty(distance: NDArray[np.float32]) -> bool:
@@ -480,6 +530,23 @@ def sdf_parts_mesh(
     EmptyMaskError
         If no part holds any inside sample.
     """
+    union, lo, _ = _parts_union(sections, boxes, upsample=upsample,
+                                extend_to_box=extend_to_box, hull=hull,
+                                interpolation=interpolation, carve=carve)
+    return _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample)
+
+
+def _parts_union(
+    sections: CrossSections,
+    boxes: Sequence[Box],
+    *,
+    upsample: int,
+    extend_to_box: bool,
+    hull: NDArray[np.bool_] | None,
+    interpolation: str,
+    carve: NDArray[np.bool_] | None,
+) -> tuple[NDArray[np.float32], tuple[int, int, int], tuple[int, int, int]]:
+    """The minimum of the parts' padded fields (carved), its box ``[lo, hi)`` on the grid."""
     upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
     regions = [_grid_box(sections, b) for b in boxes]
     if not regions:
@@ -512,7 +579,53 @@ def sdf_parts_mesh(
                 "the reconstruction lies entirely outside the projections' visual hull"
             )
     logger.debug("merged %d SDF parts on a %s grid", len(regions), tuple(shape))
-    return _mesh(sections, np.moveaxis(union, axis, 0), lo, upsample)
+    return union, lo, hi
+
+
+class SdfSurface(NamedTuple):
+    """A meshed signed-distance reconstruction and its occupancy at the voxel centres.
+
+    Attributes
+    ----------
+    mesh : trimesh.Trimesh
+        Watertight, outward surface, world mm.
+    occupancy : Volume or None
+        The voxel centres inside the surface, on the sub-grid of the reference
+        grid that the parts' boxes span (exactly the samples of negative field
+        the marching cubes separated from the others); None when the field was
+        sampled finer than the grid (``upsample > 1``).
+    """
+
+    mesh: trimesh.Trimesh
+    occupancy: Volume | None
+
+
+def sdf_parts_surface(
+    sections: CrossSections,
+    boxes: Sequence[Box],
+    *,
+    upsample: int = 1,
+    extend_to_box: bool = True,
+    hull: NDArray[np.bool_] | None = None,
+    interpolation: str = "linear",
+    carve: NDArray[np.bool_] | None = None,
+) -> SdfSurface:
+    """As :func:`sdf_parts_mesh`, also returning the occupancy the mesh encloses.
+
+    The occupancy comes free with the field, so a metric of the reconstruction
+    on the reference grid needs no rasterization of the mesh.
+    """
+    union, lo, hi = _parts_union(sections, boxes, upsample=upsample,
+                                 extend_to_box=extend_to_box, hull=hull,
+                                 interpolation=interpolation, carve=carve)
+    occupancy = None
+    if upsample == 1:
+        inside = union[1:-1, 1:-1, 1:-1] < 0
+        affine = sections.affine.copy()
+        affine[:3, 3] = sections.affine[:3, :3] @ np.asarray(lo, dtype=np.float64) + affine[:3, 3]
+        occupancy = Volume(inside, affine)
+    mesh = _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample)
+    return SdfSurface(mesh, occupancy)
 
 
 HULL_LEVEL = 0.49
