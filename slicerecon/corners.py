@@ -7,11 +7,16 @@ rectangle covering pixels ``lo..hi-1`` has its corners at ``lo - 0.5`` and
 ``hi - 0.5``. Every returned coordinate is therefore a half-integer.
 
 The corner response is the Harris measure ``det(M) - k trace(M)^2`` of the
-Gaussian-weighted structure tensor ``M``
-(:func:`skimage.feature.corner_harris` on the zero-padded silhouette),
-non-maximum suppressed by :func:`skimage.feature.corner_peaks`. Each peak pixel
-is then snapped to the nearest lattice vertex where the silhouette boundary
-turns (see :func:`harris_corners`).
+Gaussian-weighted structure tensor ``M`` of the zero-padded silhouette (Harris
+& Stephens 1988), computed as scikit-image's ``corner_harris`` does it (Sobel
+derivatives, a Gaussian window truncated at 4 sigma, zero outside the image:
+:func:`harris_response` gives the same values), and non-maximum suppressed as
+its ``corner_peaks`` does (:func:`skimage.feature.peak.peak_local_max`, then
+peaks closer than ``min_distance`` to a stronger one dropped). The response is
+written here so that the planner does not import ``skimage.feature`` (which
+loads ``scipy.stats``, about a second per process). Each peak pixel is then
+snapped to the nearest lattice vertex where the silhouette boundary turns (see
+:func:`harris_corners`).
 """
 
 from __future__ import annotations
@@ -25,12 +30,76 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import InputError, OptionError
 from .sections import Projections
 
-__all__ = ["harris_corners", "projection_corners", "pad_corners", "reference_response"]
+__all__ = [
+    "harris_corners",
+    "harris_response",
+    "pad_corners",
+    "projection_corners",
+    "reference_response",
+]
 
 logger = logging.getLogger(__name__)
 
 _SNAP_RADIUS = 1.5
 """Largest distance (pixels, per coordinate) from a peak pixel centre to its snapped vertex."""
+
+
+def harris_response(image: NDArray[np.float64], *, k: float, sigma: float) -> NDArray[np.float64]:
+    """Harris corner response ``det(M) - k trace(M)^2`` of a grey image.
+
+    Parameters
+    ----------
+    image : ndarray of shape (M, N), float
+        The image; values beyond its border count as 0.
+    k : float
+        Harris sensitivity.
+    sigma : float
+        Standard deviation of the Gaussian window of the structure tensor, pixels.
+
+    Returns
+    -------
+    ndarray of shape (M, N), float64
+        The response per pixel; equal to ``skimage.feature.corner_harris(image,
+        method="k", k=k, sigma=sigma)``.
+    """
+    from scipy import ndimage
+
+    rows = ndimage.sobel(image, axis=0, mode="constant", cval=0.0)
+    cols = ndimage.sobel(image, axis=1, mode="constant", cval=0.0)
+
+    def window(values: NDArray[np.float64]) -> NDArray[np.float64]:
+        return ndimage.gaussian_filter(values, sigma, mode="constant", cval=0.0, truncate=4.0)
+
+    arr, arc, acc = window(rows * rows), window(rows * cols), window(cols * cols)
+    return arr * acc - arc**2 - k * (arr + acc) ** 2
+
+
+def _corner_peaks(
+    response: NDArray[np.float64], *, min_distance: int, threshold_abs: float, num_peaks: float
+) -> NDArray[np.int64]:
+    """Peak pixels of a response, as scikit-image's ``corner_peaks`` finds them.
+
+    Local maxima above ``threshold_abs`` at least ``min_distance`` apart
+    (:func:`skimage.feature.peak.peak_local_max`), strongest first; then any
+    peak within ``min_distance`` of an earlier kept one is dropped, and at
+    most ``num_peaks`` remain.
+    """
+    from scipy.spatial import cKDTree
+    from skimage.feature.peak import peak_local_max
+
+    coords = peak_local_max(response, min_distance=min_distance, threshold_abs=threshold_abs,
+                            threshold_rel=None, exclude_border=False, num_peaks=np.inf)
+    if len(coords):
+        tree = cKDTree(coords)
+        rejected: set[int] = set()
+        for idx, point in enumerate(coords):
+            if idx not in rejected:
+                near = tree.query_ball_point(point, r=min_distance, p=np.inf)
+                rejected.update(i for i in near if i != idx)
+        coords = np.delete(coords, tuple(rejected), axis=0)
+        if np.isfinite(num_peaks):
+            coords = coords[: int(num_peaks)]
+    return np.asarray(coords, dtype=np.int64)
 
 
 @lru_cache(maxsize=32)
@@ -53,12 +122,10 @@ def reference_response(k: float, sigma: float) -> float:
     float
         The peak response of a quarter-plane silhouette.
     """
-    from skimage.feature import corner_harris
-
     half = int(np.ceil(4 * sigma)) + 4
     image = np.zeros((2 * half + 1, 2 * half + 1))
     image[half:, half:] = 1.0
-    return float(corner_harris(image, method="k", k=k, sigma=sigma).max())
+    return float(harris_response(image, k=k, sigma=sigma).max())
 
 
 def _check_image(image: ArrayLike) -> NDArray[np.bool_]:
@@ -123,7 +190,7 @@ def harris_corners(
         maximum: a silhouette without corners (a disk) yields none.
     min_distance : int, optional
         Minimum distance between response peaks, pixels
-        (:func:`skimage.feature.corner_peaks`).
+        (as ``skimage.feature.corner_peaks``).
     max_corners : int, optional
         Keep at most this many corners, the strongest responses first.
         ``None`` keeps all.
@@ -144,8 +211,6 @@ def harris_corners(
     pixels, then the lexicographically smallest. A peak with no such vertex
     nearby is snapped to the adjacent vertex with the largest mean response.
     """
-    from skimage.feature import corner_harris, corner_peaks
-
     img = _check_image(image)
     if not k > 0:
         raise OptionError(f"k must be > 0 (got {k})")
@@ -162,14 +227,12 @@ def harris_corners(
 
     pad = int(np.ceil(3 * sigma)) + 2
     padded = np.pad(img, pad)
-    response = corner_harris(padded.astype(np.float64), method="k", k=k, sigma=sigma)
+    response = harris_response(padded.astype(np.float64), k=k, sigma=sigma)
     threshold = threshold_rel * reference_response(float(k), float(sigma))
-    peaks = corner_peaks(
+    peaks = _corner_peaks(
         response,
         min_distance=int(min_distance),
         threshold_abs=max(threshold, np.finfo(np.float64).tiny),
-        threshold_rel=None,
-        exclude_border=False,
         num_peaks=np.inf if max_corners is None else int(max_corners),
     )
     if peaks.size == 0:
