@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -301,6 +302,37 @@ def prepare_inputs(
     return sections, proj, truth
 
 
+MAX_AXIS_UPSAMPLE = 9
+"""Largest number of signed-distance samples per voxel along the section axis."""
+
+
+def axis_upsample(sections: CrossSections) -> int:
+    """Field samples per voxel along the section axis for the ``sdf`` surface.
+
+    A grid whose slice step is the gap between planes (contours read on their
+    own, or an RTSTRUCT on a slice axis of its own) has no voxel layer between
+    two planes, so a field sampled per voxel could only be interpolated
+    linearly, by marching cubes, between planes. When the median gap holds
+    fewer than four voxel layers, the axis is sampled about as finely as the
+    in-plane pixels instead (an odd factor, so that the planes stay on
+    samples; at most :data:`MAX_AXIS_UPSAMPLE`). Dense masks sampled at a few
+    planes keep one sample per voxel.
+
+    Returns
+    -------
+    int
+        Odd, in ``[1, MAX_AXIS_UPSAMPLE]``.
+    """
+    if sections.n_planes < 2 or float(np.median(np.diff(sections.indices))) >= 4.0:
+        return 1
+    spacing = sections.spacing
+    a, b = sections.plane_axes
+    ratio = float(spacing[sections.axis] / min(spacing[a], spacing[b]))
+    factor = max(1, math.ceil(ratio - 1e-6))
+    factor += 1 - factor % 2  # odd: the planes stay on samples
+    return int(min(factor, MAX_AXIS_UPSAMPLE))
+
+
 def planning_occupancy(sections: CrossSections, projections: Projections) -> np.ndarray:
     """The 3-D occupancy a planner sees: the projections' visual hull, exact on the planes.
 
@@ -402,6 +434,7 @@ def reconstruct(
         surface = reconstruct_surface(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
             hull=guide, interpolation=interpolation, carve=hull if implicit_carve else None,
+            upsample=axis_upsample(sections) if method == "sdf" else 1,
         )
         mesh, occupancy = surface.mesh, surface.occupancy
     if carve and not implicit_carve:

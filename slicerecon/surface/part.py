@@ -196,6 +196,7 @@ def reconstruct_parts(
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
     carve: NDArray[np.bool_] | None = None,
+    upsample: int = 1,
 ) -> trimesh.Trimesh:
     """Reconstruct every part and merge them into one watertight mesh.
 
@@ -215,6 +216,9 @@ def reconstruct_parts(
     carve : ndarray of shape sections.grid_shape, bool, optional
         ``method="sdf"`` only: intersect the union with this visual hull in the
         implicit domain (:func:`~slicerecon.surface.sdf.sdf_parts_mesh`).
+    upsample : int, default 1
+        ``method="sdf"`` only: field samples per voxel along the section axis
+        (:func:`~slicerecon.surface.sdf.sdf_field`).
 
     Returns
     -------
@@ -230,7 +234,7 @@ def reconstruct_parts(
     """
     return reconstruct_surface(
         sections, boxes, method=method, smooth=smooth, extend_to_box=extend_to_box,
-        hull=hull, interpolation=interpolation, carve=carve,
+        hull=hull, interpolation=interpolation, carve=carve, upsample=upsample,
     ).mesh
 
 
@@ -261,6 +265,7 @@ def reconstruct_surface(
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
     carve: NDArray[np.bool_] | None = None,
+    upsample: int = 1,
 ) -> Surface:
     """As :func:`reconstruct_parts`, with the occupancy when the method gives it for free.
 
@@ -299,7 +304,8 @@ def reconstruct_surface(
     else:
         # Implicit union: the minimum of the parts' signed distances, meshed once.
         surface = sdf_parts_surface(sections, boxes, extend_to_box=extend_to_box, hull=hull,
-                                    interpolation=interpolation, carve=carve)
+                                    interpolation=interpolation, carve=carve,
+                                    upsample=upsample)
         mesh, occupancy = surface.mesh, surface.occupancy
     logger.debug("merged %d parts (%s): %d faces", len(boxes), method, len(mesh.faces))
     if smooth:

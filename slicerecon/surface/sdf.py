@@ -512,11 +512,15 @@ def sdf_parts_mesh(
     upsample, extend_to_box, hull, interpolation
         As for :func:`sdf_field`.
     carve : ndarray of shape sections.grid_shape, bool, optional
-        A visual hull to intersect the union with *implicitly*: the field is
-        the maximum of the parts' union and the hull's own level function
-        (``HULL_LEVEL`` of a voxel inside, as the mesh carve of
-        :func:`slicerecon.surface.carve.carve` places it), so one marching
-        cubes gives the carved surface, with no mesh Boolean.
+        A visual hull to intersect the union with *implicitly*: at every
+        sample outside the hull the field is raised to at least
+        ``HULL_LEVEL`` of a voxel (positive, outside), so one marching cubes
+        gives the carved surface, with no mesh Boolean. Samples inside the
+        hull keep their values, so where the surface already stops at the
+        hull (the end caps) it is not moved; where the hull cuts, the cut lies
+        between an inside sample and the outside one, nearer the outside one
+        the deeper the inside sample (it never cuts into the hull). The
+        samples' occupancy is exactly the intersection.
 
     Returns
     -------
@@ -546,7 +550,7 @@ def _parts_union(
     interpolation: str,
     carve: NDArray[np.bool_] | None,
 ) -> tuple[NDArray[np.float32], tuple[int, int, int], tuple[int, int, int]]:
-    """The minimum of the parts' padded fields (carved), its box ``[lo, hi)`` on the grid."""
+    """The union of the parts' padded fields (carved), its box ``[lo, hi)`` on the grid."""
     upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
     regions = [_grid_box(sections, b) for b in boxes]
     if not regions:
@@ -557,23 +561,40 @@ def _parts_union(
     scale = np.ones(3, dtype=np.int64)
     scale[axis] = upsample
     shape = [(h - low) * s + 2 for low, h, s in zip(lo, hi, scale, strict=True)]
-    union: NDArray[np.float32] | None = None
+    # Inside the parts' boxes the union is the minimum of the parts' fields.
+    # Beyond every box, where only the mirror padding reaches, it is the
+    # largest padding value: there a neighbour's corner padding (small near
+    # its own face) must not pull the surface beyond another part's face.
+    inner: NDArray[np.float32] | None = None
+    covered = np.zeros(shape, dtype=bool)
+    padding = np.full(shape, -1.0, dtype=np.float32)
+    far = np.float32(0.0)
     for region in regions:
         part = _box_field(sections, region, bounded=True, upsample=upsample,
                           extend_to_box=extend_to_box, hull=hull, interpolation=interpolation)
         if not np.any(part < 0):
             continue
+        moved = np.moveaxis(part, 0, axis)
+        if inner is None:
+            inner = np.full(shape, np.float32(np.inf), dtype=np.float32)
+        far = max(far, np.float32(np.abs(part).max()))
+        start = [(r - low) * s + 1 for r, low, s in zip(region.lo, lo, scale, strict=True)]
+        core = tuple(slice(s0, s0 + n) for s0, n in zip(start, moved.shape, strict=True))
+        np.minimum(inner[core], moved, out=inner[core])
+        covered[core] = True
         padded = np.moveaxis(_mirror_pad(part), 0, axis)
-        if union is None:
-            union = np.full(shape, np.float32(padded.max()), dtype=np.float32)
-        start = [(r - low) * s for r, low, s in zip(region.lo, lo, scale, strict=True)]
-        where = tuple(slice(s0, s0 + n) for s0, n in zip(start, padded.shape, strict=True))
-        np.minimum(union[where], padded, out=union[where])
-    if union is None:
+        where = tuple(slice(s0 - 1, s0 - 1 + n)
+                      for s0, n in zip(start, padded.shape, strict=True))
+        np.maximum(padding[where], padded, out=padding[where])
+    if inner is None:
         raise EmptyMaskError("no part's box holds any section foreground")
+    union = np.where(covered, inner, np.where(padding >= 0, padding, far))
+    del inner, padding, covered
     if carve is not None:
         check_hull(carve, sections.grid_shape)
-        np.maximum(union, _hull_level(sections, carve, lo, hi, upsample), out=union)
+        level = _hull_level(sections, carve, lo, hi, upsample)
+        outside = level > 0
+        np.maximum(union, level, out=union, where=outside)
         if not np.any(union < 0):
             raise EmptyMaskError(
                 "the reconstruction lies entirely outside the projections' visual hull"
