@@ -234,7 +234,8 @@ def prepare_inputs(
     one comma-separated string (:mod:`slicerecon.io.projections`).
 
     The grid the reconstruction will work on (the cropped mask, or the
-    sections' grid) is checked against ``memory_budget_gb``, GiB
+    sections' grid, refined along the axis as :func:`axis_upsample` says) is
+    checked against ``memory_budget_gb``, GiB
     (:func:`slicerecon.io.limits.check_grid`), before anything is allocated on it.
 
     Returns
@@ -282,8 +283,9 @@ def prepare_inputs(
         if slices is not None or every is not None:
             raise OptionError("--slices/--every apply to dense masks; this input is already sparse")
     sections.require_foreground()
-    check_grid(sections.grid_shape, what="the reconstruction grid",
-               memory_budget_gb=memory_budget_gb)
+    samples = list(sections.grid_shape)
+    samples[sections.axis] *= axis_upsample(sections)  # the sdf surface's field samples
+    check_grid(samples, what="the reconstruction grid", memory_budget_gb=memory_budget_gb)
     if files:
         from .io.projections import read_projection_files
 

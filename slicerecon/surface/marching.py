@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Volume, check_affine
 
-__all__ = ["field_to_mesh", "signed_volume", "volume_to_mesh"]
+__all__ = ["field_to_mesh", "march_field", "signed_volume", "volume_to_mesh"]
 
 logger = logging.getLogger(__name__)
 
@@ -259,6 +259,23 @@ def signed_volume(vertices: NDArray[np.float64], faces: NDArray[np.integer]) -> 
     return float((a[:, 0] * cross_x + a[:, 1] * cross_y + a[:, 2] * cross_z).sum() / 6.0)
 
 
+def march_field(field: NDArray[np.float32], affine: NDArray[np.float64]) -> trimesh.Trimesh:
+    """Marching cubes on a ready signed-distance field: the fast path of the sdf surface.
+
+    ``field`` (negative inside) must be finite, positive on every border sample
+    and never exactly 0, as :func:`slicerecon.surface.sdf.sdf_mesh` makes it;
+    then no padding, flipping or copying is needed. :func:`field_to_mesh` is
+    the checked, general entry point.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Closed, outward-oriented mesh, world mm.
+    """
+    return _march(np.asarray(field, dtype=np.float32), check_affine(affine), level=0.0,
+                  inside_high=False, pad_value=0.0, step=1, pad=False)
+
+
 def _check_step(step_size: int) -> int:
     if isinstance(step_size, bool) or not isinstance(step_size, int | np.integer):
         raise OptionError(f"step_size must be an integer (got {step_size!r})")
@@ -277,25 +294,32 @@ def _march(
     inside_high: bool,
     pad_value: float,
     step: int,
+    pad: bool = True,
 ) -> trimesh.Trimesh:
     """Marching cubes on ``field`` padded with ``pad_value``; vertices mapped to world mm.
 
-    ``field`` is inside where it exceeds ``level`` when ``inside_high``.
+    ``field`` is inside where it exceeds ``level`` when ``inside_high`` (else
+    where it is below). ``pad=False``: the field is already closed (outside on
+    every border sample) and is used as it is.
     """
     from skimage.measure import marching_cubes
 
-    # One outside layer before the grid; after it, enough layers that the last
-    # sample of a ``step``-strided lattice (0, step, 2 step, ...) lies in the
-    # padding: skimage drops a partial last cell, which would leave holes.
-    after = [step - (n % step) for n in field.shape]
-    padded = np.pad(
-        field,
-        [(1, a) for a in after],
-        mode="constant",
-        constant_values=pad_value,
-    )
+    if pad:
+        # One outside layer before the grid; after it, enough layers that the last
+        # sample of a ``step``-strided lattice (0, step, 2 step, ...) lies in the
+        # padding: skimage drops a partial last cell, which would leave holes.
+        after = [step - (n % step) for n in field.shape]
+        padded = np.pad(
+            field,
+            [(1, a) for a in after],
+            mode="constant",
+            constant_values=pad_value,
+        )
+    else:
+        padded = field
     verts_vox, faces, _, _ = marching_cubes(padded, level, method="lewiner", step_size=step)
-    verts_vox -= 1.0  # undo the leading pad: back to the field's voxel indices
+    if pad:
+        verts_vox -= 1.0  # undo the leading pad: back to the field's voxel indices
     verts = verts_vox @ affine[:3, :3].T + affine[:3, 3]
     # skimage winds faces around the high side with gradient_direction="descent":
     # normals point towards higher values. Flip when "high" is inside, and once

@@ -50,7 +50,7 @@ from scipy import ndimage
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Box, CrossSections, Volume
 from .extension import LayerMap, check_hull, extension_maps, interpolate_maps
-from .marching import field_to_mesh
+from .marching import march_field
 
 __all__ = [
     "INTERPOLATIONS",
@@ -565,6 +565,14 @@ def _parts_union(
     # Beyond every box, where only the mirror padding reaches, it is the
     # largest padding value: there a neighbour's corner padding (small near
     # its own face) must not pull the surface beyond another part's face.
+    if len(regions) == 1:
+        part = _box_field(sections, regions[0], bounded=True, upsample=upsample,
+                          extend_to_box=extend_to_box, hull=hull, interpolation=interpolation)
+        if not np.any(part < 0):
+            raise EmptyMaskError("no part's box holds any section foreground")
+        union = np.ascontiguousarray(np.moveaxis(_mirror_pad(part), 0, axis))
+        del part
+        return _carve_union(sections, union, lo, hi, upsample, carve), lo, hi
     inner: NDArray[np.float32] | None = None
     covered = np.zeros(shape, dtype=bool)
     padding = np.full(shape, -1.0, dtype=np.float32)
@@ -590,17 +598,30 @@ def _parts_union(
         raise EmptyMaskError("no part's box holds any section foreground")
     union = np.where(covered, inner, np.where(padding >= 0, padding, far))
     del inner, padding, covered
+    logger.debug("merged %d SDF parts on a %s grid", len(regions), tuple(shape))
+    return _carve_union(sections, union, lo, hi, upsample, carve), lo, hi
+
+
+def _carve_union(
+    sections: CrossSections,
+    union: NDArray[np.float32],
+    lo: tuple[int, int, int],
+    hi: tuple[int, int, int],
+    upsample: int,
+    carve: NDArray[np.bool_] | None,
+) -> NDArray[np.float32]:
+    """Raise the samples outside the hull to the hull level (the implicit carve), in place."""
     if carve is not None:
         check_hull(carve, sections.grid_shape)
-        level = _hull_level(sections, carve, lo, hi, upsample)
-        outside = level > 0
+        outside = ~_hull_inside(sections, carve, lo, hi, upsample)
+        level = np.float32(HULL_LEVEL * float(np.min(sections.spacing)))
         np.maximum(union, level, out=union, where=outside)
+        del outside
         if not np.any(union < 0):
             raise EmptyMaskError(
                 "the reconstruction lies entirely outside the projections' visual hull"
             )
-    logger.debug("merged %d SDF parts on a %s grid", len(regions), tuple(shape))
-    return union, lo, hi
+    return union
 
 
 class SdfSurface(NamedTuple):
@@ -655,17 +676,15 @@ outside voxel centre: 0.49 of the way from the outside one, keeping 1 % of a
 voxel more than the hull (the level of :data:`slicerecon.surface.carve.HULL_LEVEL`)."""
 
 
-def _hull_level(
+def _hull_inside(
     sections: CrossSections,
     hull: NDArray[np.bool_],
     lo: tuple[int, ...],
     hi: tuple[int, ...],
     upsample: int,
-) -> NDArray[np.float32]:
-    """The hull as a level function on the padded samples of the box ``[lo, hi)``.
+) -> NDArray[np.bool_]:
+    """The hull on the padded samples of the box ``[lo, hi)``; beyond the grid is outside.
 
-    ``(HULL_LEVEL - inside) * step`` in mm-like units (step: the smallest voxel
-    spacing), negative inside the hull; samples beyond the grid are outside.
     Along the section axis each voxel's value is repeated ``upsample`` times.
     """
     axis = sections.axis
@@ -681,8 +700,7 @@ def _hull_level(
                          upsample, axis=axis)
         edge = [np.take(inside, [0], axis=axis), np.take(inside, [-1], axis=axis)]
         inside = np.concatenate([edge[0], core, edge[1]], axis=axis)
-    step = float(np.min(sections.spacing))
-    return ((HULL_LEVEL - inside.astype(np.float32)) * np.float32(step)).astype(np.float32)
+    return inside
 
 
 def _mirror_pad(field: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -707,6 +725,9 @@ def _mesh(
     affine = sections.affine @ _to_index(sections, (lo[0], lo[1], lo[2]), upsample, pad=1)
     step = float(np.min(np.linalg.norm(affine[:3, :3], axis=0)))
     nudge = np.float32(_LEVEL_GAP * step)
-    near = np.abs(field) < nudge
-    field[near] = np.where(field[near] < 0, -nudge, nudge)
-    return field_to_mesh(field, affine, level=0.0, inside="negative")
+    near = np.flatnonzero(np.abs(field) < nudge)
+    flat = field.reshape(-1)
+    flat[near] = np.where(flat[near] < 0, -nudge, nudge)
+    # The padded field is finite, closed (positive on every border sample) and
+    # off its zero level: marching cubes runs on it as it is, without copies.
+    return march_field(field, affine)
