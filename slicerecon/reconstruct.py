@@ -420,7 +420,7 @@ def reconstruct(
 
     with _timed(timings, "plan"):
         hull = visual_hull(projections, sections.grid_shape)
-        occupancy = _exact_on_planes(hull, sections)
+        occupancy = hull if planner == "none" else _exact_on_planes(hull, sections)
 
         guide = hull if planner != "none" else None
         # No planner's choice at inference depends on the reward's reconstruction

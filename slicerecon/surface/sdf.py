@@ -617,7 +617,7 @@ def _carve_union(
         level = np.float32(HULL_LEVEL * float(np.min(sections.spacing)))
         np.maximum(union, level, out=union, where=outside)
         del outside
-        if not np.any(union < 0):
+        if not union.min() < 0:
             raise EmptyMaskError(
                 "the reconstruction lies entirely outside the projections' visual hull"
             )
@@ -666,7 +666,8 @@ def sdf_parts_surface(
         affine = sections.affine.copy()
         affine[:3, 3] = sections.affine[:3, :3] @ np.asarray(lo, dtype=np.float64) + affine[:3, 3]
         occupancy = Volume(inside, affine)
-    mesh = _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample)
+    mesh = _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample,
+                 checked=occupancy is not None)
     return SdfSurface(mesh, occupancy)
 
 
@@ -711,15 +712,17 @@ def _mirror_pad(field: NDArray[np.float32]) -> NDArray[np.float32]:
 
 
 def _mesh(
-    sections: CrossSections, padded: NDArray[np.float32], lo: tuple[int, ...], upsample: int
+    sections: CrossSections, padded: NDArray[np.float32], lo: tuple[int, ...], upsample: int,
+    *, checked: bool = False,
 ) -> trimesh.Trimesh:
     """Mesh a padded, axis-first field whose box starts at voxel ``lo``.
 
     Samples closer to the zero level than :data:`_LEVEL_GAP` sample spacings
     are pushed off it first: a sample on the level puts vertices of several
-    triangles on one grid point and pinches the mesh.
+    triangles on one grid point and pinches the mesh. ``checked``: the caller
+    already knows that some sample is inside.
     """
-    if not np.any(padded < 0):
+    if not checked and not np.any(padded < 0):
         raise EmptyMaskError("no section foreground in the sampled region: nothing to mesh")
     field = np.ascontiguousarray(np.moveaxis(padded, 0, sections.axis))
     affine = sections.affine @ _to_index(sections, (lo[0], lo[1], lo[2]), upsample, pad=1)
