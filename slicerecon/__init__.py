@@ -20,9 +20,20 @@ from .errors import (
     OptionError,
     SlicereconError,
 )
-from .sections import AXIS_NAMES, Box, Contour, CrossSections, Projection, Projections, Volume
 
 __version__ = "0.1.0"
+
+_SECTIONS = ("AXIS_NAMES", "Box", "Contour", "CrossSections", "Projection", "Projections",
+             "Volume")
+
+
+def __getattr__(name: str) -> object:
+    """The data model, imported on first use so that ``slicerecon --help`` needs no numpy."""
+    if name in _SECTIONS:
+        from . import sections
+
+        return getattr(sections, name)
+    raise AttributeError(f"module 'slicerecon' has no attribute {name!r}")
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 
