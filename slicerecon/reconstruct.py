@@ -342,7 +342,7 @@ def planning_occupancy(sections: CrossSections, projections: Projections) -> np.
     -------
     ndarray of shape ``sections.grid_shape``, bool
     """
-    from .partition.hull import visual_hull
+    from .sampling import visual_hull
 
     return _exact_on_planes(visual_hull(projections, sections.grid_shape), sections)
 
@@ -416,7 +416,7 @@ def reconstruct(
     if method in WHOLE_SHAPE_METHODS:
         return _reconstruct_whole_shape(sections, projections, method=method, smooth=smooth)
     timings: dict[str, float] = {}
-    from .partition.hull import visual_hull
+    from .sampling import visual_hull
 
     with _timed(timings, "plan"):
         hull = visual_hull(projections, sections.grid_shape)

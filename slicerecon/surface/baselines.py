@@ -545,7 +545,7 @@ def sdf_hull(
     EmptyMaskError
         If the interpolation and the hull do not overlap.
     """
-    from ..partition.hull import visual_hull
+    from ..sampling import visual_hull
 
     _check_sections(sections, "sdf-hull")
     proj = _check_projections(projections, sections)

@@ -9,10 +9,9 @@ import pytest
 
 from slicerecon.errors import EmptyMaskError, GeometryError, OptionError
 from slicerecon.partition import planner as planner_module
-from slicerecon.partition.hull import visual_hull
 from slicerecon.partition.planner import Plan, PlanPart, plan_partition, planner_names
 from slicerecon.partition.state import Part
-from slicerecon.sampling import projections_from_volume
+from slicerecon.sampling import projections_from_volume, visual_hull
 from slicerecon.sections import Box, Volume
 
 

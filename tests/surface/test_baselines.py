@@ -19,10 +19,9 @@ from slicerecon.cli import main
 from slicerecon.errors import DependencyError, GeometryError, InputError, OptionError
 from slicerecon.io.nifti import write_nifti
 from slicerecon.metrics import evaluate
-from slicerecon.partition.hull import visual_hull
 from slicerecon.rasterize import mesh_to_mask
 from slicerecon.reconstruct import METHODS, WHOLE_SHAPE_METHODS, prepare_inputs, reconstruct
-from slicerecon.sampling import dense_count
+from slicerecon.sampling import dense_count, visual_hull
 from slicerecon.sections import CrossSections
 from slicerecon.surface import baselines
 from slicerecon.surface.baselines import (

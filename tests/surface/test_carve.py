@@ -10,9 +10,8 @@ import trimesh
 
 from slicerecon.errors import EmptyMaskError
 from slicerecon.metrics import evaluate
-from slicerecon.partition.hull import visual_hull
 from slicerecon.reconstruct import prepare_inputs, reconstruct
-from slicerecon.sampling import projections_from_volume
+from slicerecon.sampling import projections_from_volume, visual_hull
 from slicerecon.sections import Volume
 from slicerecon.shapes import make_shape
 from slicerecon.surface.carve import carve

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from slicerecon.errors import GeometryError
-from slicerecon.partition.hull import visual_hull
 from slicerecon.rasterize import mesh_to_mask
-from slicerecon.sampling import projections_from_volume
+from slicerecon.sampling import projections_from_volume, visual_hull
 from slicerecon.sections import Box, CrossSections, Volume
 from slicerecon.surface.extension import LayerMap, extension_maps, interpolate_maps
 from slicerecon.surface.loft import loft_solid
