@@ -24,7 +24,9 @@ import trimesh
 
 from .errors import OptionError
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid
+from .partition.planner import PlannerEntry, planner_names, register_planner
 from .sections import AXIS_NAMES, CrossSections, Projections, Volume, axis_index
+from .surface.methods import method_entry, method_names
 
 __all__ = [
     "ReconstructConfig",
@@ -42,11 +44,24 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-PLANNERS = ("heuristic", "none", "policy")
-METHODS = ("hybrid", "loft", "sdf", "poisson", "sdf-hull", "itk-mci")
-WHOLE_SHAPE_METHODS = ("poisson", "sdf-hull", "itk-mci")
+def _plan_policy(occupancy: np.ndarray, **options: Any) -> Any:
+    """The learned planner, imported (with torch) only when it runs."""
+    from .policy.planner import plan_policy
+
+    return plan_policy(occupancy, **options)
+
+
+register_planner(PlannerEntry("policy", _plan_policy, needs_torch=True, takes_weights=True,
+                              summary="a trained actor (docs/policy.md)"))
+
+PLANNERS = tuple(planner_names())
+"""Planner names (the registry of :mod:`slicerecon.partition.planner`, with the
+learned planner registered here, the layer that composes partition and policy)."""
+METHODS = method_names()
+"""Surface method names (:data:`slicerecon.surface.methods.METHODS`)."""
+WHOLE_SHAPE_METHODS = method_names(per_part=False)
 """Methods that reconstruct all the sections at once, without a partition
-(:mod:`slicerecon.surface.baselines`); planners and carving apply to loft/sdf only."""
+(:mod:`slicerecon.surface.baselines`); planners and carving apply to the others only."""
 PROJECTION_SOURCES = ("auto", "gt", "sections")
 INTERPOLATIONS = ("pchip", "linear")
 MESH_FORMATS = ("stl", "ply", "obj")
@@ -411,9 +426,8 @@ def reconstruct(
 
     if planner not in PLANNERS:
         raise OptionError(f"planner must be one of {', '.join(PLANNERS)} (got {planner!r})")
-    if method not in METHODS:
-        raise OptionError(f"method must be one of {', '.join(METHODS)} (got {method!r})")
-    if method in WHOLE_SHAPE_METHODS:
+    entry = method_entry(method)
+    if not entry.per_part:
         return _reconstruct_whole_shape(sections, projections, method=method, smooth=smooth)
     timings: dict[str, float] = {}
     from .sampling import visual_hull
@@ -430,16 +444,16 @@ def reconstruct(
             occupancy, planner=planner, reconstruct=None, max_parts=max_parts, weights=weights,
             max_grid=PLANNING_MAX_GRID,
         )
-    implicit_carve = carve and method == "sdf" and not smooth
+    implicit_carve = carve and entry.implicit_carve and not smooth
     with _timed(timings, "surface"):
         boxes = [part.box for part in plan.parts]
         surface = reconstruct_surface(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
             hull=guide, interpolation=interpolation, carve=hull if implicit_carve else None,
-            upsample=axis_upsample(sections) if method == "sdf" else 1,
+            upsample=axis_upsample(sections) if entry.implicit_carve else 1,
         )
         mesh, occupancy = surface.mesh, surface.occupancy
-    if carve and not implicit_carve:
+    if carve and entry.carved and not implicit_carve:
         from .surface.carve import carve as carve_by_hull
 
         with _timed(timings, "carve"):

@@ -1,10 +1,11 @@
 """Partition planners: turn an occupancy grid into cuboid parts (``plan.json``).
 
-A planner is a function registered in :data:`PLANNERS`; :func:`plan_partition`
-looks it up by name. ``"none"`` is the paper's no-projection baseline (one part,
-the bounding box of the shape); ``"heuristic"`` runs the heuristic expert to the
-end of an episode; ``"policy"`` runs a trained actor (:mod:`slicerecon.policy.planner`,
-imported only when that planner is used, so the geometry never imports torch).
+A planner is a :class:`PlannerEntry` in :data:`PLANNERS` (a function and what it
+needs); :func:`plan_partition` looks it up by name. ``"none"`` is the paper's
+no-projection baseline (one part, the bounding box of the shape);
+``"heuristic"`` runs the heuristic expert to the end of an episode. The learned
+planner ``"policy"`` lives in :mod:`slicerecon.policy` and is registered by the
+layer above (:mod:`slicerecon.reconstruct`): this package imports nothing of it.
 """
 
 from __future__ import annotations
@@ -24,7 +25,16 @@ from .cuts import Cut
 from .heuristic import expert_cut
 from .state import Part, PartitionState, Reconstruct
 
-__all__ = ["PlanPart", "Plan", "PLANNERS", "plan_partition", "planner_names"]
+__all__ = [
+    "PLANNERS",
+    "Plan",
+    "PlanPart",
+    "PlannerEntry",
+    "plan_partition",
+    "planner_entry",
+    "planner_names",
+    "register_planner",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -183,34 +193,71 @@ def _plan_heuristic(
     return state.finish()
 
 
-def _plan_policy(
-    occupancy: NDArray[np.bool_],
-    *,
-    reconstruct: Reconstruct | None,
-    max_parts: int,
-    min_remaining: float,
-    lam: float,
-    weights: str | os.PathLike[str] | None = None,
-    device: str = "cpu",
-) -> list[Part]:
-    """The learned planner (:func:`slicerecon.policy.planner.plan_policy`).
+@dataclass(frozen=True)
+class PlannerEntry:
+    """A registered planner and what it needs.
 
-    The policy package (and torch) is imported only when this planner runs.
+    Attributes
+    ----------
+    name : str
+        The ``--planner`` value.
+    plan : callable
+        ``plan(occupancy, *, reconstruct, max_parts, min_remaining, lam, **options)
+        -> list of Part``.
+    partitions : bool
+        Whether it may make more than one part (False for the one-part baseline).
+    needs_torch : bool
+        Whether running it imports torch.
+    takes_weights : bool
+        Whether it accepts ``weights=`` (a trained actor).
+    summary : str
+        One line for help texts.
     """
-    from ..policy.planner import plan_policy
 
-    return plan_policy(
-        occupancy, reconstruct=reconstruct, max_parts=max_parts,
-        min_remaining=min_remaining, lam=lam, weights=weights, device=device,
-    )
+    name: str
+    plan: PlannerFn
+    partitions: bool = True
+    needs_torch: bool = False
+    takes_weights: bool = False
+    summary: str = ""
+
+    def __call__(self, occupancy: NDArray[np.bool_], **options: Any) -> list[Part]:
+        return self.plan(occupancy, **options)
 
 
-PLANNERS: dict[str, PlannerFn] = {
-    "none": _plan_none,
-    "heuristic": _plan_heuristic,
-    "policy": _plan_policy,
-}
-"""Registered planners by name. Register a new one with ``PLANNERS["name"] = function``."""
+PLANNERS: dict[str, PlannerEntry | PlannerFn] = {}
+"""Registered planners by name (:func:`register_planner`). Higher layers add
+their own: the learned planner is registered by :mod:`slicerecon.reconstruct`,
+so this module never knows the policy package."""
+
+
+def register_planner(entry: PlannerEntry) -> PlannerEntry:
+    """Add a planner to :data:`PLANNERS` (replacing one of the same name); return it."""
+    PLANNERS[entry.name] = entry
+    return entry
+
+
+def planner_entry(name: str) -> PlannerEntry:
+    """The registry entry of ``name`` (a bare function registered by hand is wrapped).
+
+    Raises
+    ------
+    OptionError
+        For an unknown name (the message lists the registered ones).
+    """
+    key = str(name).strip().lower()
+    if key not in PLANNERS:
+        raise OptionError(
+            f"unknown planner {name!r}; choose one of: {', '.join(planner_names())}"
+        )
+    found = PLANNERS[key]
+    return found if isinstance(found, PlannerEntry) else PlannerEntry(key, found)
+
+
+register_planner(PlannerEntry("none", _plan_none, partitions=False,
+                              summary="one part: the no-projection baseline"))
+register_planner(PlannerEntry("heuristic", _plan_heuristic,
+                              summary="the paper's heuristic expert"))
 
 
 def planner_names() -> list[str]:
@@ -271,14 +318,11 @@ def plan_partition(
     EmptyMaskError
         If the occupancy is empty.
     """
-    name = str(planner).strip().lower()
-    if name not in PLANNERS:
-        raise OptionError(
-            f"unknown planner {planner!r}; choose one of: {', '.join(planner_names())}"
-        )
+    entry = planner_entry(planner)
+    name = entry.name
     if isinstance(max_parts, bool) or int(max_parts) < 1:
         raise OptionError(f"max_parts must be >= 1 (got {max_parts})")
-    if weights is not None and name != "policy":
+    if weights is not None and not entry.takes_weights:
         raise OptionError(f"weights apply to the policy planner only (planner is {name!r})")
     occ = np.asarray(occupancy)
     options = {} if weights is None else {"weights": weights}
@@ -291,7 +335,7 @@ def plan_partition(
         if reconstruct is not None:
             raise OptionError("a reward reconstruction needs the full grid: give max_grid=None")
         coarse = _pool(occ.astype(bool, copy=False), factor)
-        parts = PLANNERS[name](
+        parts = entry(
             coarse, reconstruct=None, max_parts=int(max_parts),
             min_remaining=float(min_remaining), lam=float(lam), **options,
         )
@@ -300,7 +344,7 @@ def plan_partition(
         plan = Plan(name, refined, shape)  # type: ignore[arg-type]
         logger.info("planner %s on a %dx coarser grid: %d parts", name, factor, len(plan.parts))
         return plan
-    parts = PLANNERS[name](
+    parts = entry(
         occ,
         reconstruct=reconstruct,
         max_parts=int(max_parts),

@@ -75,6 +75,7 @@ from ..errors import DependencyError, EmptyMaskError, GeometryError, InputError,
 from ..sections import Box, CrossSections, Projections, Volume
 from .marching import field_to_mesh, volume_to_mesh
 from .merge import from_manifold, solid_from_arrays
+from .methods import method_entry, method_names
 from .sdf import sdf_field
 
 __all__ = [
@@ -689,11 +690,10 @@ def itk_mci(
 
 # -- registry ---------------------------------------------------------------------------
 BASELINES: dict[str, BaselineFn] = {
-    "poisson": poisson,
-    "sdf-hull": sdf_hull,
-    "itk-mci": itk_mci,
+    name: method_entry(name).load() for name in method_names(per_part=False)
 }
-"""Whole-shape methods by name (the ``--method`` values that bypass the planners)."""
+"""Whole-shape methods by name: the view of :data:`slicerecon.surface.methods.METHODS`
+on the ``--method`` values that bypass the planners."""
 
 
 def baseline_names() -> list[str]:

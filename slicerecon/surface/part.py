@@ -42,6 +42,7 @@ from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Box, CrossSections, Volume
 from .loft import correspondence_is_simple, loft_solid
 from .merge import check_closed, from_manifold, to_manifold, union_solids
+from .methods import method_names
 from .sdf import sdf_field, sdf_mesh, sdf_parts_surface
 from .smooth import taubin_smooth
 
@@ -57,8 +58,9 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-METHODS = ("hybrid", "loft", "sdf")
-"""Surface methods of :func:`reconstruct_part` and :func:`reconstruct_parts`."""
+METHODS = method_names(per_part=True)
+"""Surface methods of :func:`reconstruct_part` and :func:`reconstruct_parts` (the per-part
+entries of :data:`slicerecon.surface.methods.METHODS`)."""
 
 VOXEL_METHODS = ("sdf", "loft")
 """Methods of :func:`part_voxels` (``"sdf"`` is the cheap one)."""
