@@ -35,9 +35,6 @@ EXIT_INPUT = 2
 DEFAULT_MAX_MEMORY_GB = 8.0
 """Default of ``--max-memory``; equal to ``slicerecon.io.limits.DEFAULT_MEMORY_BUDGET_GB``
 (a test checks it), written here so that ``--help`` imports nothing heavy."""
-_state: dict[str, bool] = {"debug": False}
-
-
 @contextlib.contextmanager
 def _ctrl_c_after() -> Iterator[None]:
     """Deliver a Ctrl-C pressed inside the block when it is done.
@@ -74,7 +71,6 @@ def _root(
     ] = False,
 ) -> None:
     """Reconstruct watertight 3D surfaces from parallel planar cross-sections."""
-    _state["debug"] = debug
     if verbose or debug:
         from rich.logging import RichHandler
 
@@ -230,29 +226,35 @@ def run(
 ) -> None:
     """Reconstruct one input; write mesh, plan.json, metrics.json and preview.png."""
     with _ctrl_c_after():
-        from .reconstruct import ReconstructConfig, run_case
+        from .reconstruct import run_case
 
-    config = ReconstructConfig(
-        slices=slices,
-        every=every,
-        axis=axis,
-        planner=planner,
-        weights=None if weights is None else str(weights),
-        method=method,
-        interpolation=interpolation,
-        projections=projections,
-        smooth=smooth,
-        carve=carve,
-        mesh_format=mesh_format,
-        label=label,
-        roi=roi,
-        allow_irregular=allow_irregular,
-        max_memory_gb=max_memory,
-    )
+    config = _reconstruct_config(locals())
     with _StageProgress(enabled=not quiet) as progress:
         summary = run_case(input, outdir, config, ground_truth=gt, progress=progress)
     if not quiet:
         _print_summary(summary, outdir)
+
+
+def _reconstruct_config(options: dict[str, Any]) -> Any:
+    """The :class:`~slicerecon.reconstruct.ReconstructConfig` of a command's options.
+
+    The one place the command line turns its shared options (``run`` and
+    ``batch`` take the same ones) into the library's config: each option
+    fills the field of its name (``--max-memory`` fills ``max_memory_gb``,
+    paths become strings); the other options of the command are ignored.
+    """
+    from dataclasses import fields
+
+    from .reconstruct import ReconstructConfig
+
+    names = {f.name for f in fields(ReconstructConfig)}
+    renamed = {"max_memory": "max_memory_gb"}
+    values = {}
+    for key, value in options.items():
+        name = renamed.get(key, key)
+        if name in names:
+            values[name] = str(value) if isinstance(value, Path) else value
+    return ReconstructConfig(**values)
 
 
 class _StageProgress:
@@ -381,25 +383,8 @@ def batch(
     with _ctrl_c_after():
         from pipelines.batch import run_batch
 
-        from .reconstruct import ReconstructConfig
 
-    config = ReconstructConfig(
-        slices=slices,
-        every=every,
-        axis=axis,
-        planner=planner,
-        weights=None if weights is None else str(weights),
-        method=method,
-        interpolation=interpolation,
-        projections=projections,
-        smooth=smooth,
-        carve=carve,
-        mesh_format=mesh_format,
-        label=label,
-        roi=roi,
-        allow_irregular=allow_irregular,
-        max_memory_gb=max_memory,
-    )
+    config = _reconstruct_config(locals())
     if not logging.getLogger().handlers:
         logging.getLogger("distributed").setLevel(logging.ERROR)  # keep the bar readable
     console = Console(stderr=True)
@@ -455,22 +440,17 @@ def evaluate(
     seed: Annotated[int, typer.Option(help="Sampling seed.")] = 0,
     max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
 ) -> None:
-    """Print metrics of PREDICTION against GROUND_TRUTH as JSON."""
-    from .io import detect_kind, load_input
-    from .io.mesh import read_mesh
-    from .metrics import evaluate as evaluate_metrics
-    from .sections import Volume
+    """Print metrics of PREDICTION against GROUND_TRUTH as JSON.
 
-    def load(path: Path, lab: str | None) -> Any:
-        if detect_kind(path).kind == "mesh":
-            return read_mesh(path)
-        data = load_input(path, label=lab, memory_budget_gb=max_memory)
-        if not isinstance(data, Volume):
-            raise SlicereconError(f"{path} holds contours; evaluate needs a mesh or a dense mask")
-        return data
+    A mesh is scored as the exact surface; a mask as its voxels (docs/metrics.md).
+    """
+    from .io import load_ground_truth
+    from .metrics import evaluate as evaluate_metrics
 
     metrics = evaluate_metrics(
-        load(prediction, None), load(ground_truth, label), n_points=n_points, seed=seed
+        load_ground_truth(prediction, memory_budget_gb=max_memory),
+        load_ground_truth(ground_truth, label=label, memory_budget_gb=max_memory),
+        n_points=n_points, seed=seed,
     )
     typer.echo(json.dumps(metrics.to_dict(), indent=2))
 
@@ -754,10 +734,13 @@ def main(argv: list[str] | None = None) -> int:
     stderr); 1 a batch finished with failed cases; 130 interrupted (Ctrl-C).
     """
     usage_errors = _click_exceptions()
+    args = sys.argv[1:] if argv is None else list(argv)
+    debug = "--debug" in args[: next((i for i, a in enumerate(args) if not a.startswith("-")),
+                                       len(args))]
     try:
         result = app(args=argv, prog_name="slicerecon", standalone_mode=False)
     except SlicereconError as exc:
-        if _state["debug"]:
+        if debug:
             raise
         typer.echo(f"error: {' '.join(str(exc).split())}", err=True)
         return EXIT_INPUT
@@ -773,7 +756,7 @@ def main(argv: list[str] | None = None) -> int:
             return 130
         if not isinstance(exc, usage_errors):
             raise
-        if _state["debug"]:
+        if debug:
             raise
         typer.echo(_usage_line(exc), err=True)
         return EXIT_INPUT

@@ -94,7 +94,7 @@ def _outline(image: NDArray[np.uint8], lo: tuple[int, int], hi: tuple[int, int],
 def write_preview(
     path: str | os.PathLike[str],
     result: Reconstruction,
-    truth: Volume | None = None,
+    truth: object = None,
 ) -> Path:
     """Write the preview image of ``result`` to ``path`` (PNG, atomically).
 
@@ -104,8 +104,9 @@ def write_preview(
         Output file.
     result : Reconstruction
         What :func:`slicerecon.reconstruct.reconstruct` returned.
-    truth : Volume, optional
-        Ground truth on any grid; shown in row 1 when its grid is the sections' grid.
+    truth : Volume or trimesh.Trimesh, optional
+        Ground truth; a Volume on the sections' grid is shown in row 1 (else
+        the projections are).
 
     Returns
     -------
@@ -133,7 +134,7 @@ def write_preview(
     for i, box in reversed(list(enumerate(boxes))):
         owner[tuple(slice(lo // step, -(-hi // step)) for lo, hi in zip(box.lo, box.hi,
                                                                          strict=True))] = i
-    same_grid = truth is not None and truth.shape == tuple(grid) and np.allclose(
+    same_grid = isinstance(truth, Volume) and truth.shape == tuple(grid) and np.allclose(
         truth.affine, sections.affine
     )
     zoom = _scale_px(coarse_shape)

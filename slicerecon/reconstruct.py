@@ -508,7 +508,7 @@ def run_case(
     dict
         A summary: output paths, metrics (or None), timings, part count.
     """
-    from .io import load_input
+    from .io import load_ground_truth, load_input
     from .io.mesh import write_mesh
     from .metrics import evaluate
     from .preview import write_preview
@@ -540,12 +540,10 @@ def run_case(
         )
     if ground_truth is not None:
         with _timed(timings, "read"):
-            gt_data = load_input(
-                ground_truth, label=config.label, memory_budget_gb=config.max_memory_gb
+            truth = load_ground_truth(
+                ground_truth, label=config.label, allow_irregular=config.allow_irregular,
+                memory_budget_gb=config.max_memory_gb,
             )
-        if not isinstance(gt_data, Volume):
-            raise OptionError("--gt must be a dense mask or a closed mesh, not contours")
-        truth = gt_data
     say("reconstruct")
     result = reconstruct(
         sections,

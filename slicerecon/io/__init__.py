@@ -17,6 +17,7 @@ import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -25,7 +26,14 @@ from ..sections import CrossSections, Volume
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid, reading
 from .selection import parse_selector
 
-__all__ = ["InputKind", "detect_kind", "load_input", "MESH_SUFFIXES", "NIFTI_SUFFIXES"]
+__all__ = [
+    "InputKind",
+    "MESH_SUFFIXES",
+    "NIFTI_SUFFIXES",
+    "detect_kind",
+    "load_ground_truth",
+    "load_input",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -189,6 +197,53 @@ def load_input(
         return _read(kind, selector, image_dir=image_dir, allow_irregular=allow_irregular,
                      mesh_resolution=mesh_resolution, pixel_spacing=pixel_spacing,
                      memory_budget_gb=memory_budget_gb)
+
+
+def load_ground_truth(
+    path: str | os.PathLike[str],
+    *,
+    label: int | str | None = None,
+    allow_irregular: bool = False,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> Volume | Any:
+    """Read a ground truth (or a prediction) to score against: the one loader for both.
+
+    A closed mesh is kept as the **exact mesh** (``trimesh.Trimesh``, world
+    mm), so metrics compare against the surface itself, never a voxelisation
+    of it; a label map, DICOM series or SEG becomes the :class:`Volume` of the
+    chosen structure (as :func:`load_input`). Contour inputs are not a ground
+    truth.
+
+    Parameters
+    ----------
+    path : path-like
+        A mesh (``.stl`` / ``.ply`` / ``.obj`` / ``.off``) or a dense mask.
+    label, allow_irregular, memory_budget_gb
+        As for :func:`load_input`.
+
+    Returns
+    -------
+    Volume or trimesh.Trimesh
+
+    Raises
+    ------
+    InputError
+        What :func:`load_input` raises; a contour input (sparse planes).
+    """
+    with reading(path):
+        if detect_kind(path).kind == "mesh":
+            from .mesh import read_mesh
+
+            _single_structure(Path(path), parse_selector(label))
+            return read_mesh(path)
+    data = load_input(path, label=label, allow_irregular=allow_irregular,
+                      memory_budget_gb=memory_budget_gb)
+    if not isinstance(data, Volume):
+        raise InputError(
+            f"{path} holds contours on some planes; a ground truth must be a dense mask "
+            "or a closed mesh"
+        )
+    return data
 
 
 def _selector(label: int | str | None, roi: int | str | None) -> int | str | None:
