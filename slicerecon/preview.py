@@ -13,16 +13,17 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .sections import AXIS_NAMES, Volume, in_plane_axes
+from .sections import AXIS_NAMES, Box, CrossSections, Projections, Volume, in_plane_axes
 
 if TYPE_CHECKING:
-    from .reconstruct import Reconstruction
+    import trimesh
 
 __all__ = ["MAX_PANEL_PX", "write_preview"]
 
@@ -93,17 +94,32 @@ def _outline(image: NDArray[np.uint8], lo: tuple[int, int], hi: tuple[int, int],
 
 def write_preview(
     path: str | os.PathLike[str],
-    result: Reconstruction,
+    *,
+    mesh: trimesh.Trimesh,
+    boxes: Sequence[Box],
+    planner: str,
+    sections: CrossSections,
+    projections: Projections,
+    occupancy: Volume | None = None,
     truth: object = None,
 ) -> Path:
-    """Write the preview image of ``result`` to ``path`` (PNG, atomically).
+    """Write the preview image of a reconstruction to ``path`` (PNG, atomically).
 
     Parameters
     ----------
     path : path-like
         Output file.
-    result : Reconstruction
-        What :func:`slicerecon.reconstruct.reconstruct` returned.
+    mesh : trimesh.Trimesh
+        The reconstructed surface, world mm.
+    boxes : sequence of Box
+        The parts' boxes, in plan order.
+    planner : str
+        The planner's name (for the title).
+    sections, projections
+        What the reconstruction was made from.
+    occupancy : Volume, optional
+        The voxel centres inside ``mesh`` on a sub-grid of the sections' grid,
+        when known (else the mesh is rasterized).
     truth : Volume or trimesh.Trimesh, optional
         Ground truth; a Volume on the sections' grid is shown in row 1 (else
         the projections are).
@@ -118,18 +134,16 @@ def write_preview(
     from .io.atomic import atomic_path
     from .rasterize import mesh_to_mask
 
-    sections = result.sections
     grid = sections.grid_shape
     step = _step(grid)
     coarse_shape = tuple(math.ceil(n / step) for n in grid)
     affine = sections.affine.copy()
     affine[:3, :3] = affine[:3, :3] * step
     affine[:3, 3] = sections.affine[:3, :3] @ np.full(3, (step - 1) / 2.0) + sections.affine[:3, 3]
-    if result.occupancy is not None:
-        recon = _coarse(_on_grid(result.occupancy, sections.affine, grid), step)
+    if occupancy is not None:
+        recon = _coarse(_on_grid(occupancy, sections.affine, grid), step)
     else:
-        recon = mesh_to_mask(result.mesh, affine, coarse_shape)  # type: ignore[arg-type]
-    boxes = [part.box for part in result.plan.parts]
+        recon = mesh_to_mask(mesh, affine, coarse_shape)  # type: ignore[arg-type]
     owner = np.full(coarse_shape, -1, dtype=np.int16)
     for i, box in reversed(list(enumerate(boxes))):
         owner[tuple(slice(lo // step, -(-hi // step)) for lo, hi in zip(box.lo, box.hi,
@@ -146,9 +160,9 @@ def write_preview(
             top = _coarse(truth.mask, step).any(axis=ax_id)
             label = "ground truth"
         else:
-            view = result.projections[ax_id].image
+            view = projections[ax_id].image
             top = _coarse(view[:, :, None], step)[:, :, 0]
-            label = f"projection ({result.projections.source})"
+            label = f"projection ({projections.source})"
         image = np.full(top.shape + (3,), 255, dtype=np.uint8)
         image[top] = (90, 90, 90)
         if sections.axis != ax_id:
@@ -183,7 +197,7 @@ def write_preview(
     canvas = Image.new("RGB", (max(width, 480), height), "white")
     draw = ImageDraw.Draw(canvas)
     draw.text((_GAP_PX, 2), f"{sections.n_planes} planes along {AXIS_NAMES[sections.axis]} "
-              f"(red lines); planner: {result.plan.planner}", fill=(0, 0, 0))
+              f"(red lines); planner: {planner}", fill=(0, 0, 0))
     y = _TITLE_PX + _GAP_PX
     for r in range(2):
         x = _GAP_PX

@@ -581,7 +581,11 @@ def run_case(
         _write_json(out / "plan.json", plan)
         if metrics is not None:
             _write_json(out / "metrics.json", metrics.to_dict())
-        write_preview(out / "preview.png", result, truth)
+        write_preview(
+            out / "preview.png", mesh=result.mesh, boxes=result.plan.boxes,
+            planner=result.plan.planner, sections=sections, projections=projections,
+            occupancy=result.occupancy, truth=truth,
+        )
     summary: dict[str, Any] = {
         "input": str(input_path),
         "mesh": str(mesh_path),
