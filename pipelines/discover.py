@@ -16,6 +16,11 @@ order, skipping hidden files and folders) and finds:
 * a file named like DICOM (``.dcm``, ``.dicom``, ``.ima``) that cannot be read
   in a folder without image files: one case, so that its failure is recorded.
 
+DICOM files are recognised by content, whatever their name, with or without
+the 128-byte preamble, by the readers' own sniffer
+(:func:`slicerecon.io.dicom.sniff.dicom_role`), so a batch finds exactly the
+files ``slicerecon run`` reads.
+
 Meshes (``.stl``, ``.ply``, ``.obj``, ``.off``) are not cases: a batch writes
 meshes, and an output directory inside ``INDIR`` must not be read back as
 input. Other files are ignored.
@@ -63,6 +68,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
 from slicerecon.errors import InputError
+from slicerecon.io.dicom.sniff import DICOM_SUFFIXES, dicom_role
 
 __all__ = ["CASE_KINDS", "RESERVED_NAMES", "Case", "discover_cases", "safe_case_name"]
 
@@ -76,7 +82,6 @@ followed; see :attr:`Case.error`)."""
 
 NIFTI_SUFFIXES = (".nii.gz", ".nii")
 CONTOUR_SUFFIXES = (".json", ".csv")
-DICOM_SUFFIXES = (".dcm", ".dicom", ".ima")
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off")
 FOLLOW_HINT = (
     "copy the data into INDIR, or pass --follow-symlinks if you trust where the links point"
@@ -85,10 +90,6 @@ FOLLOW_HINT = (
 MAX_NAME_LENGTH = 96
 """Longest case name; longer ones are cut and get a hash of the full name."""
 
-_SEG_SOP_CLASS_UID = "1.2.840.10008.5.1.4.1.1.66.4"
-_NON_IMAGE_MODALITIES = frozenset(
-    {"RTSTRUCT", "SEG", "RTPLAN", "RTRECORD", "SR", "KO", "PR", "REG", "DOC", "FID", "PLAN"}
-)
 RESERVED_NAMES = frozenset({"report_assets"})
 """Names of batch-level outputs in OUTDIR (the HTML report's figure folder); a case
 that would get one of them is numbered instead (``report_assets-2``)."""
@@ -195,42 +196,6 @@ def _strip_suffix(name: str) -> str:
     return name
 
 
-def _has_dicom_marker(path: Path) -> bool:
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(132)
-    except OSError:
-        return False
-    return len(head) == 132 and head[128:132] == b"DICM"
-
-
-def _dicom_role(path: Path) -> str | None:
-    """``"image"``, ``"seg"``, ``"rtstruct"``, ``"other"`` (a non-image object),
-    ``"unreadable"`` (named like DICOM but not readable), or None (not DICOM)."""
-    named_dicom = path.name.lower().endswith(DICOM_SUFFIXES)
-    if not _has_dicom_marker(path):
-        return "unreadable" if named_dicom else None
-    import pydicom
-
-    try:
-        ds = pydicom.dcmread(
-            path, stop_before_pixels=True, specific_tags=["Modality", "SOPClassUID"]
-        )
-    except Exception:  # noqa: BLE001 - any parser failure: the reader reports it later
-        return "unreadable"
-    modality = str(getattr(ds, "Modality", "") or "").upper()
-    sop_class = str(getattr(ds, "SOPClassUID", "") or "")
-    meta = getattr(ds, "file_meta", None)
-    media_class = str(meta.get("MediaStorageSOPClassUID", "")) if meta is not None else ""
-    if sop_class == _SEG_SOP_CLASS_UID or media_class == _SEG_SOP_CLASS_UID:
-        return "seg"
-    if modality == "RTSTRUCT":
-        return "rtstruct"
-    if modality in _NON_IMAGE_MODALITIES or media_class == "1.2.840.10008.1.3.10":
-        return "other"
-    return "image"
-
-
 def _relpath(path: Path, root: Path) -> str:
     return path.relative_to(root).as_posix()
 
@@ -256,7 +221,7 @@ def _folder_cases(
             continue
         if not dicom_files:
             continue
-        role = _dicom_role(f)
+        role = dicom_role(f)
         if role is not None:
             dicom.setdefault(role, []).append(f)
     images = dicom.get("image", [])

@@ -33,7 +33,7 @@ from ..errors import (
     SlicereconError,
 )
 from ..sections import CrossSections
-from .dicom import PARSE_ERRORS, read_dicom_header
+from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 from .limits import DEFAULT_MEMORY_BUDGET_GB
 from .polygons import sections_from_polygons
 from .selection import choose_structure, parse_selector
@@ -52,7 +52,7 @@ def _read_dataset(path: str | os.PathLike[str]) -> tuple[Any, Path]:
         raise InputError(f"{p} is a directory; pass the RTSTRUCT file itself")
     ds = read_dicom_header(p, stop_before_pixels=True)
     modality = str(ds.get("Modality", "") or "")
-    if modality != "RTSTRUCT" or "StructureSetROISequence" not in ds:
+    if object_kind(ds) != "rtstruct" or "StructureSetROISequence" not in ds:
         raise FormatError(
             f"{p} is not a DICOM RTSTRUCT (Modality {modality or 'missing'}"
             + ("" if "StructureSetROISequence" in ds else ", no StructureSetROISequence")
@@ -264,7 +264,7 @@ def read_rtstruct(
     polygons, names, image_uids = _roi_polygons(ds, number, name, p)
     reference = None
     if image_dir is not None:
-        from .dicom import dicom_series_geometry
+        from .dicom.series import dicom_series_geometry
 
         affine, shape, series_uids = dicom_series_geometry(
             image_dir, allow_irregular=allow_irregular
