@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 import pydicom
 from numpy.typing import ArrayLike, NDArray
+from pydicom.datadict import tag_for_keyword
 from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.pixels import pack_bits
 from pydicom.sequence import Sequence as DicomSequence
@@ -291,6 +292,7 @@ def write_seg(
     labels: Mapping[int, str],
     fractional: bool = False,
     omit_empty_frames: bool = True,
+    dimension_index: bool = True,
     series_uid: str | None = None,
     study_uid: str | None = None,
     frame_of_reference_uid: str | None = None,
@@ -314,6 +316,11 @@ def write_seg(
     omit_empty_frames : bool
         Skip frames with no foreground, as most SEG writers do (so a segment's
         frames need not cover every slice).
+    dimension_index : bool
+        Write the Multi-frame Dimension module (DimensionIndexSequence indexing
+        frames by ReferencedSegmentNumber and ImagePositionPatient), as the
+        standard requires and highdicom, dcmqi and 3D Slicer write it. False
+        leaves it out, as some older exporters do.
     series_uid, study_uid, frame_of_reference_uid : str, optional
         UIDs to use (default: fresh ones).
 
@@ -408,6 +415,20 @@ def write_seg(
     shared.PixelMeasuresSequence = DicomSequence([measures])
     ds.SharedFunctionalGroupsSequence = DicomSequence([shared])
     ds.PerFrameFunctionalGroupsSequence = DicomSequence(per_frame)
+    if dimension_index:
+        organization = generate_uid()
+        dimension_items = []
+        for index, group in (("ReferencedSegmentNumber", "SegmentIdentificationSequence"),
+                             ("ImagePositionPatient", "PlanePositionSequence")):
+            item = Dataset()
+            item.DimensionOrganizationUID = organization
+            item.DimensionIndexPointer = tag_for_keyword(index)
+            item.FunctionalGroupPointer = tag_for_keyword(group)
+            dimension_items.append(item)
+        ds.DimensionIndexSequence = DicomSequence(dimension_items)
+        organization_item = Dataset()
+        organization_item.DimensionOrganizationUID = organization
+        ds.DimensionOrganizationSequence = DicomSequence([organization_item])
 
     ds.NumberOfFrames = len(frames)
     ds.Rows = n_rows

@@ -173,3 +173,128 @@ def test_info_and_dispatcher(two_segment_seg):
     ]
     assert info["n_frames"] == 8
     np.testing.assert_array_equal(load_input(path, label=1).mask, liver)
+
+
+# --------------------------------------------------------------------- who decodes
+def _frames_path_refused(monkeypatch):
+    """Make the pydicom frame-by-frame decoder fail, so a read proves highdicom did it."""
+    from slicerecon.io.dicom import seg as seg_module
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("decoded frame by frame, not by highdicom")
+
+    monkeypatch.setattr(seg_module, "_mask_by_frames", refuse)
+
+
+def _highdicom_refused(monkeypatch):
+    from slicerecon.io.dicom import seg as seg_module
+
+    monkeypatch.setattr(seg_module, "_mask_by_highdicom", lambda *args, **kwargs: None)
+
+
+def _layouts():
+    """(name, segments, affine, write_seg options, segment to read) covering what tests pin."""
+    liver, tumour = _two_segments()
+    gap = np.zeros((5, 5, 7), bool)
+    gap[1:4, 1:4, [1, 2, 5]] = True
+    prob = np.zeros((6, 6, 3))
+    prob[1:5, 1:5, :] = 0.3
+    prob[2:4, 2:4, 1:] = 0.7
+    feet_first = _oblique_affine() @ np.diag([1.0, 1.0, -1.0, 1.0])  # slices run downwards
+    return [
+        ("two segments, by label", {1: liver, 2: tumour}, _oblique_affine(), {}, "Tumour"),
+        ("omitted empty frames", {1: gap}, _oblique_affine(), {}, 1),
+        ("fractional", {1: prob}, _oblique_affine(), {"fractional": True}, 1),
+        ("feet first", {1: liver, 2: tumour}, feet_first, {}, 1),
+        ("single frame", {4: gap[:, :, 2:3]}, _oblique_affine(), {}, 4),
+    ]
+
+
+@pytest.mark.parametrize("layout", _layouts(), ids=[layout[0] for layout in _layouts()])
+def test_highdicom_and_the_frame_reader_give_the_same_volume(tmp_path, monkeypatch, layout):
+    pytest.importorskip("highdicom")
+    _, segments, affine, options, chosen = layout
+    labels = {n: f"S{n}" for n in segments} | ({2: "Tumour"} if 2 in segments else {})
+    path = factory.write_seg(tmp_path / "seg.dcm", segments, affine, labels=labels, **options)
+
+    with monkeypatch.context() as m:
+        _frames_path_refused(m)
+        by_highdicom = read_dicom_seg(path, segment=chosen)
+    with monkeypatch.context() as m:
+        _highdicom_refused(m)
+        by_frames = read_dicom_seg(path, segment=chosen)
+
+    np.testing.assert_array_equal(by_highdicom.mask, by_frames.mask)
+    np.testing.assert_array_equal(by_highdicom.affine, by_frames.affine)
+    assert by_highdicom.mask.any()
+
+
+def test_seg_without_dimension_index_is_read_as_before(tmp_path, two_segment_seg, monkeypatch):
+    """Older exporters leave out DimensionIndexSequence; highdicom refuses them, we do not."""
+    _, affine, liver, tumour = two_segment_seg
+    path = factory.write_seg(tmp_path / "legacy.dcm", {1: liver, 2: tumour}, affine,
+                             labels={1: "Liver", 2: "Tumour"}, dimension_index=False)
+    assert "DimensionIndexSequence" not in pydicom.dcmread(path)
+
+    volume = read_dicom_seg(path, segment="Tumour")
+
+    np.testing.assert_array_equal(volume.mask, tumour)
+    np.testing.assert_allclose(volume.affine, affine, atol=1e-6)
+
+
+def test_seg_stacked_along_a_tilted_line_keeps_the_shear(tmp_path):
+    """Frames of a gantry-tilted CT step sideways: highdicom cannot stack them, we can."""
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [0.8, 0.8],
+                                          [0.0, 0.9, 2.5], [-10.0, -12.0, 4.0])
+    mask = np.zeros((8, 9, 5), bool)
+    mask[2:6, 3:7, 1:4] = True
+    path = factory.write_seg(tmp_path / "tilt.dcm", {1: mask}, affine, labels={1: "Tilted"})
+
+    volume = read_dicom_seg(path)
+
+    np.testing.assert_array_equal(volume.mask, mask[:, :, 1:4])
+    np.testing.assert_allclose(volume.affine[:3, 2], [0.0, 0.9, 2.5], atol=1e-6)
+    np.testing.assert_allclose(volume.affine[:3, 3], affine[:3, 3] + affine[:3, 2], atol=1e-6)
+
+
+def test_two_frames_of_one_segment_at_one_position_are_refused(tmp_path):
+    liver, _ = _two_segments()
+    path = factory.write_seg(tmp_path / "seg.dcm", {1: liver}, _oblique_affine(),
+                             labels={1: "Liver"})
+    ds = pydicom.dcmread(path)
+    frames = ds.PerFrameFunctionalGroupsSequence
+    frames[1].PlanePositionSequence[0].ImagePositionPatient = (
+        frames[0].PlanePositionSequence[0].ImagePositionPatient
+    )
+    ds.save_as(path)
+
+    with pytest.raises(GeometryError, match="two frames of one segment at the same position"):
+        read_dicom_seg(path)
+
+
+def test_labelmap_segmentation_is_refused(tmp_path):
+    liver, _ = _two_segments()
+    path = factory.write_seg(tmp_path / "seg.dcm", {1: liver}, _oblique_affine(),
+                             labels={1: "Liver"})
+    ds = pydicom.dcmread(path)
+    ds.SegmentationType = "LABELMAP"
+    ds.save_as(path)
+
+    with pytest.raises(InputError, match="LABELMAP is not supported"):
+        read_dicom_seg(path)
+
+
+def test_seg_grid_over_the_memory_budget_is_refused_before_decoding(tmp_path, monkeypatch):
+    from slicerecon.errors import MemoryBudgetError
+    from slicerecon.io.dicom import seg as seg_module
+
+    liver, _ = _two_segments()
+    path = factory.write_seg(tmp_path / "seg.dcm", {1: liver}, _oblique_affine(),
+                             labels={1: "Liver"})
+    ds = pydicom.dcmread(path)
+    ds.Rows, ds.Columns = 60000, 60000  # declared, never decoded
+    ds.save_as(path)
+    monkeypatch.setattr(seg_module, "_mask_by_highdicom", None)  # must not be reached
+
+    with pytest.raises(MemoryBudgetError, match="memory budget"):
+        read_dicom_seg(path)
