@@ -137,7 +137,7 @@ def test_registry_and_errors() -> None:
 
 
 def test_missing_packages_raise_dependency_errors(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(realshapes, "_package_dir", lambda package: None)
+    monkeypatch.setattr(realshapes.installed, "package_dir", lambda package: None)
     with pytest.raises(DependencyError, match="pip install .*pyvista"):
         real_shape("frog_heart")
     with pytest.raises(DependencyError, match="pip install pymeshlab"):
