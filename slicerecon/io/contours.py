@@ -17,6 +17,21 @@ row per vertex; the rows of one polygon are contiguous and in order.
 Polygons are closed implicitly (a repeated first vertex at the end is dropped)
 and filled by the even-odd rule, so a polygon inside another is a hole.
 Reading goes through :func:`slicerecon.io.polygons.sections_from_polygons`.
+
+Validation
+----------
+The JSON structure is a pydantic schema (:class:`ContourFile`,
+:class:`ContourPlane`, :class:`ContourGrid`): strict types (``true`` is not a
+number, ``"1"`` is not a number, null is not a value), finite numbers, no
+unknown keys, lists of the right length checked before their items. Its first
+error becomes one :class:`~slicerecon.errors.FormatError` naming the file and
+the JSON path (``planes[3].polygons[1]: needs at least 3 points (got 2)``).
+The rules that join fields (a plane's ``position`` against its polygons, an
+empty plane needing ``position`` and ``normal``) are checked after it.
+
+CSV is read line by line: its rules (contiguous rows per polygon, line numbers
+in every message) are about the order of rows, which a record schema does not
+express, so it keeps its own checks.
 """
 
 from __future__ import annotations
@@ -30,10 +45,25 @@ import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import (
+    AfterValidator,
+    AllowInfNan,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+    ValidatorFunctionWrapHandler,
+    WrapValidator,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import ErrorDetails, PydanticCustomError
 
 from ..errors import FormatError, InputError, OptionError, SlicereconError
 from ..sections import CrossSections
@@ -45,6 +75,9 @@ __all__ = [
     "CONTOUR_FORMAT",
     "CONTOUR_VERSION",
     "CSV_COLUMNS",
+    "ContourFile",
+    "ContourGrid",
+    "ContourPlane",
     "read_contours",
     "write_contours_csv",
     "write_contours_json",
@@ -59,8 +92,6 @@ CONTOUR_VERSION = 1
 CSV_COLUMNS = ("plane", "polygon", "x", "y", "z")
 """Columns a CSV contour file must have (in any order)."""
 
-_TOP_KEYS = ("format", "version", "units", "label", "normal", "grid", "planes")
-_PLANE_KEYS = ("position", "polygons")
 
 
 @dataclass
@@ -162,121 +193,12 @@ def _fail(path: Path, where: str, message: str) -> FormatError:
     return FormatError(f"{path}: {where}: {message}" if where else f"{path}: {message}")
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool)
-
-
-def _number(value: Any, path: Path, where: str) -> float:
-    if not _is_number(value):
-        raise _fail(path, where, f"expected a number (got {_kind(value)})")
-    if not math.isfinite(value):
-        raise _fail(path, where, f"must be finite (got {value})")
-    return float(value)
-
-
 def _kind(value: Any) -> str:
+    """How a JSON value is named in messages: ``a string``, ``a list``, ``true/false``, ..."""
     names = {dict: "an object", list: "a list", str: "a string", bool: "true/false"}
     if value is None:
         return "null"
     return names.get(type(value), type(value).__name__)
-
-
-def _numbers(value: Any, count: int, path: Path, where: str, what: str) -> list[float]:
-    if not isinstance(value, list) or len(value) != count:
-        raise _fail(path, where, f"expected {what} (got {_kind(value)}"
-                    + (f" of length {len(value)})" if isinstance(value, list) else ")"))
-    return [_number(v, path, f"{where}[{i}]") for i, v in enumerate(value)]
-
-
-def _check_keys(obj: dict[str, Any], allowed: tuple[str, ...], path: Path, where: str) -> None:
-    unknown = sorted(set(obj) - set(allowed))
-    if unknown:
-        raise _fail(
-            path, where,
-            f"unknown key {unknown[0]!r} (allowed: {', '.join(allowed)})",
-        )
-
-
-def _parse_json(text: str, path: Path) -> _Parsed:
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FormatError(
-            f"{path} is not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}"
-        ) from exc
-    if not isinstance(doc, dict):
-        raise _fail(path, "", f"the top level must be a JSON object (got {_kind(doc)})")
-    _check_keys(doc, _TOP_KEYS, path, "")
-    for key in ("format", "version", "units", "planes"):
-        if key not in doc:
-            raise _fail(path, "", f"missing key {key!r}; see docs/formats.md")
-    if doc["format"] != CONTOUR_FORMAT:
-        raise _fail(path, "format",
-                    f"expected {CONTOUR_FORMAT!r} (got {doc['format']!r}): not a contour file")
-    if not (isinstance(doc["version"], int) and not isinstance(doc["version"], bool)):
-        raise _fail(path, "version", f"expected an integer (got {_kind(doc['version'])})")
-    if doc["version"] != CONTOUR_VERSION:
-        raise _fail(path, "version", f"version {doc['version']} is not supported; this "
-                    f"slicerecon reads version {CONTOUR_VERSION}")
-    if doc["units"] != "mm":
-        raise _fail(path, "units", f"must be \"mm\" (got {doc['units']!r}); convert the "
-                    "coordinates to millimetres")
-    if "label" in doc and not isinstance(doc["label"], str):
-        raise _fail(path, "label", f"expected a string (got {_kind(doc['label'])})")
-
-    parsed = _Parsed()
-    if "normal" in doc:
-        normal = np.array(_numbers(doc["normal"], 3, path, "normal", "[nx, ny, nz]"))
-        if not np.any(normal):
-            raise _fail(path, "normal", "must not be the zero vector")
-        parsed.normal = normal / np.linalg.norm(normal)
-    if "grid" in doc:
-        parsed.grid = _parse_grid(doc["grid"], path)
-
-    planes = doc["planes"]
-    if not isinstance(planes, list):
-        raise _fail(path, "planes", f"expected a list of planes (got {_kind(planes)})")
-    parsed.n_planes = len(planes)
-    for p, plane in enumerate(planes):
-        where = f"planes[{p}]"
-        if not isinstance(plane, dict):
-            raise _fail(path, where, f"expected an object (got {_kind(plane)})")
-        _check_keys(plane, _PLANE_KEYS, path, where)
-        if "polygons" not in plane:
-            raise _fail(path, where, "missing key 'polygons'")
-        polygons = plane["polygons"]
-        if not isinstance(polygons, list):
-            raise _fail(path, f"{where}.polygons", f"expected a list (got {_kind(polygons)})")
-        position = (
-            _number(plane["position"], path, f"{where}.position") if "position" in plane else None
-        )
-        if not polygons:
-            if position is None or parsed.normal is None:
-                raise _fail(path, where, "a plane without polygons needs a \"position\" and "
-                            "the file a top-level \"normal\"")
-            parsed.empty_positions.append(position)
-            continue
-        for q, polygon in enumerate(polygons):
-            pname = f"{where}.polygons[{q}]"
-            points = _parse_polygon(polygon, path, pname)
-            if position is not None and parsed.normal is not None:
-                at = float(points.mean(axis=0) @ parsed.normal)
-                if abs(at - position) > max(0.01, 1e-6 * abs(position)):
-                    raise _fail(path, pname, f"lies at {at:.6g} mm along the normal but the "
-                                f"plane's position is {position:.6g} mm")
-            parsed.polygons.append(points)
-            parsed.names.append(pname)
-    return parsed
-
-
-def _parse_polygon(polygon: Any, path: Path, where: str) -> NDArray[np.float64]:
-    if not isinstance(polygon, list):
-        raise _fail(path, where, f"expected a list of [x, y, z] points (got {_kind(polygon)})")
-    points = np.array(
-        [_numbers(pt, 3, path, f"{where}[{i}]", "[x, y, z]") for i, pt in enumerate(polygon)],
-        dtype=np.float64,
-    ).reshape(-1, 3)
-    return _closed(points, path, where)
 
 
 def _closed(points: NDArray[np.float64], path: Path, where: str) -> NDArray[np.float64]:
@@ -287,31 +209,236 @@ def _closed(points: NDArray[np.float64], path: Path, where: str) -> NDArray[np.f
     return points
 
 
-def _parse_grid(grid: Any, path: Path) -> tuple[NDArray[np.float64], tuple[int, int, int]]:
-    if not isinstance(grid, dict):
-        raise _fail(path, "grid", f"expected an object (got {_kind(grid)})")
-    _check_keys(grid, ("affine", "shape"), path, "grid")
-    for key in ("affine", "shape"):
-        if key not in grid:
-            raise _fail(path, "grid", f"missing key {key!r}")
-    rows = grid["affine"]
-    if not isinstance(rows, list) or len(rows) != 4:
-        raise _fail(path, "grid.affine", "expected 4 rows of 4 numbers")
-    affine = np.array(
-        [_numbers(r, 4, path, f"grid.affine[{i}]", "4 numbers") for i, r in enumerate(rows)]
-    )
+# ----------------------------------------------------------------------------- JSON schema
+def _refuse(message: str) -> PydanticCustomError:
+    """A schema error whose text is ours (shown after the JSON path)."""
+    return PydanticCustomError("slicerecon", "{message}", {"message": message})
+
+
+def _expect(what: str, length: int | None = None) -> WrapValidator:
+    """A list of ``length`` items (any length when None), checked before its items."""
+
+    def validate(value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+        if not isinstance(value, list) or (length is not None and len(value) != length):
+            got = _kind(value) + (f" of length {len(value)}" if isinstance(value, list) else "")
+            raise _refuse(f"expected {what} (got {got})")
+        return handler(value)
+
+    return WrapValidator(validate)
+
+
+def _not_null(what: str) -> BeforeValidator:
+    """An optional key may be left out, but not given as null."""
+
+    def validate(value: Any) -> Any:
+        if value is None:
+            raise _refuse(f"expected {what} (got null)")
+        return value
+
+    return BeforeValidator(validate)
+
+
+def _polygon_points(points: list[list[float]]) -> list[list[float]]:
+    if len(points) > 1 and points[0] == points[-1]:
+        points = points[:-1]  # closed implicitly: a repeated first point is dropped
+    if len(points) < 3:
+        raise _refuse(f"needs at least 3 points (got {len(points)})")
+    return points
+
+
+def _non_zero(normal: list[float]) -> list[float]:
+    if not any(normal):
+        raise _refuse("must not be the zero vector")
+    return normal
+
+
+def _homogeneous(rows: list[list[float]]) -> list[list[float]]:
+    affine = np.array(rows)
     if not np.allclose(affine[3], [0, 0, 0, 1]):
-        raise _fail(path, "grid.affine", "the last row must be [0, 0, 0, 1]")
+        raise _refuse("the last row must be [0, 0, 0, 1]")
     if abs(np.linalg.det(affine[:3, :3])) < 1e-12:
-        raise _fail(path, "grid.affine", "is singular (a voxel axis has zero length)")
-    shape = grid["shape"]
-    if (
-        not isinstance(shape, list)
-        or len(shape) != 3
-        or not all(isinstance(s, int) and not isinstance(s, bool) and s > 0 for s in shape)
-    ):
-        raise _fail(path, "grid.shape", f"expected 3 positive integers (got {shape!r})")
-    return affine, (shape[0], shape[1], shape[2])
+        raise _refuse("is singular (a voxel axis has zero length)")
+    return rows
+
+
+def _grid_shape(value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+    try:
+        return handler(value)
+    except ValidationError:
+        raise _refuse(f"expected 3 positive integers (got {value!r})") from None
+
+
+Number = Annotated[float, Strict(), AllowInfNan(False)]
+"""A finite JSON number (an integer is accepted; true/false and strings are not)."""
+Point = Annotated[list[Number], _expect("[x, y, z]", 3)]
+Polygon = Annotated[
+    list[Point], _expect("a list of [x, y, z] points"), AfterValidator(_polygon_points)
+]
+Normal = Annotated[list[Number], _expect("[nx, ny, nz]", 3), AfterValidator(_non_zero)]
+AffineRow = Annotated[list[Number], _expect("4 numbers", 4)]
+Affine = Annotated[list[AffineRow], _expect("4 rows of 4 numbers", 4), AfterValidator(_homogeneous)]
+GridShape = Annotated[
+    list[Annotated[int, Field(gt=0)]], Field(min_length=3, max_length=3),
+    WrapValidator(_grid_shape),
+]
+
+
+class _JsonObject(BaseModel):
+    """A JSON object with exactly the keys of the model's fields (in this order)."""
+
+    model_config = ConfigDict(
+        extra="forbid", strict=True, frozen=True, use_attribute_docstrings=True
+    )
+    _not_an_object: ClassVar[str] = "expected an object"
+
+    @model_validator(mode="before")
+    @classmethod
+    def _known_keys(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            raise _refuse(f"{cls._not_an_object} (got {_kind(data)})")
+        unknown = sorted(set(data) - set(cls.model_fields))
+        if unknown:
+            allowed = ", ".join(cls.model_fields)
+            raise _refuse(f"unknown key {unknown[0]!r} (allowed: {allowed})")
+        return data
+
+
+class ContourGrid(_JsonObject):
+    """``grid``: the voxel grid to rasterize on."""
+
+    affine: Affine
+    """Voxel index → world mm, 4 rows of 4 numbers, last row ``[0, 0, 0, 1]``, not singular."""
+    shape: GridShape
+    """``[I, J, K]``, positive integers."""
+
+
+class ContourPlane(_JsonObject):
+    """``planes[i]``: the polygons of one plane."""
+
+    position: Annotated[Number | None, _not_null("a number")] = None
+    """Position along the file's ``normal``, mm (checked against the polygons when given)."""
+    polygons: Annotated[list[Polygon], _expect("a list")]
+    """Closed polygons, each at least 3 ``[x, y, z]`` points in world mm."""
+
+
+class ContourFile(_JsonObject):
+    """A JSON contour file (``docs/formats.md``); ``model_json_schema()`` gives its schema."""
+
+    _not_an_object: ClassVar[str] = "the top level must be a JSON object"
+
+    format: Annotated[Any, Field(json_schema_extra={"const": CONTOUR_FORMAT})]
+    """The string ``"slicerecon-contours"``."""
+    version: Annotated[int, Field(json_schema_extra={"const": CONTOUR_VERSION})]
+    """The integer 1."""
+    units: Annotated[Any, Field(json_schema_extra={"const": "mm"})]
+    """The string ``"mm"``."""
+    label: Annotated[str | None, _not_null("a string")] = None
+    """A name for the structure (informative)."""
+    normal: Annotated[Normal | None, _not_null("[nx, ny, nz]")] = None
+    """The plane normal, any non-zero length."""
+    grid: Annotated[ContourGrid | None, _not_null("an object")] = None
+    """The voxel grid to rasterize on."""
+    planes: Annotated[list[ContourPlane], _expect("a list of planes")]
+    """The planes, each with its polygons."""
+
+    @field_validator("format", mode="after")
+    @classmethod
+    def _format(cls, value: Any) -> Any:
+        if value != CONTOUR_FORMAT:
+            raise _refuse(f"expected {CONTOUR_FORMAT!r} (got {value!r}): not a contour file")
+        return value
+
+    @field_validator("version", mode="after")
+    @classmethod
+    def _version(cls, value: int) -> int:
+        if value != CONTOUR_VERSION:
+            raise _refuse(f"version {value} is not supported; this slicerecon reads version "
+                          f"{CONTOUR_VERSION}")
+        return value
+
+    @field_validator("units", mode="after")
+    @classmethod
+    def _units(cls, value: Any) -> Any:
+        if value != "mm":
+            raise _refuse(f"must be \"mm\" (got {value!r}); convert the coordinates to "
+                          "millimetres")
+        return value
+
+
+def _json_path(loc: tuple[int | str, ...]) -> str:
+    """``("planes", 3, "polygons", 1)`` → ``planes[3].polygons[1]``."""
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _schema_error(error: ErrorDetails, path: Path) -> FormatError:
+    """One pydantic error as our message: the file, the JSON path, what was wrong."""
+    loc, kind, value = tuple(error["loc"]), error["type"], error.get("input")
+    if kind == "missing":
+        hint = "" if len(loc) > 1 else "; see docs/formats.md"
+        return _fail(path, _json_path(loc[:-1]), f"missing key {loc[-1]!r}{hint}")
+    if kind == "slicerecon":
+        message = str((error.get("ctx") or {}).get("message", error["msg"]))
+    elif kind == "finite_number":
+        message = f"must be finite (got {value})"
+    elif kind == "float_type" and isinstance(value, int) and not isinstance(value, bool):
+        message = f"must be finite (got an integer of {len(str(value))} digits)"
+    elif kind in ("float_type", "float_parsing"):
+        message = f"expected a number (got {_kind(value)})"
+    elif kind in ("int_type", "int_parsing"):
+        message = f"expected an integer (got {_kind(value)})"
+    elif kind == "string_type":
+        message = f"expected a string (got {_kind(value)})"
+    else:  # not reached by the schema above; pydantic's own words, still with the path
+        message = error["msg"]
+    return _fail(path, _json_path(loc), message)
+
+
+def _parse_json(text: str, path: Path) -> _Parsed:
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise FormatError(
+            f"{path} is not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}"
+        ) from exc
+    except (ValueError, RecursionError) as exc:  # 4,301-digit integers, 100,000-deep nesting
+        raise FormatError(
+            f"{path} is not valid JSON: {type(exc).__name__}: {str(exc)[:200]}"
+        ) from exc
+    try:
+        model = ContourFile.model_validate(doc)
+    except ValidationError as exc:
+        raise _schema_error(exc.errors()[0], path) from None
+
+    # the rules that join several fields: positions against polygons, empty planes
+    parsed = _Parsed(n_planes=len(model.planes))
+    if model.normal is not None:
+        normal = np.array(model.normal)
+        parsed.normal = normal / np.linalg.norm(normal)
+    if model.grid is not None:
+        shape = model.grid.shape
+        parsed.grid = (np.array(model.grid.affine), (shape[0], shape[1], shape[2]))
+    for p, plane in enumerate(model.planes):
+        where = f"planes[{p}]"
+        if not plane.polygons:
+            if plane.position is None or parsed.normal is None:
+                raise _fail(path, where, "a plane without polygons needs a \"position\" and "
+                            "the file a top-level \"normal\"")
+            parsed.empty_positions.append(plane.position)
+            continue
+        for q, polygon in enumerate(plane.polygons):
+            pname = f"{where}.polygons[{q}]"
+            points = np.array(polygon, dtype=np.float64)
+            if plane.position is not None and parsed.normal is not None:
+                at = float(points.mean(axis=0) @ parsed.normal)
+                if abs(at - plane.position) > max(0.01, 1e-6 * abs(plane.position)):
+                    raise _fail(path, pname, f"lies at {at:.6g} mm along the normal but the "
+                                f"plane's position is {plane.position:.6g} mm")
+            parsed.polygons.append(points)
+            parsed.names.append(pname)
+    return parsed
 
 
 def _csv_rows(text: str) -> Iterator[tuple[int, list[str]]]:

@@ -192,7 +192,7 @@ def roi_contours(
         Missing file, not an RTSTRUCT, malformed ContourData.
     """
     ds, p = _read_dataset(path)
-    out = []
+    out: list[tuple[int, str, list[NDArray[np.float64]], str]] = []
     for number, name in _rois(ds, p):
         try:
             polygons, _, _ = _roi_polygons(ds, number, name, p)

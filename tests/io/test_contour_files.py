@@ -227,3 +227,39 @@ def test_writers_refuse_empty_sections(tmp_path):
     with pytest.raises(EmptyMaskError):
         write_contours_json(empty, tmp_path / "e.json")
     assert not (tmp_path / "e.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("doc", "message"),
+    [
+        (_json_doc([{"polygons": [TRIANGLE]}], label=None),
+         r"label: expected a string \(got null\)"),
+        (_json_doc([{"position": None, "polygons": [TRIANGLE]}]),
+         r"planes\[0\]\.position: expected a number \(got null\)"),
+        (_json_doc([{"polygons": [[[0, 0, 10**400], [1, 0, 1], [0, 1, 1]]]}]),
+         r"planes\[0\]\.polygons\[0\]\[0\]\[2\]: must be finite \(got an integer of 401 digits\)"),
+        (_json_doc([{"polygons": [TRIANGLE]}], grid={"affine": np.eye(4).tolist(),
+                                                      "shape": [4, 4, 4], "origin": [0, 0, 0]}),
+         r"grid: unknown key 'origin' \(allowed: affine, shape\)"),
+        (_json_doc([{"polygons": [TRIANGLE]}], grid={"affine": np.zeros((4, 4)).tolist(),
+                                                      "shape": [4, 4, 4]}),
+         r"grid\.affine: the last row must be \[0, 0, 0, 1\]"),
+        (_json_doc([{"polygons": [TRIANGLE]}], version="1"),
+         "version: expected an integer \\(got a string\\)"),
+        (_json_doc([{"polygons": [TRIANGLE]}, 5]), r"planes\[1\]: expected an object \(got int\)"),
+    ],
+)
+def test_schema_errors_name_the_json_path(tmp_path, doc, message):
+    path = _write_json(tmp_path, doc)
+    with pytest.raises(FormatError, match=message) as info:
+        read_contours(path)
+    assert str(info.value).startswith(f"{path}: ")
+
+
+def test_the_schema_is_published_as_json_schema():
+    from slicerecon.io.contours import ContourFile
+
+    schema = ContourFile.model_json_schema()
+    assert schema["required"] == ["format", "version", "units", "planes"]
+    assert schema["additionalProperties"] is False
+    assert schema["properties"]["format"]["const"] == "slicerecon-contours"
