@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -11,12 +13,16 @@ from slicerecon.sections import Volume
 from slicerecon.shapes import (
     SHAPES,
     analytic_volume,
+    blobs,
     chair,
+    ellipsoid,
     make_shape,
     shape_names,
     shape_params,
+    sphere,
     y_branch,
 )
+from slicerecon.shapes.params import checked
 
 PRIMITIVES = ["sphere", "ellipsoid", "torus", "box", "two_spheres"]
 ANISOTROPIC = (0.8, 0.8, 2.0)
@@ -144,3 +150,25 @@ def test_registry_and_errors() -> None:
         make_shape("sphere", radius=0.3)
     with pytest.raises(OptionError, match="margin"):
         make_shape("box", margin=-1)
+
+
+def test_parameter_checks_come_from_the_signature() -> None:
+    # the signature stays the function's own: the registry reads the sizes from it
+    sizes = [p.name for p in inspect.signature(chair).parameters.values()
+             if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD]
+    assert sizes == list(shape_params("chair"))
+    with pytest.raises(OptionError, match="radius must be a number of mm"):
+        sphere("large")
+    with pytest.raises(OptionError, match=r"radii\[1\] must be a positive finite size"):
+        ellipsoid((10.0, -1.0, 5.0))
+    with pytest.raises(OptionError, match="count must be a whole number from 1 to 32"):
+        blobs(count=0)
+    with pytest.raises(OptionError, match="seed must be a whole number"):
+        blobs(seed=-3)
+    small = blobs(np.float32(40.0), np.int64(6), count=np.int64(2), seed=np.int64(1))
+    np.testing.assert_array_equal(small.mask, blobs(40.0, 6.0, count=2, seed=1).mask)
+    with pytest.raises(TypeError, match="declare no check"):
+
+        @checked
+        def slab(thickness: float = 1.0) -> Volume:
+            raise AssertionError("never defined")
