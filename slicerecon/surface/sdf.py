@@ -60,6 +60,7 @@ __all__ = [
     "sdf_mesh",
     "sdf_parts_mesh",
     "sdf_parts_surface",
+    "SdfField",
     "SdfSurface",
 ]
 
@@ -624,6 +625,31 @@ def _carve_union(
     return union
 
 
+class SdfField(NamedTuple):
+    """A signed-distance field ready for marching cubes, and where its samples lie.
+
+    Attributes
+    ----------
+    values : ndarray of shape (I', J', K'), float32
+        mm, negative inside, in grid axis order, padded by one positive sample
+        on every side (so its zero level is closed).
+    affine : ndarray of shape (4, 4)
+        Sample index → world mm.
+    lo : tuple of int
+        The reference-grid voxel of the first unpadded sample's voxel.
+    upsample : int
+        Samples per voxel along the section axis (1 elsewhere).
+    axis : int
+        The section axis.
+    """
+
+    values: NDArray[np.float32]
+    affine: NDArray[np.float64]
+    lo: tuple[int, int, int]
+    upsample: int
+    axis: int
+
+
 class SdfSurface(NamedTuple):
     """A meshed signed-distance reconstruction and its occupancy at the voxel centres.
 
@@ -636,10 +662,13 @@ class SdfSurface(NamedTuple):
         grid that the parts' boxes span (exactly the samples of negative field
         the marching cubes separated from the others); None when the field was
         sampled finer than the grid (``upsample > 1``).
+    field : SdfField or None
+        The field the mesh was extracted from, when asked for (``keep_field``).
     """
 
     mesh: trimesh.Trimesh
     occupancy: Volume | None
+    field: SdfField | None = None
 
 
 def sdf_parts_surface(
@@ -651,11 +680,14 @@ def sdf_parts_surface(
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
     carve: NDArray[np.bool_] | None = None,
+    keep_field: bool = False,
 ) -> SdfSurface:
     """As :func:`sdf_parts_mesh`, also returning the occupancy the mesh encloses.
 
     The occupancy comes free with the field, so a metric of the reconstruction
-    on the reference grid needs no rasterization of the mesh.
+    on the reference grid needs no rasterization of the mesh. ``keep_field``
+    also returns the field itself (:class:`SdfField`), e.g. to resolve several
+    structures jointly (:mod:`slicerecon.surface.joint`).
     """
     union, lo, hi = _parts_union(sections, boxes, upsample=upsample,
                                  extend_to_box=extend_to_box, hull=hull,
@@ -668,7 +700,11 @@ def sdf_parts_surface(
         occupancy = Volume(inside, affine)
     mesh = _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample,
                  checked=occupancy is not None)
-    return SdfSurface(mesh, occupancy)
+    field = None
+    if keep_field:
+        affine = sections.affine @ _to_index(sections, lo, upsample, pad=1)
+        field = SdfField(union, affine, lo, upsample, sections.axis)
+    return SdfSurface(mesh, occupancy, field)
 
 
 HULL_LEVEL = 0.49
