@@ -193,6 +193,9 @@ class Reconstruction:
     """The voxel centres of the sections' grid inside :attr:`mesh`, on a sub-grid,
     when the method gives them for free (``sdf``: the field's sign); None
     otherwise. Metrics and previews use it instead of rasterizing the mesh."""
+    field: Any = None
+    """With ``keep_field=True`` and ``method="sdf"``: the signed-distance field the
+    mesh was extracted from (:class:`slicerecon.surface.sdf.SdfField`)."""
 
 
 @contextmanager
@@ -382,6 +385,7 @@ def reconstruct(
     max_parts: int = 8,
     weights: str | os.PathLike[str] | None = None,
     interpolation: str = "pchip",
+    keep_field: bool = False,
 ) -> Reconstruction:
     """Reconstruct a watertight surface from cross-sections and projections.
 
@@ -416,6 +420,9 @@ def reconstruct(
     interpolation : {"pchip", "linear"}
         How the signed-distance parts interpolate across planes
         (:func:`slicerecon.surface.sdf.sdf_field`).
+    keep_field : bool
+        Keep the ``sdf`` surface's field (:attr:`Reconstruction.field`), e.g. to
+        resolve several structures jointly (:mod:`slicerecon.surface.joint`).
 
     Returns
     -------
@@ -451,6 +458,7 @@ def reconstruct(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
             hull=guide, interpolation=interpolation, carve=hull if implicit_carve else None,
             upsample=axis_upsample(sections) if entry.implicit_carve else 1,
+            keep_field=keep_field,
         )
         mesh, occupancy = surface.mesh, surface.occupancy
     if carve and entry.carved and not implicit_carve:
@@ -458,7 +466,7 @@ def reconstruct(
 
         with _timed(timings, "carve"):
             mesh = carve_by_hull(mesh, hull, sections.affine)
-    return Reconstruction(mesh, plan, sections, projections, timings, occupancy)
+    return Reconstruction(mesh, plan, sections, projections, timings, occupancy, surface.field)
 
 
 def _reconstruct_whole_shape(

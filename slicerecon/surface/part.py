@@ -43,7 +43,7 @@ from ..sections import Box, CrossSections, Volume
 from .loft import correspondence_is_simple, loft_solid
 from .merge import check_closed, from_manifold, to_manifold, union_solids
 from .methods import method_names
-from .sdf import sdf_field, sdf_mesh, sdf_parts_surface
+from .sdf import SdfField, sdf_field, sdf_mesh, sdf_parts_surface
 from .smooth import taubin_smooth
 
 __all__ = [
@@ -251,10 +251,14 @@ class Surface(NamedTuple):
         Voxel centres inside the mesh on a sub-grid of the reference grid:
         the sign of the field for ``method="sdf"``; None for lofted surfaces
         and smoothed meshes (rasterize the mesh instead).
+    field : SdfField or None
+        ``method="sdf"`` with ``keep_field``: the signed-distance field the
+        mesh was extracted from.
     """
 
     mesh: trimesh.Trimesh
     occupancy: Volume | None
+    field: SdfField | None = None
 
 
 def reconstruct_surface(
@@ -268,6 +272,7 @@ def reconstruct_surface(
     interpolation: str = "linear",
     carve: NDArray[np.bool_] | None = None,
     upsample: int = 1,
+    keep_field: bool = False,
 ) -> Surface:
     """As :func:`reconstruct_parts`, with the occupancy when the method gives it for free.
 
@@ -281,7 +286,7 @@ def reconstruct_surface(
         _check_inputs(sections, box)
     if carve is not None and method != "sdf":
         raise OptionError("an implicit carve applies to method 'sdf' only; carve the mesh instead")
-    occupancy = None
+    occupancy, field = None, None
     if method == "hybrid":
         solids = [
             _hybrid_solid(sections, b, extend_to_box=extend_to_box, hull=hull,
@@ -307,12 +312,12 @@ def reconstruct_surface(
         # Implicit union: the minimum of the parts' signed distances, meshed once.
         surface = sdf_parts_surface(sections, boxes, extend_to_box=extend_to_box, hull=hull,
                                     interpolation=interpolation, carve=carve,
-                                    upsample=upsample)
-        mesh, occupancy = surface.mesh, surface.occupancy
+                                    upsample=upsample, keep_field=keep_field)
+        mesh, occupancy, field = surface.mesh, surface.occupancy, surface.field
     logger.debug("merged %d parts (%s): %d faces", len(boxes), method, len(mesh.faces))
     if smooth:
-        mesh, occupancy = taubin_smooth(mesh), None
-    return Surface(mesh, occupancy)
+        mesh, occupancy, field = taubin_smooth(mesh), None, None
+    return Surface(mesh, occupancy, field)
 
 
 def _hybrid_solid(
