@@ -9,12 +9,15 @@ for a plausible size and non-blank content.
 
 from __future__ import annotations
 
+import ast
 import base64
 import csv
 import io
 import json
 import re
 import shutil
+import subprocess
+import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -346,3 +349,83 @@ def test_renders_of_sparse_input_with_and_without_a_mesh_ground_truth(tmp_path: 
     # panel), then ground truth | reconstruction | error (three panels).
     single, triple = (_decode(src) for src in page.images[-2:])
     assert single.width * 2 < triple.width
+
+
+# ------------------------------------------------------------------ the report only reads
+REPORT_PACKAGE = Path(__file__).resolve().parents[1] / "slicerecon" / "report"
+RUNNING = ("slicerecon.reconstruct", "slicerecon.partition", "slicerecon.policy", "pipelines")
+
+
+def test_report_modules_import_nothing_that_reconstructs() -> None:
+    """No module of slicerecon.report imports the reconstruction, the planners or the runner,
+    nor names run_case / reconstruct."""
+    modules = sorted(REPORT_PACKAGE.glob("*.py"))
+    assert {m.name for m in modules} >= {"__init__.py", "tables.py", "figures.py", "renders.py",
+                                         "page.py", "writer.py"}
+    for module in modules:
+        tree = ast.parse(module.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                # relative imports resolve inside slicerecon (level 2: ..name)
+                base = node.module or ""
+                target = base if node.level < 2 else ".".join(filter(None, ("slicerecon", base)))
+                names = [target, *(f"{target}.{a.name}" for a in node.names)]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                if isinstance(node, ast.Name | ast.Attribute):
+                    name = node.id if isinstance(node, ast.Name) else node.attr
+                    assert name not in ("run_case", "reconstruct"), (module.name, name)
+                continue
+            for name in names:
+                assert not name.startswith(RUNNING), (module.name, name)
+
+
+def test_writing_a_report_runs_no_reconstruction(results: Path, tmp_path: Path) -> None:
+    """In a fresh interpreter, a report with a render leaves the reconstruction unimported."""
+    copy = tmp_path / "copy"
+    shutil.copytree(results / "sphere", copy / "sphere")
+    code = (
+        "import sys\n"
+        "from slicerecon.report import write_report\n"
+        f"write_report({str(copy)!r}, max_renders=1)\n"
+        f"print(sorted(m for m in sys.modules if m.startswith({RUNNING!r})))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True, timeout=300)
+    assert done.stdout.strip() == "[]"
+    page = _parse(copy / "report.html")
+    assert len(page.images) == 1 + 1  # the box plots (one plane count) and one render
+    assert any("ground truth: sphere.nii.gz" in c for c in page.figcaptions)  # the mask was read
+
+
+def test_evaluate_dataset_uses_the_runner_and_its_records(tmp_path: Path) -> None:
+    """evaluate-dataset goes through pipelines' runner: summary.csv, done.json, one error.json
+    format (with the exception's type), and the report reads it back as the runner saw it."""
+    from pipelines.evaluate import evaluate_dataset
+
+    data = tmp_path / "data"
+    write_nifti(make_shape("sphere", radius=6.0), data / "ball.nii.gz")
+    (data / "corrupt.nii.gz").write_bytes(b"\x1f\x8b not gzip")
+    out = tmp_path / "out"
+    seen = []
+    config = ReconstructConfig(slices=6, n_points=2000)
+    report = evaluate_dataset(data, out, methods=["loft", "sdf"], config=config, renders=False,
+                              progress=lambda r, done, total: seen.append((r.case, r.status)))
+    assert report == out / "report.html"
+    assert sorted(seen) == [("ball/loft", "ok"), ("ball/sdf", "ok"),
+                            ("corrupt/loft", "failed"), ("corrupt/sdf", "failed")]
+    with (out / "summary.csv").open(newline="") as handle:
+        rows = {r["case"]: r for r in csv.DictReader(handle)}
+    assert rows["ball/sdf"]["status"] == "ok" and rows["ball/sdf"]["input"] == "ball.nii.gz"
+    assert rows["corrupt/loft"]["error_type"] == "FormatError"
+    assert (out / "ball" / "loft" / "done.json").is_file()
+    error = json.loads((out / "corrupt" / "sdf" / "error.json").read_text())
+    assert error["type"] == "FormatError" and error["method"] == "sdf" and error["traceback"]
+    by_name = {c.case: c for c in collect_results(out)}
+    assert by_name["corrupt/sdf"].error_text.startswith("FormatError: ")
+    assert by_name["ball/loft"].watertight is True and by_name["ball/loft"].kind == "nifti"
+    seen.clear()
+    evaluate_dataset(data, out, methods=["loft", "sdf"], config=config, renders=False,
+                     progress=lambda r, done, total: seen.append((r.case, r.status)))
+    assert sorted(seen)[:2] == [("ball/loft", "skipped"), ("ball/sdf", "skipped")]

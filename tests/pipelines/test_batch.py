@@ -373,6 +373,49 @@ def test_interrupted_summary_write_leaves_no_partial_file(tmp_path):
     assert not (tmp_path / "new.csv").exists()
 
 
+def test_one_case_result_record_for_the_runner_and_the_report():
+    import slicerecon.report
+    import slicerecon.results
+
+    assert CaseResult is slicerecon.results.CaseResult is slicerecon.report.CaseResult
+    assert write_summary is slicerecon.results.write_summary
+
+
+def test_named_configurations_run_every_case_into_a_folder_each(tmp_path):
+    from dataclasses import replace
+
+    from slicerecon.results import collect_results
+
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "ball.nii.gz")
+    (tmp_path / "in" / "bad.nii.gz").write_bytes(b"\x1f\x8b not gzip")
+    configs = {"loft": replace(CONFIG, method="loft"), "sdf": CONFIG}
+    out = tmp_path / "out"
+    result = run_batch(tmp_path / "in", out, configs, workers=0, report=False)
+    assert [(c.case, c.status, c.method) for c in result.cases] == [
+        ("bad/loft", "failed", "loft"), ("bad/sdf", "failed", "sdf"),
+        ("ball/loft", "ok", "loft"), ("ball/sdf", "ok", "sdf")]
+    assert trimesh.load(out / "ball" / "loft" / "mesh.stl").is_watertight
+    assert set(_summary(out)) == {"bad/loft", "bad/sdf", "ball/loft", "ball/sdf"}
+    # what the runner returns is what a reader of the folders gets back
+    stored = {c.case: c for c in collect_results(out)}
+    assert set(stored) == {c.case for c in result.cases}
+    for case in result.cases:
+        again = stored[case.case]
+        assert (again.status, again.method, again.error, again.error_type) == (
+            case.status, case.method, case.error, case.error_type)
+        if case.ok:
+            assert (again.metrics, again.planes, again.parts, again.watertight, again.seconds,
+                    again.input, again.kind) == (case.metrics, case.planes, case.parts,
+                                                 case.watertight, case.seconds, case.input,
+                                                 case.kind)
+    rerun = run_batch(tmp_path / "in", out, configs, workers=0, report=False)
+    assert [c.status for c in rerun.cases] == ["failed", "failed", "skipped", "skipped"]
+    assert rerun.cases[2].metrics == result.cases[2].metrics
+    assert not _hidden_or_temporary(out)
+    with pytest.raises(OptionError, match="folder names"):
+        run_batch(tmp_path / "in", out, {"../up": CONFIG}, workers=0)
+
+
 # ------------------------------------------------------------------------ invocation
 def test_bad_invocations(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "missing"), "-o", str(tmp_path / "o")]) == 2
@@ -521,7 +564,7 @@ def test_follow_symlinks_option_of_the_batch_command(tmp_path, capsys):
 def test_a_ctrl_c_in_a_publish_waits_until_both_renames_are_done():
     import signal
 
-    from pipelines.batch import _sigint_deferred
+    from pipelines.publish import sigint_deferred as _sigint_deferred
 
     done = []
     with pytest.raises(KeyboardInterrupt):
@@ -533,7 +576,7 @@ def test_a_ctrl_c_in_a_publish_waits_until_both_renames_are_done():
 
 
 def test_a_result_left_aside_by_a_killed_publish_is_restored(tmp_path):
-    from pipelines.batch import _clear_stale
+    from pipelines.publish import clear_stale as _clear_stale
 
     (tmp_path / ".a.old-123456789abc").mkdir()
     (tmp_path / ".a.old-123456789abc" / "done.json").write_text("{}")

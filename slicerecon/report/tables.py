@@ -1,0 +1,157 @@
+"""The report's tables: statistics per group (``summary.json``) and ``metrics.csv``.
+
+Both are computed from :class:`~slicerecon.results.CaseResult` records only;
+the numbers are those of each case's ``metrics.json`` (nothing is recomputed).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..results import CaseResult
+
+__all__ = ["metric_names", "metrics_csv_text", "sort_key", "summarize"]
+
+
+def metric_names(cases: Sequence[CaseResult]) -> list[str]:
+    """Every metric key of ``cases``, in the order of first appearance.
+
+    Parameters
+    ----------
+    cases : sequence of CaseResult
+
+    Returns
+    -------
+    list of str
+    """
+    names: dict[str, None] = {}
+    for case in cases:
+        for key in case.metrics or {}:
+            names.setdefault(key, None)
+    return list(names)
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _stats(values: Sequence[float]) -> dict[str, float | int | None]:
+    data = np.asarray([v for v in values if math.isfinite(v)], dtype=np.float64)
+    if data.size == 0:
+        return {"n": 0, "mean": None, "median": None, "std": None, "min": None, "max": None}
+    return {
+        "n": int(data.size),
+        "mean": _finite(float(data.mean())),
+        "median": _finite(float(np.median(data))),
+        "std": _finite(float(data.std(ddof=1))) if data.size > 1 else None,
+        "min": _finite(float(data.min())),
+        "max": _finite(float(data.max())),
+    }
+
+
+def _group_stats(cases: Sequence[CaseResult], names: Sequence[str]) -> dict[str, Any]:
+    ok = [c for c in cases if c.ok]
+    return {
+        "count": len(cases),
+        "failures": len(cases) - len(ok),
+        "metrics": {
+            name: _stats([c.metrics[name] for c in ok if c.metrics and name in c.metrics])
+            for name in names
+        },
+        "seconds": _stats([s for c in ok if (s := c.stage_seconds) is not None]),
+    }
+
+
+def sort_key(value: str | int | None) -> tuple[int, str | int]:
+    """Sort key that puts None after every value."""
+    return (1, "") if value is None else (0, value)
+
+
+def summarize(cases: Sequence[CaseResult]) -> dict[str, Any]:
+    """Per-group statistics of the metrics (what ``summary.json`` holds).
+
+    Parameters
+    ----------
+    cases : sequence of CaseResult
+
+    Returns
+    -------
+    dict
+        ``n_cases``, ``n_failures``, ``metrics`` (names), ``groups`` (one
+        entry per method/planner: ``method``, ``planner``, ``count`` = cases
+        in the group including failures, ``failures``, ``metrics`` =
+        ``{name: {n, mean, median, std, min, max}}`` over the finished cases
+        that have the metric, ``std`` the sample standard deviation (ddof 1,
+        None below two values), ``seconds`` the same statistics of run time
+        (the sum of each case's stage timings)), ``by_planes`` (the same per
+        method/planner/number of planes) and ``failures`` (case, method,
+        planner, input, error). Non-finite values are left out of the
+        statistics; absent statistics are None.
+    """
+    names = metric_names(cases)
+    groups: dict[tuple[str | None, str | None], list[CaseResult]] = {}
+    by_planes: dict[tuple[str | None, str | None, int | None], list[CaseResult]] = {}
+    for case in cases:
+        groups.setdefault((case.method, case.planner), []).append(case)
+        if case.ok:
+            by_planes.setdefault((case.method, case.planner, case.planes), []).append(case)
+    return {
+        "n_cases": len(cases),
+        "n_failures": sum(not c.ok for c in cases),
+        "metrics": names,
+        "groups": [
+            {"method": m, "planner": p, **_group_stats(groups[(m, p)], names)}
+            for m, p in sorted(groups, key=lambda k: (sort_key(k[0]), sort_key(k[1])))
+        ],
+        "by_planes": [
+            {"method": m, "planner": p, "planes": n, **_group_stats(by_planes[(m, p, n)], names)}
+            for m, p, n in sorted(
+                by_planes, key=lambda k: (sort_key(k[0]), sort_key(k[1]), sort_key(k[2]))
+            )
+        ],
+        "failures": [
+            {"case": c.case, "method": c.method, "planner": c.planner, "input": c.input,
+             "error": c.error_text}
+            for c in cases if not c.ok
+        ],
+    }
+
+
+def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
+    """``metrics.csv``: one row per case.
+
+    Parameters
+    ----------
+    cases : sequence of CaseResult
+
+    Returns
+    -------
+    str
+        Columns ``case, method, planner, planes, status`` (``ok`` / ``failed``),
+        every metric (full precision, empty when absent), ``seconds`` (the sum
+        of the stage timings), ``error``.
+    """
+    names = metric_names(cases)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["case", "method", "planner", "planes", "status", *names, "seconds", "error"])
+    for c in cases:
+        metrics = c.metrics or {}
+        seconds = c.stage_seconds
+        writer.writerow([
+            c.case,
+            c.method or "",
+            c.planner or "",
+            "" if c.planes is None else c.planes,
+            "ok" if c.ok else "failed",
+            *(repr(metrics[n]) if n in metrics else "" for n in names),
+            "" if seconds is None else repr(round(seconds, 4)),
+            c.error_text,
+        ])
+    return buffer.getvalue()
