@@ -183,8 +183,11 @@ CarveOpt = Annotated[
 ]
 LabelOpt = Annotated[
     str | None,
-    typer.Option(help="Structure to keep: a label value, a SEG segment or an RTSTRUCT ROI, "
-                 "by number or name."),
+    typer.Option(help="Structures to reconstruct (default: all): label values, SEG segments or "
+                 "an RTSTRUCT ROI, by number or name, comma-separated."),
+]
+UnionOpt = Annotated[
+    bool, typer.Option("--union", help="Every structure together as one (every non-zero voxel).")
 ]
 RoiOpt = Annotated[str | None, typer.Option(help="Another name for --label (RTSTRUCT ROIs).")]
 IrregularOpt = Annotated[
@@ -218,6 +221,7 @@ def run(
     carve: CarveOpt = True,
     label: LabelOpt = None,
     roi: RoiOpt = None,
+    union: UnionOpt = False,
     allow_irregular: IrregularOpt = False,
     max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
     quiet: Annotated[
@@ -494,30 +498,40 @@ def evaluate_dataset(
     rerun: Annotated[
         bool, typer.Option("--rerun", help="Recompute cases already done with the same options.")
     ] = False,
+    workers: Annotated[
+        int | None,
+        typer.Option(help="Local worker processes; 0 (default) runs the cases one after "
+                     "the other in this process."),
+    ] = 0,
+    follow_symlinks: Annotated[
+        bool,
+        typer.Option("--follow-symlinks",
+                     help="Read symbolic links that point outside DATASET_DIR (default: each "
+                     "is a failed case, never opened)."),
+    ] = False,
 ) -> None:
     """Run every mask of DATASET_DIR with each method into OUTDIR/<case>/<method>/; report.
 
-    Sequential; a failing case writes error.json and the others go on. Prints
-    the report path.
+    Runs through the batch runner: a failing case writes error.json and the
+    others go on; a re-run skips what is finished (unless --rerun). Prints the
+    report path.
     """
     from rich.console import Console
 
-    from .reconstruct import ReconstructConfig
-    from .report import evaluate_dataset as run_dataset
+    with _ctrl_c_after():
+        from pipelines.evaluate import evaluate_dataset as run_dataset
 
-    config = ReconstructConfig(
-        slices=slices,
-        every=every,
-        axis=axis,
-        planner=planner,
-        projections=projections,
-        smooth=smooth,
-        mesh_format=mesh_format,
-        label=label,
-        n_points=n_points,
-        seed=seed,
-    )
+    options = dict(locals())
+    options.pop("method")  # one config per method: the runner sets it
+    config = _reconstruct_config(options)
+    if workers != 0 and not logging.getLogger().handlers:
+        logging.getLogger("distributed").setLevel(logging.ERROR)  # keep the status readable
+
     with Console(stderr=True).status("starting") as status:
+
+        def advance(result: Any, done: int, total: int) -> None:
+            status.update(f"[{done}/{total}] {result.status} {result.case}")
+
         path = run_dataset(
             dataset_dir,
             outdir,
@@ -526,7 +540,9 @@ def evaluate_dataset(
             title=title,
             renders=not no_renders,
             resume=not rerun,
-            progress=lambda s: status.update(s),
+            workers=workers,
+            follow_symlinks=follow_symlinks,
+            progress=advance,
         )
     typer.echo(str(path))
 
