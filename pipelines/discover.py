@@ -272,6 +272,11 @@ def _within(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
+OUTPUT_MARKER = "plan.json"
+"""A folder holding this file is a case slicerecon wrote (its ``labels.nii.gz``
+and meshes are outputs): it and its subfolders are not searched for inputs."""
+
+
 def _walk(root: Path, skip: Iterable[Path], *, follow_symlinks: bool) -> list[_Folder]:
     """Search ``root`` (sorted, hidden entries skipped) applying the symlink rules."""
     real_root = root.resolve()
@@ -284,6 +289,10 @@ def _walk(root: Path, skip: Iterable[Path], *, follow_symlinks: bool) -> list[_F
 
     for here, dirs, names in os.walk(root, followlinks=True):
         folder = Path(here)
+        if OUTPUT_MARKER in names:  # a case folder slicerecon wrote: outputs, not inputs
+            logger.debug("not searching %s: it holds a reconstruction's outputs", folder)
+            dirs[:] = []
+            continue
         links: list[_Link] = []
         keep: list[str] = []
         for d in sorted(dirs):
