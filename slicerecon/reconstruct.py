@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import trimesh
+from numpy.typing import NDArray
 
 from .errors import OptionError
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid
@@ -118,6 +119,9 @@ class ReconstructConfig:
     the only segment / ROI)."""
     roi: str | None = None
     """RTSTRUCT ROI name or number (another name for ``label``)."""
+    union: bool = False
+    """Treat every non-zero voxel (every structure) as one structure, as
+    slicerecon did before it reconstructed structures separately."""
     allow_irregular: bool = False
     """Accept DICOM series with uneven slice spacing."""
     max_parts: int = 8
@@ -138,7 +142,21 @@ class ReconstructConfig:
     seed: int = 0
     """Seed of every random choice (surface sampling)."""
 
+    @property
+    def selectors(self) -> list[int | str]:
+        """The structures ``label`` (or ``roi``) names: comma-separated numbers or names."""
+        from .io.selection import parse_selector
+
+        text = self.label if self.label is not None else self.roi
+        if text is None:
+            return []
+        if isinstance(text, int):
+            return [text]
+        return [v for part in str(text).split(",") if (v := parse_selector(part)) is not None]
+
     def __post_init__(self) -> None:
+        if self.union and (self.label is not None or self.roi is not None):
+            raise OptionError("give --label or --union, not both")
         if self.slices is not None and self.every is not None:
             raise OptionError("give --slices or --every, not both")
         if self.slices is not None and self.slices < 2:
@@ -516,7 +534,8 @@ def run_case(
     dict
         A summary: output paths, metrics (or None), timings, part count.
     """
-    from .io import load_ground_truth, load_input
+    from .io import DICOM_KINDS, detect_kind, load_ground_truth, load_input
+    from .io.labelmap import read_label_map
     from .io.mesh import write_mesh
     from .metrics import evaluate
     from .preview import write_preview
@@ -528,15 +547,35 @@ def run_case(
     out = Path(outdir)
     timings: dict[str, float] = {}
     say("read")
+    value, name = 1, ""
     with _timed(timings, "read"):
-        data = load_input(
-            input_path,
-            label=config.label,
-            roi=config.roi,
-            image_dir=image_dir,
-            allow_irregular=config.allow_irregular,
+        label_map = None if config.union or ground_truth is not None else read_label_map(
+            input_path, allow_irregular=config.allow_irregular,
             memory_budget_gb=config.max_memory_gb,
         )
+    if label_map is not None:
+        if config.selectors:
+            label_map = label_map.select(config.selectors, source=input_path)
+        if len(label_map.structures) > 1:
+            from .structures import run_structures_case
+
+            return run_structures_case(label_map, input_path, out, config, progress=progress,
+                                       timings=timings)
+        only = label_map.structures[0]
+        value, name = only.value, only.name
+        data: Volume | CrossSections = label_map.mask(only.value)
+        frame = label_map.coordinates
+    else:
+        with _timed(timings, "read"):
+            data = load_input(
+                input_path,
+                label=None if config.union else config.label,
+                roi=None if config.union else config.roi,
+                image_dir=image_dir,
+                allow_irregular=config.allow_irregular,
+                memory_budget_gb=config.max_memory_gb,
+            )
+        frame = "LPS" if detect_kind(input_path).kind in DICOM_KINDS else "RAS"
     with _timed(timings, "sections"):
         sections, projections, truth = prepare_inputs(
             data,
@@ -589,6 +628,19 @@ def run_case(
         _write_json(out / "plan.json", plan)
         if metrics is not None:
             _write_json(out / "metrics.json", metrics.to_dict())
+        grid = data if isinstance(data, Volume) else None
+        labels, labels_affine = _label_grid(result, sections, grid, value)
+        from .io.labelmap import Structure, write_label_map
+
+        write_label_map(labels, labels_affine, out / "labels.nii.gz", coordinates=frame)
+        structure = Structure(value, name)
+        _write_json(out / "structures.json", {"structures": [{
+            **structure.to_dict(), "status": "reconstructed",
+            "planes": int(np.count_nonzero(sections.masks.any(axis=(1, 2)))),
+            "volume_mm3": round(float(np.count_nonzero(labels))
+                                * abs(float(np.linalg.det(labels_affine[:3, :3]))), 3),
+            "parts": len(result.plan.parts), "mesh": mesh_path.name,
+        }]})
         write_preview(
             out / "preview.png", mesh=result.mesh, boxes=result.plan.boxes,
             planner=result.plan.planner, sections=sections, projections=projections,
@@ -604,3 +656,29 @@ def run_case(
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     }
     return summary
+
+
+def _label_grid(
+    result: Reconstruction, sections: CrossSections, grid: Volume | None, value: int
+) -> tuple[NDArray[np.integer], NDArray[np.float64]]:
+    """The reconstruction as a label map: on the input's grid for a dense input (``grid``),
+    else on the sections' grid; ``value`` inside, 0 outside."""
+    from .rasterize import mesh_to_mask
+
+    shape = grid.shape if grid is not None else sections.grid_shape
+    affine = grid.affine if grid is not None else sections.affine
+    dtype = np.uint8 if 0 <= value < 256 else np.int32
+    labels = np.zeros(shape, dtype=dtype)
+    occupancy = result.occupancy
+    if occupancy is not None and np.allclose(occupancy.affine[:3, :3], affine[:3, :3]):
+        offset = np.linalg.solve(affine[:3, :3], occupancy.affine[:3, 3] - affine[:3, 3])
+        lo = np.rint(offset).astype(np.int64)
+        if np.allclose(offset, lo, atol=1e-6):
+            region = tuple(slice(max(int(a), 0), min(int(a) + n, m))
+                           for a, n, m in zip(lo, occupancy.shape, shape, strict=True))
+            source = tuple(slice(r.start - int(a), r.stop - int(a))
+                           for r, a in zip(region, lo, strict=True))
+            labels[region][occupancy.mask[source]] = value
+            return labels, affine
+    labels[mesh_to_mask(result.mesh, affine, shape)] = value
+    return labels, affine

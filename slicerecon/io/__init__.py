@@ -27,6 +27,7 @@ from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid, reading
 from .selection import parse_selector
 
 __all__ = [
+    "DICOM_KINDS",
     "InputKind",
     "MESH_SUFFIXES",
     "NIFTI_SUFFIXES",
@@ -40,6 +41,8 @@ logger = logging.getLogger(__name__)
 NIFTI_SUFFIXES = (".nii", ".nii.gz")
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off")
 CONTOUR_SUFFIXES = (".json", ".csv")
+DICOM_KINDS = ("dicom-series", "dicom-seg", "rtstruct")
+"""Input kinds in DICOM patient coordinates (LPS)."""
 DICOM_SUFFIXES = (".dcm", ".dicom", "")
 
 

@@ -1,0 +1,367 @@
+"""Every structure of an input at once: shared planes, joint resolution, one label map.
+
+:func:`reconstruct_structures` takes a :class:`~slicerecon.io.labelmap.LabelMap`
+(several labels of a label map, or every segment of a SEG) and
+
+1. chooses the planes **once**, over the extent of all the structures together
+   (as an annotator marks planes of the scan: :func:`slicerecon.reconstruct.prepare_inputs`
+   on their union);
+2. reconstructs each structure from its own masks on those planes and its own
+   silhouettes, with the default surface (:func:`slicerecon.reconstruct.reconstruct`,
+   keeping each signed-distance field); a structure that no kept plane
+   crosses is reported (a warning and a record), never silently dropped;
+3. resolves them jointly (:func:`slicerecon.surface.joint.resolve`): every
+   voxel goes to the structure it is most inside, so no voxel belongs to two
+   structures and structures that touch still touch; each structure's mesh is
+   made from its share and shares its interface with its neighbours.
+
+The result is a label map on the input's grid and one watertight mesh per
+structure. Metrics per structure compare each with its own mask.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from .errors import OptionError
+from .io.labelmap import LabelMap, Structure
+from .io.limits import DEFAULT_MEMORY_BUDGET_GB
+from .sections import CrossSections, Volume
+
+__all__ = ["StructureResult", "StructuresReconstruction", "reconstruct_structures"]
+
+logger = logging.getLogger(__name__)
+
+NO_PLANE = "no kept plane crosses it"
+"""Status of a structure the chosen planes miss."""
+NOT_RECONSTRUCTED = "every voxel went to a neighbour"
+"""Status of a structure whose reconstruction lost every voxel to other structures."""
+
+
+@dataclass
+class StructureResult:
+    """One structure of a joint reconstruction.
+
+    Attributes
+    ----------
+    structure : Structure
+        Value, name and colour.
+    status : str
+        ``"reconstructed"``, or why it was not (:data:`NO_PLANE`, :data:`NOT_RECONSTRUCTED`).
+    mesh : trimesh.Trimesh or None
+        Its watertight surface (world mm) cut by its neighbours.
+    planes : int
+        Kept planes on which it has foreground.
+    occupancy : Volume or None
+        Its voxels in the joint label map (on the sections' grid).
+    plan : Plan or None
+        The partition its reconstruction used.
+    """
+
+    structure: Structure
+    status: str
+    mesh: trimesh.Trimesh | None = None
+    planes: int = 0
+    occupancy: Volume | None = None
+    plan: Any = None
+
+    @property
+    def volume_mm3(self) -> float:
+        """Volume of its share of the label map, mm³."""
+        return 0.0 if self.occupancy is None else self.occupancy.volume_mm3
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready record (``structures.json``)."""
+        return {**self.structure.to_dict(), "status": self.status, "planes": self.planes,
+                "volume_mm3": round(self.volume_mm3, 3),
+                "parts": None if self.plan is None else len(self.plan.parts)}
+
+
+@dataclass
+class StructuresReconstruction:
+    """The result of :func:`reconstruct_structures`.
+
+    Attributes
+    ----------
+    results : list of StructureResult
+        One per structure, in the label map's order.
+    labels : ndarray of shape (I, J, K)
+        The reconstructed label map on the **input's** grid (its label values).
+    sections : CrossSections
+        The union's planes (on the cropped grid all structures share).
+    truth : LabelMap
+        The input (each structure's ground truth when it was dense).
+    crop_lo : ndarray of shape (3,)
+        Where the shared grid starts in the input's grid.
+    timings : dict of str to float
+    """
+
+    results: list[StructureResult]
+    labels: NDArray[np.integer]
+    sections: CrossSections
+    truth: LabelMap
+    crop_lo: NDArray[np.int64]
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def truth_mask(self, value: int) -> Volume:
+        """A structure's own mask on the shared (cropped) grid."""
+        shape = self.sections.grid_shape
+        region = tuple(slice(int(a), int(a) + n) for a, n in zip(self.crop_lo, shape,
+                                                                 strict=True))
+        return Volume(self.truth.labels[region] == value, self.sections.affine)
+
+
+def reconstruct_structures(
+    label_map: LabelMap,
+    *,
+    slices: int | None = None,
+    every: int | None = None,
+    axis: int | str = "z",
+    planner: str = "heuristic",
+    method: str = "sdf",
+    interpolation: str = "pchip",
+    carve: bool = True,
+    max_parts: int = 8,
+    weights: str | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> StructuresReconstruction:
+    """Reconstruct every structure of a label map from shared planes, jointly.
+
+    Parameters
+    ----------
+    label_map : LabelMap
+        The structures (dense: each is its own ground truth).
+    slices, every, axis
+        Plane choice over the union of the structures
+        (:func:`slicerecon.reconstruct.prepare_inputs`).
+    planner, interpolation, carve, max_parts, weights
+        As for :func:`slicerecon.reconstruct.reconstruct`, for every structure.
+    method : {"sdf"}
+        The joint resolution works on signed distances: ``sdf`` only.
+    memory_budget_gb : float
+        As for :func:`slicerecon.reconstruct.prepare_inputs`.
+
+    Returns
+    -------
+    StructuresReconstruction
+
+    Raises
+    ------
+    OptionError
+        A method other than ``sdf``; plane options out of range.
+    EmptyMaskError
+        No structure holds a voxel.
+    """
+    from .reconstruct import prepare_inputs, reconstruct
+    from .sampling import projections_from_volume
+    from .surface.joint import resolve
+
+    if method != "sdf":
+        raise OptionError(
+            f"several structures are resolved on their signed distances: use --method sdf "
+            f"(got {method!r}), or choose one structure with --label, or --union"
+        )
+    timings: dict[str, float] = {}
+    start = time.perf_counter()
+    union = label_map.union()
+    sections, _, cropped = prepare_inputs(union, slices=slices, every=every, axis=axis,
+                                          projections="gt", memory_budget_gb=memory_budget_gb)
+    if cropped is None:  # a sparse union: the input annotates only some planes
+        raise OptionError("the structures annotate only some planes; several sparse "
+                          "structures are read from an RTSTRUCT or contour files")
+    crop_lo = np.rint(np.linalg.solve(label_map.affine[:3, :3],
+                                      cropped.affine[:3, 3] - label_map.affine[:3, 3]))
+    crop_lo = crop_lo.astype(np.int64)
+    region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, cropped.shape,
+                                                             strict=True))
+    labels_crop = label_map.labels[region]
+    plane_index = np.rint(sections.indices).astype(np.int64)
+    timings["sections"] = time.perf_counter() - start
+
+    results: list[StructureResult] = []
+    fields = []
+    for structure in label_map.structures:
+        mask = labels_crop == structure.value
+        planes = np.moveaxis(mask, sections.axis, 0)[plane_index]
+        crossed = int(np.count_nonzero(planes.any(axis=(1, 2))))
+        if crossed == 0:
+            logger.warning("structure %s lies between the kept planes: not reconstructed",
+                           structure.label)
+            results.append(StructureResult(structure, NO_PLANE))
+            fields.append(None)
+            continue
+        own = CrossSections(planes, sections.indices, sections.axis, sections.affine,
+                            sections.grid_shape)
+        projections = projections_from_volume(Volume(mask, sections.affine))
+        t0 = time.perf_counter()
+        result = reconstruct(own, projections, planner=planner, method=method,
+                             interpolation=interpolation, carve=carve, max_parts=max_parts,
+                             weights=weights, keep_field=True)
+        timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - t0
+        results.append(StructureResult(structure, "reconstructed", planes=crossed,
+                                       plan=result.plan))
+        fields.append(result.field)
+
+    t0 = time.perf_counter()
+    joint = resolve(fields, sections.grid_shape)
+    values = np.array([s.structure.value for s in results], dtype=np.int64)
+    labels = np.zeros(label_map.shape, dtype=np.result_type(label_map.labels.dtype, np.uint8))
+    won = joint.labels >= 0
+    labels[region][won] = values[joint.labels[won]]
+    for i, item in enumerate(results):
+        if fields[i] is None:
+            continue
+        item.mesh = joint.meshes[i]
+        inside = joint.labels == i
+        if item.mesh is None or not inside.any():
+            item.status, item.mesh = NOT_RECONSTRUCTED, None
+            continue
+        item.occupancy = Volume(inside, sections.affine)
+    timings["resolve"] = time.perf_counter() - t0
+    logger.info("%d structures: %d reconstructed", len(results),
+                sum(r.mesh is not None for r in results))
+    return StructuresReconstruction(results, labels, sections, label_map, crop_lo, timings)
+
+
+def _mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, float]:
+    """The mean of each numeric metric over the structures."""
+    keys = [k for k, v in next(iter(per_structure.values())).items()
+            if isinstance(v, int | float) and not isinstance(v, bool)]
+    return {k: float(np.mean([m[k] for m in per_structure.values()])) for k in keys}
+
+
+def run_structures_case(
+    label_map: LabelMap,
+    input_path: Any,
+    out: Any,
+    config: Any,
+    *,
+    progress: Any = None,
+    timings: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """Reconstruct every structure of ``label_map`` and write the case's outputs into ``out``.
+
+    Writes ``meshes/<value>_<name>.<format>`` (one watertight mesh per
+    reconstructed structure), ``labels.nii.gz`` (the label map on the input's
+    grid, with its label values), ``structures.json`` (every structure: value,
+    name, colour, status, planes used, volume in mm³, mesh), ``metrics.json``
+    (per structure and their mean), ``plan.json`` and ``preview.png``; every
+    file atomically. Called by :func:`slicerecon.reconstruct.run_case`.
+
+    Returns
+    -------
+    dict
+        The case summary (``metrics`` holds the mean over structures).
+    """
+    from pathlib import Path
+
+    from .io.labelmap import write_label_map
+    from .io.mesh import write_mesh
+    from .metrics import evaluate
+    from .preview import write_preview
+    from .reconstruct import _write_json
+
+    def say(stage: str) -> None:
+        if progress is not None:
+            progress(stage)
+
+    outdir = Path(out)
+    times = dict(timings or {})
+    say("reconstruct")
+    result = reconstruct_structures(
+        label_map, slices=config.slices, every=config.every, axis=config.axis,
+        planner=config.planner, method=config.method, interpolation=config.interpolation,
+        carve=config.carve, max_parts=config.max_parts, weights=config.weights,
+        memory_budget_gb=config.max_memory_gb,
+    )
+    times.update(result.timings)
+    say("evaluate")
+    start = time.perf_counter()
+    metrics: dict[str, dict[str, Any]] = {}
+    for item in result.results:
+        if item.mesh is None:
+            continue
+        truth = result.truth_mask(item.structure.value)
+        metrics[item.structure.label] = evaluate(
+            item.mesh, truth, n_points=config.n_points, seed=config.seed,
+            pred_occupancy=item.occupancy,
+        ).to_dict()
+    times["metrics"] = time.perf_counter() - start
+    say("write")
+    start = time.perf_counter()
+    records = []
+    for item in result.results:
+        record = item.to_dict()
+        if item.mesh is not None:
+            path = write_mesh(item.mesh, outdir / "meshes" / f"{item.structure.label}."
+                              f"{config.mesh_format}")
+            record["mesh"] = f"meshes/{path.name}"
+        records.append(record)
+    write_label_map(result.labels, label_map.affine, outdir / "labels.nii.gz",
+                    coordinates=label_map.coordinates)
+    _write_json(outdir / "structures.json", {"structures": records})
+    mean = _mean_metrics(metrics) if metrics else None
+    if metrics:
+        _write_json(outdir / "metrics.json", {"structures": metrics, "mean": mean})
+    sections = result.sections
+    _write_json(outdir / "plan.json", {
+        "structures": [
+            {**item.structure.to_dict(),
+             "plan": None if item.plan is None else item.plan.to_dict(affine=sections.affine)}
+            for item in result.results
+        ],
+        "sections": {"axis": "xyz"[sections.axis], "n_planes": sections.n_planes,
+                     "plane_indices": sections.indices.tolist(),
+                     "positions_mm": sections.positions.tolist()},
+        "input": str(input_path),
+        "config": _config_dict(config),
+        "timings_s": {k: round(v, 4) for k, v in times.items()},
+    })
+    meshes = [item.mesh for item in result.results if item.mesh is not None]
+    union = Volume(result.labels != 0, label_map.affine)
+    write_preview(outdir / "preview.png", mesh=trimesh.util.concatenate(meshes), boxes=[],
+                  planner=f"{config.planner}, {len(meshes)} structures", sections=sections,
+                  projections=_union_projections(result), occupancy=_crop(union, result),
+                  truth=Volume(_truth_union(result), sections.affine))
+    times["write"] = time.perf_counter() - start
+    return {
+        "input": str(input_path),
+        "mesh": str(outdir / "meshes"),
+        "parts": sum(0 if r.plan is None else len(r.plan.parts) for r in result.results),
+        "planes": sections.n_planes,
+        "watertight": all(bool(m.is_watertight) for m in meshes),
+        "metrics": mean,
+        "structures": records,
+        "timings_s": {k: round(v, 4) for k, v in times.items()},
+    }
+
+
+def _config_dict(config: Any) -> dict[str, Any]:
+    from dataclasses import asdict
+
+    return asdict(config)
+
+
+def _truth_union(result: StructuresReconstruction) -> NDArray[np.bool_]:
+    shape = result.sections.grid_shape
+    region = tuple(slice(int(a), int(a) + n) for a, n in zip(result.crop_lo, shape, strict=True))
+    return result.truth.labels[region] != 0
+
+
+def _crop(volume: Volume, result: StructuresReconstruction) -> Volume:
+    shape = result.sections.grid_shape
+    region = tuple(slice(int(a), int(a) + n) for a, n in zip(result.crop_lo, shape, strict=True))
+    return Volume(volume.mask[region], result.sections.affine)
+
+
+def _union_projections(result: StructuresReconstruction) -> Any:
+    from .sampling import projections_from_volume
+
+    return projections_from_volume(Volume(_truth_union(result), result.sections.affine))

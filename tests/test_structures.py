@@ -1,0 +1,131 @@
+"""Every structure at once: a label map in, one mesh per structure and a label map out."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import nibabel as nib
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial import cKDTree
+
+from slicerecon.cli import main
+from slicerecon.io.labelmap import read_label_map
+from slicerecon.rasterize import mesh_to_mask
+from slicerecon.reconstruct import reconstruct
+from slicerecon.sampling import projections_from_volume
+from slicerecon.sections import CrossSections
+from slicerecon.structures import NO_PLANE, reconstruct_structures
+
+SPACING = (0.8, 0.8, 2.0)
+
+
+def _four_labels() -> np.ndarray:
+    """Two half-balls touching along x = 32 mm, a small ball and a bar (anisotropic voxels)."""
+    shape = (80, 70, 40)
+    x, y, z = (a * s for a, s in zip(np.meshgrid(*[np.arange(n) for n in shape],
+                                                 indexing="ij"), SPACING, strict=True))
+    labels = np.zeros(shape, np.uint8)
+    ball = (x - 32) ** 2 + (y - 28) ** 2 + (z - 40) ** 2 < 22**2
+    labels[ball & (x < 32)] = 1
+    labels[ball & (x >= 32)] = 2
+    labels[(x - 52) ** 2 + (y - 48) ** 2 + (z - 20) ** 2 < 4**2] = 5
+    labels[(np.abs(x - 12) < 6) & (np.abs(y - 50) < 5) & (z > 10) & (z < 70)] = 7
+    return labels
+
+
+@pytest.fixture(scope="module")
+def four(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("labels") / "four.nii.gz"
+    nib.save(nib.Nifti1Image(_four_labels(), np.diag([*SPACING, 1.0])), path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def joint(four: Path):  # noqa: ANN201
+    return reconstruct_structures(read_label_map(four), slices=12)
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / (a | b).sum())
+
+
+def test_every_structure_gets_a_watertight_mesh_and_no_voxel_two(joint) -> None:  # noqa: ANN001
+    assert [r.structure.value for r in joint.results] == [1, 2, 5, 7]
+    assert all(r.mesh is not None and r.mesh.is_watertight for r in joint.results)
+    # one label per voxel by construction: the label map holds the input's values only
+    assert set(np.unique(joint.labels)) == {0, 1, 2, 5, 7}
+    owners = sum(r.occupancy.mask.astype(int) for r in joint.results)
+    assert owners.max() == 1
+
+
+def test_touching_structures_share_their_interface(joint) -> None:  # noqa: ANN001
+    first, second = joint.results[0].mesh, joint.results[1].mesh
+    distance, _ = cKDTree(second.vertices).query(first.vertices)
+    shared = first.vertices[distance < 1e-9]
+    assert len(shared) > 200  # the x = 32 mm face is one surface in both meshes
+    assert np.ptp(shared[:, 0]) < 0.5
+    # no gap: well inside the ball, the voxels either side of the interface (x = 32 mm
+    # is between x indices 39 and 40) all belong to one of the two
+    x, y, z = (a * s for a, s in zip(np.meshgrid(*[np.arange(n) for n in (80, 70, 40)],
+                                                 indexing="ij"), SPACING, strict=True))
+    deep = (x - 32) ** 2 + (y - 28) ** 2 + (z - 40) ** 2 < 16**2
+    assert np.all(np.isin(joint.labels[38:42][deep[38:42]], (1, 2)))
+
+
+def test_each_label_at_least_as_good_as_plain_sdf_on_the_same_planes(joint) -> None:  # noqa: ANN001
+    sections = joint.sections
+    planes = np.rint(sections.indices).astype(int)
+    for item in joint.results:
+        truth = joint.truth_mask(item.structure.value)
+        own = CrossSections(np.moveaxis(truth.mask, 2, 0)[planes], sections.indices, 2,
+                            sections.affine, sections.grid_shape)
+        plain = reconstruct(own, projections_from_volume(truth), method="sdf", planner="none",
+                            carve=False, interpolation="linear").mesh
+        plain_iou = _iou(mesh_to_mask(plain, sections.affine, sections.grid_shape), truth.mask)
+        assert _iou(item.occupancy.mask, truth.mask) >= plain_iou - 1e-9, item.structure
+
+
+def test_run_writes_meshes_labels_and_records(four: Path, tmp_path: Path) -> None:
+    out = tmp_path / "all"
+    assert main(["run", str(four), "--slices", "12", "-o", str(out)]) == 0
+    meshes = sorted(p.name for p in (out / "meshes").iterdir())
+    assert meshes == ["1.stl", "2.stl", "5.stl", "7.stl"]
+    assert all(trimesh.load(out / "meshes" / m).is_watertight for m in meshes)
+    written = nib.load(out / "labels.nii.gz")
+    source = nib.load(four)
+    assert written.shape == source.shape and np.allclose(written.affine, source.affine)
+    assert set(np.unique(np.asanyarray(written.dataobj))) == {0, 1, 2, 5, 7}
+    records = json.loads((out / "structures.json").read_text())["structures"]
+    assert [r["value"] for r in records] == [1, 2, 5, 7]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics["structures"]) == {"1", "2", "5", "7"} and "volume_iou" in metrics["mean"]
+
+
+def test_one_label_writes_mesh_and_union_is_one_structure(four: Path, tmp_path: Path) -> None:
+    assert main(["run", str(four), "--label", "2", "-o", str(tmp_path / "two")]) == 0
+    assert (tmp_path / "two" / "mesh.stl").is_file()
+    values = np.unique(np.asanyarray(nib.load(tmp_path / "two" / "labels.nii.gz").dataobj))
+    assert set(values) == {0, 2}
+    assert main(["run", str(four), "--union", "-o", str(tmp_path / "union")]) == 0
+    union = trimesh.load(tmp_path / "union" / "mesh.stl")
+    assert union.is_watertight
+    assert main(["run", str(four), "--label", "1,7", "-o", str(tmp_path / "some")]) == 0
+    assert sorted(p.name for p in (tmp_path / "some" / "meshes").iterdir()) == ["1.stl", "7.stl"]
+
+
+def test_a_structure_between_the_planes_is_reported(tmp_path: Path) -> None:
+    labels = np.zeros((30, 30, 40), np.uint8)
+    labels[5:25, 5:25, 2:38] = 1
+    labels[12:18, 12:18, 20:22] = 3  # two slices thick, missed by 4 planes
+    path = tmp_path / "thin.nii.gz"
+    nib.save(nib.Nifti1Image(labels, np.eye(4)), path)
+    result = reconstruct_structures(read_label_map(path), slices=4)
+    status = {r.structure.value: r.status for r in result.results}
+    assert status[3] == NO_PLANE and status[1] == "reconstructed"
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--slices", "4", "-o", str(out)]) == 0
+    records = json.loads((out / "structures.json").read_text())["structures"]
+    assert {r["value"]: r["status"] for r in records}[3] == NO_PLANE
