@@ -15,7 +15,7 @@ import os
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -404,6 +404,7 @@ def reconstruct(
     weights: str | os.PathLike[str] | None = None,
     interpolation: str = "pchip",
     keep_field: bool = False,
+    upsample: int | None = None,
 ) -> Reconstruction:
     """Reconstruct a watertight surface from cross-sections and projections.
 
@@ -441,6 +442,9 @@ def reconstruct(
     keep_field : bool
         Keep the ``sdf`` surface's field (:attr:`Reconstruction.field`), e.g. to
         resolve several structures jointly (:mod:`slicerecon.surface.joint`).
+    upsample : int, optional
+        ``sdf`` field samples per voxel along the section axis (default:
+        :func:`axis_upsample`); structures resolved jointly share one.
 
     Returns
     -------
@@ -475,7 +479,7 @@ def reconstruct(
         surface = reconstruct_surface(
             sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
             hull=guide, interpolation=interpolation, carve=hull if implicit_carve else None,
-            upsample=axis_upsample(sections) if entry.implicit_carve else 1,
+            upsample=(upsample or axis_upsample(sections)) if entry.implicit_carve else 1,
             keep_field=keep_field,
         )
         mesh, occupancy = surface.mesh, surface.occupancy
@@ -553,6 +557,17 @@ def run_case(
             input_path, allow_irregular=config.allow_irregular,
             memory_budget_gb=config.max_memory_gb,
         )
+    kind = detect_kind(input_path)
+    if kind.kind == "rtstruct" and ground_truth is None:
+        several, single = _rtstruct_rois(kind, config, image_dir)
+        if several is not None:
+            from .structures import run_structures_case
+
+            return run_structures_case(several, input_path, out, config, progress=progress,
+                                       timings=timings, coordinates="LPS")
+        if single is not None:
+            config = replace(config, label=str(single.value), roi=None)
+            value, name = single.value, single.name
     if label_map is not None:
         if config.selectors:
             label_map = label_map.select(config.selectors, source=input_path)
@@ -575,7 +590,7 @@ def run_case(
                 allow_irregular=config.allow_irregular,
                 memory_budget_gb=config.max_memory_gb,
             )
-        frame = "LPS" if detect_kind(input_path).kind in DICOM_KINDS else "RAS"
+        frame = "LPS" if kind.kind in DICOM_KINDS else "RAS"
     with _timed(timings, "sections"):
         sections, projections, truth = prepare_inputs(
             data,
@@ -656,6 +671,30 @@ def run_case(
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     }
     return summary
+
+
+def _rtstruct_rois(kind: Any, config: ReconstructConfig, image_dir: Any) -> tuple[Any, Any]:
+    """The ROIs of an RTSTRUCT to reconstruct: ``(several, None)`` when several chosen
+    ROIs have contours; ``(None, structure)`` when one does (ROIs without contours
+    are reported); ``(None, None)`` to let the one-structure reader decide."""
+    from .io.rtstruct import read_rtstruct_structures
+
+    if config.union:
+        raise OptionError("--union applies to label maps; choose RTSTRUCT ROIs with --label")
+    if len(config.selectors) == 1:
+        return None, None
+    structures, sections, union = read_rtstruct_structures(
+        kind.path, rois=config.selectors, allow_irregular=config.allow_irregular,
+        image_dir=image_dir if image_dir is not None else kind.image_dir,
+        memory_budget_gb=config.max_memory_gb,
+    )
+    drawn = [s for s, own in zip(structures, sections, strict=True) if own is not None]
+    if len(drawn) >= 2:
+        return (structures, sections, union), None
+    for structure, own in zip(structures, sections, strict=True):
+        if own is None:
+            logger.warning("ROI %s has no contours: nothing to reconstruct", structure.label)
+    return None, drawn[0]
 
 
 def _label_grid(

@@ -35,13 +35,21 @@ from .io.labelmap import LabelMap, Structure
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB
 from .sections import CrossSections, Volume
 
-__all__ = ["StructureResult", "StructuresReconstruction", "reconstruct_structures"]
+__all__ = [
+    "StructureResult",
+    "StructuresReconstruction",
+    "reconstruct_sparse_structures",
+    "reconstruct_structures",
+    "run_structures_case",
+]
 
 logger = logging.getLogger(__name__)
 
 NO_PLANE = "no kept plane crosses it"
 """Status of a structure the chosen planes miss."""
 NOT_RECONSTRUCTED = "every voxel went to a neighbour"
+NO_CONTOURS = "no closed planar contours"
+"""Status of an RTSTRUCT ROI that holds no contour."""
 """Status of a structure whose reconstruction lost every voxel to other structures."""
 
 
@@ -96,22 +104,30 @@ class StructuresReconstruction:
         The reconstructed label map on the **input's** grid (its label values).
     sections : CrossSections
         The union's planes (on the cropped grid all structures share).
-    truth : LabelMap
-        The input (each structure's ground truth when it was dense).
+    truth : LabelMap or None
+        The input, each structure's ground truth, when it was dense (else None).
     crop_lo : ndarray of shape (3,)
-        Where the shared grid starts in the input's grid.
+        Where the shared grid starts in the grid of :attr:`labels`.
     timings : dict of str to float
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm of :attr:`labels`.
+    coordinates : {"RAS", "LPS"}
+        The world frame of :attr:`affine`.
     """
 
     results: list[StructureResult]
     labels: NDArray[np.integer]
     sections: CrossSections
-    truth: LabelMap
+    truth: LabelMap | None
     crop_lo: NDArray[np.int64]
     timings: dict[str, float] = field(default_factory=dict)
+    affine: NDArray[np.float64] | None = None
+    coordinates: str = "RAS"
 
     def truth_mask(self, value: int) -> Volume:
-        """A structure's own mask on the shared (cropped) grid."""
+        """A structure's own mask on the shared (cropped) grid (dense inputs only)."""
+        if self.truth is None:
+            raise OptionError("contour inputs have no ground truth")
         shape = self.sections.grid_shape
         region = tuple(slice(int(a), int(a) + n) for a, n in zip(self.crop_lo, shape,
                                                                  strict=True))
@@ -159,9 +175,8 @@ def reconstruct_structures(
     EmptyMaskError
         No structure holds a voxel.
     """
-    from .reconstruct import prepare_inputs, reconstruct
+    from .reconstruct import prepare_inputs
     from .sampling import projections_from_volume
-    from .surface.joint import resolve
 
     if method != "sdf":
         raise OptionError(
@@ -185,36 +200,120 @@ def reconstruct_structures(
     plane_index = np.rint(sections.indices).astype(np.int64)
     timings["sections"] = time.perf_counter() - start
 
-    results: list[StructureResult] = []
-    fields = []
+    items = []
     for structure in label_map.structures:
         mask = labels_crop == structure.value
         planes = np.moveaxis(mask, sections.axis, 0)[plane_index]
-        crossed = int(np.count_nonzero(planes.any(axis=(1, 2))))
-        if crossed == 0:
+        own = None
+        if planes.any():
+            own = CrossSections(planes, sections.indices, sections.axis, sections.affine,
+                                sections.grid_shape)
+        items.append((structure, own, projections_from_volume(Volume(mask, sections.affine))))
+    results, joint = _reconstruct_jointly(
+        items, sections, timings, planner=planner, method=method,
+        interpolation=interpolation, carve=carve, max_parts=max_parts, weights=weights,
+    )
+    values = np.array([s.structure.value for s in results], dtype=np.int64)
+    labels = np.zeros(label_map.shape, dtype=np.result_type(label_map.labels.dtype, np.uint8))
+    won = joint.labels >= 0
+    labels[region][won] = values[joint.labels[won]]
+    return StructuresReconstruction(results, labels, sections, label_map, crop_lo, timings,
+                                    label_map.affine, label_map.coordinates)
+
+
+def reconstruct_sparse_structures(
+    structures: list[Structure],
+    sections: list[CrossSections | None],
+    union: CrossSections,
+    *,
+    coordinates: str = "LPS",
+    planner: str = "heuristic",
+    method: str = "sdf",
+    interpolation: str = "pchip",
+    carve: bool = True,
+    max_parts: int = 8,
+    weights: str | None = None,
+) -> StructuresReconstruction:
+    """Reconstruct every ROI of an RTSTRUCT (or contour structures) on their shared grid.
+
+    Parameters
+    ----------
+    structures : list of Structure
+        One per ROI.
+    sections : list of CrossSections or None
+        Each ROI's planes on the grid of ``union`` (None: no contour).
+    union : CrossSections
+        All the ROIs' planes together (:func:`slicerecon.io.rtstruct.read_rtstruct_structures`).
+    coordinates : {"RAS", "LPS"}
+        The world frame of the grid (LPS for DICOM).
+    planner, method, interpolation, carve, max_parts, weights
+        As for :func:`reconstruct_structures`; each ROI's silhouettes are
+        derived from its own sections.
+
+    Returns
+    -------
+    StructuresReconstruction
+        The label map on the shared (sections') grid; no ground truth.
+    """
+    from .sampling import projections_from_sections
+
+    if method != "sdf":
+        raise OptionError(
+            f"several structures are resolved on their signed distances: use --method sdf "
+            f"(got {method!r}), or choose one ROI with --label"
+        )
+    timings: dict[str, float] = {}
+    items = [(structure, own, None if own is None else projections_from_sections(own))
+             for structure, own in zip(structures, sections, strict=True)]
+    results, joint = _reconstruct_jointly(
+        items, union, timings, planner=planner, method=method, interpolation=interpolation,
+        carve=carve, max_parts=max_parts, weights=weights,
+    )
+    for item, own in zip(results, sections, strict=True):
+        if own is None:
+            item.status = NO_CONTOURS
+    values = np.array([r.structure.value for r in results], dtype=np.int64)
+    dtype = np.uint8 if values.max(initial=0) < 256 and values.min(initial=0) >= 0 else np.int32
+    labels = np.zeros(union.grid_shape, dtype=dtype)
+    won = joint.labels >= 0
+    labels[won] = values[joint.labels[won]]
+    return StructuresReconstruction(results, labels, union, None, np.zeros(3, np.int64),
+                                    timings, union.affine, coordinates)
+
+
+def _reconstruct_jointly(
+    items: list[tuple[Structure, CrossSections | None, Any]],
+    shared: CrossSections,
+    timings: dict[str, float],
+    **options: Any,
+) -> tuple[list[StructureResult], Any]:
+    """Reconstruct each ``(structure, sections, projections)`` keeping its field; resolve.
+
+    All sections lie on the grid of ``shared`` (every structure's planes
+    together), whose field sampling every structure uses.
+    """
+    from .reconstruct import axis_upsample, reconstruct
+    from .surface.joint import resolve
+
+    upsample = axis_upsample(shared)
+    results: list[StructureResult] = []
+    fields = []
+    for structure, own, projections in items:
+        if own is None or not own.masks.any():
             logger.warning("structure %s lies between the kept planes: not reconstructed",
                            structure.label)
             results.append(StructureResult(structure, NO_PLANE))
             fields.append(None)
             continue
-        own = CrossSections(planes, sections.indices, sections.axis, sections.affine,
-                            sections.grid_shape)
-        projections = projections_from_volume(Volume(mask, sections.affine))
-        t0 = time.perf_counter()
-        result = reconstruct(own, projections, planner=planner, method=method,
-                             interpolation=interpolation, carve=carve, max_parts=max_parts,
-                             weights=weights, keep_field=True)
-        timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - t0
+        crossed = int(np.count_nonzero(own.masks.any(axis=(1, 2))))
+        start = time.perf_counter()
+        result = reconstruct(own, projections, keep_field=True, upsample=upsample, **options)
+        timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
         results.append(StructureResult(structure, "reconstructed", planes=crossed,
                                        plan=result.plan))
         fields.append(result.field)
-
-    t0 = time.perf_counter()
-    joint = resolve(fields, sections.grid_shape)
-    values = np.array([s.structure.value for s in results], dtype=np.int64)
-    labels = np.zeros(label_map.shape, dtype=np.result_type(label_map.labels.dtype, np.uint8))
-    won = joint.labels >= 0
-    labels[region][won] = values[joint.labels[won]]
+    start = time.perf_counter()
+    joint = resolve(fields, shared.grid_shape)
     for i, item in enumerate(results):
         if fields[i] is None:
             continue
@@ -223,11 +322,11 @@ def reconstruct_structures(
         if item.mesh is None or not inside.any():
             item.status, item.mesh = NOT_RECONSTRUCTED, None
             continue
-        item.occupancy = Volume(inside, sections.affine)
-    timings["resolve"] = time.perf_counter() - t0
+        item.occupancy = Volume(inside, shared.affine)
+    timings["resolve"] = time.perf_counter() - start
     logger.info("%d structures: %d reconstructed", len(results),
                 sum(r.mesh is not None for r in results))
-    return StructuresReconstruction(results, labels, sections, label_map, crop_lo, timings)
+    return results, joint
 
 
 def _mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, float]:
@@ -238,22 +337,29 @@ def _mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, float]:
 
 
 def run_structures_case(
-    label_map: LabelMap,
+    source: LabelMap | tuple[list[Structure], list[CrossSections | None], CrossSections],
     input_path: Any,
     out: Any,
     config: Any,
     *,
     progress: Any = None,
     timings: dict[str, float] | None = None,
+    coordinates: str = "LPS",
 ) -> dict[str, Any]:
-    """Reconstruct every structure of ``label_map`` and write the case's outputs into ``out``.
+    """Reconstruct every structure and write the case's outputs into ``out``.
+
+    ``source`` is a dense :class:`LabelMap` (planes chosen over the union,
+    metrics against each structure's mask) or the ROIs of an RTSTRUCT as
+    ``(structures, sections, union)`` on their shared grid
+    (:func:`slicerecon.io.rtstruct.read_rtstruct_structures`, no metrics).
 
     Writes ``meshes/<value>_<name>.<format>`` (one watertight mesh per
     reconstructed structure), ``labels.nii.gz`` (the label map on the input's
-    grid, with its label values), ``structures.json`` (every structure: value,
-    name, colour, status, planes used, volume in mm³, mesh), ``metrics.json``
-    (per structure and their mean), ``plan.json`` and ``preview.png``; every
-    file atomically. Called by :func:`slicerecon.reconstruct.run_case`.
+    grid with its label values, or on the sections' grid for contours),
+    ``structures.json`` (every structure: value, name, colour, status, planes
+    used, volume in mm³, mesh), ``metrics.json`` (per structure and their
+    mean, dense inputs), ``plan.json`` and ``preview.png``; every file
+    atomically. Called by :func:`slicerecon.reconstruct.run_case`.
 
     Returns
     -------
@@ -275,18 +381,24 @@ def run_structures_case(
     outdir = Path(out)
     times = dict(timings or {})
     say("reconstruct")
-    result = reconstruct_structures(
-        label_map, slices=config.slices, every=config.every, axis=config.axis,
-        planner=config.planner, method=config.method, interpolation=config.interpolation,
-        carve=config.carve, max_parts=config.max_parts, weights=config.weights,
-        memory_budget_gb=config.max_memory_gb,
-    )
+    options = {"planner": config.planner, "method": config.method,
+               "interpolation": config.interpolation, "carve": config.carve,
+               "max_parts": config.max_parts, "weights": config.weights}
+    if isinstance(source, LabelMap):
+        result = reconstruct_structures(
+            source, slices=config.slices, every=config.every, axis=config.axis,
+            memory_budget_gb=config.max_memory_gb, **options,
+        )
+    else:
+        if config.slices is not None or config.every is not None:
+            raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
+        result = reconstruct_sparse_structures(*source, coordinates=coordinates, **options)
     times.update(result.timings)
     say("evaluate")
     start = time.perf_counter()
     metrics: dict[str, dict[str, Any]] = {}
     for item in result.results:
-        if item.mesh is None:
+        if item.mesh is None or result.truth is None:
             continue
         truth = result.truth_mask(item.structure.value)
         metrics[item.structure.label] = evaluate(
@@ -304,8 +416,8 @@ def run_structures_case(
                               f"{config.mesh_format}")
             record["mesh"] = f"meshes/{path.name}"
         records.append(record)
-    write_label_map(result.labels, label_map.affine, outdir / "labels.nii.gz",
-                    coordinates=label_map.coordinates)
+    write_label_map(result.labels, result.affine, outdir / "labels.nii.gz",
+                    coordinates=result.coordinates)
     _write_json(outdir / "structures.json", {"structures": records})
     mean = _mean_metrics(metrics) if metrics else None
     if metrics:
@@ -325,11 +437,12 @@ def run_structures_case(
         "timings_s": {k: round(v, 4) for k, v in times.items()},
     })
     meshes = [item.mesh for item in result.results if item.mesh is not None]
-    union = Volume(result.labels != 0, label_map.affine)
+    union = Volume(result.labels != 0, result.affine)
     write_preview(outdir / "preview.png", mesh=trimesh.util.concatenate(meshes), boxes=[],
                   planner=f"{config.planner}, {len(meshes)} structures", sections=sections,
                   projections=_union_projections(result), occupancy=_crop(union, result),
-                  truth=Volume(_truth_union(result), sections.affine))
+                  truth=None if result.truth is None else Volume(_truth_union(result),
+                                                                 sections.affine))
     times["write"] = time.perf_counter() - start
     return {
         "input": str(input_path),
@@ -362,6 +475,8 @@ def _crop(volume: Volume, result: StructuresReconstruction) -> Volume:
 
 
 def _union_projections(result: StructuresReconstruction) -> Any:
-    from .sampling import projections_from_volume
+    from .sampling import projections_from_sections, projections_from_volume
 
+    if result.truth is None:
+        return projections_from_sections(result.sections)
     return projections_from_volume(Volume(_truth_union(result), result.sections.affine))

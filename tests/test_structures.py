@@ -129,3 +129,30 @@ def test_a_structure_between_the_planes_is_reported(tmp_path: Path) -> None:
     assert main(["run", str(path), "--slices", "4", "-o", str(out)]) == 0
     records = json.loads((out / "structures.json").read_text())["structures"]
     assert {r["value"]: r["status"] for r in records}[3] == NO_PLANE
+
+
+def test_every_roi_of_an_rtstruct_with_its_name_and_colour(tmp_path: Path) -> None:
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0],
+                                          [-31.5, -31.5, 0.0])
+    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 21), np.uint16), affine,
+                         modality="CT")
+
+    def rings(centre: tuple[float, float]) -> list:
+        return [factory.contour_item(factory.circle(np.sqrt(144 - (z - 30) ** 2), centre, z))
+                for z in np.arange(21) * 3.0 if abs(z - 30) < 12]
+
+    factory.write_rtstruct(tmp_path / "ct" / "rs.dcm", {
+        (1, "Left"): rings((-10, 0)), (2, "Right"): rings((10, 0)), (3, "Ghost"): None})
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out)]) == 0
+    assert sorted(p.name for p in (out / "meshes").iterdir()) == ["1_Left.stl", "2_Right.stl"]
+    records = {r["name"]: r for r in json.loads((out / "structures.json").read_text())[
+        "structures"]}
+    assert records["Ghost"]["status"] == "no closed planar contours"
+    assert records["Left"]["colour"] == [255, 0, 0]
+    sphere = 4 / 3 * np.pi * 12**3
+    for name in ("1_Left.stl", "2_Right.stl"):
+        mesh = trimesh.load(out / "meshes" / name)
+        assert mesh.is_watertight and mesh.volume == pytest.approx(sphere, rel=0.06)

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, LabelError
 from ..sections import Volume, check_affine
-from .limits import DEFAULT_MEMORY_BUDGET_GB
+from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 from .selection import choose_structure, parse_selector
 
 __all__ = [
@@ -176,6 +176,13 @@ def read_label_map(
     InputError
         What the readers raise; :class:`EmptyMaskError` when no structure holds a voxel.
     """
+    with reading(path):
+        return _read_label_map(path, allow_irregular, memory_budget_gb)
+
+
+def _read_label_map(
+    path: str | os.PathLike[str], allow_irregular: bool, memory_budget_gb: float
+) -> LabelMap | None:
     from . import detect_kind
 
     kind = detect_kind(path)

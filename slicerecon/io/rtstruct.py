@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,11 +35,12 @@ from ..errors import (
 )
 from ..sections import CrossSections
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
-from .limits import DEFAULT_MEMORY_BUDGET_GB
+from .labelmap import Structure
+from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 from .polygons import sections_from_polygons
 from .selection import choose_structure, parse_selector
 
-__all__ = ["list_rois", "read_rtstruct", "roi_contours"]
+__all__ = ["list_rois", "read_rtstruct", "read_rtstruct_structures", "roi_contours"]
 
 logger = logging.getLogger(__name__)
 
@@ -290,3 +292,116 @@ def read_rtstruct(
     logger.info("%s: ROI %d (%s): %d contours on %d planes",
                 p, number, name, len(polygons), sections.n_planes)
     return sections
+
+
+def _roi_colours(ds: Any) -> dict[int, tuple[int, int, int]]:
+    """ROIDisplayColor of each ROI that has one (RGB 0-255)."""
+    colours: dict[int, tuple[int, int, int]] = {}
+    for item in ds.get("ROIContourSequence", []):
+        try:
+            number = int(item.ReferencedROINumber)
+            rgb = [int(v) for v in item.get("ROIDisplayColor", [])]
+        except PARSE_ERRORS:
+            continue
+        if len(rgb) == 3:
+            colours[number] = (rgb[0], rgb[1], rgb[2])
+    return colours
+
+
+def read_rtstruct_structures(
+    path: str | os.PathLike[str],
+    *,
+    rois: Sequence[int | str] = (),
+    image_dir: str | os.PathLike[str] | None = None,
+    pixel_spacing: float | None = None,
+    allow_irregular: bool = False,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> tuple[list[Structure], list[CrossSections | None], CrossSections]:
+    """Every ROI of an RTSTRUCT (or those chosen) as cross-sections on one shared grid.
+
+    The grid is the one :func:`read_rtstruct` would build for all the chosen
+    ROIs' contours together (the image series' grid with ``image_dir``, its
+    slice axis rebuilt on the contour planes when they lie between slices), so
+    that every ROI is rasterized on the same voxels and they can be resolved
+    against each other.
+
+    Parameters
+    ----------
+    path : path-like
+        An RTSTRUCT file.
+    rois : sequence of int or str
+        ROINumbers or ROINames to keep (default: every ROI).
+    image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+        As for :func:`read_rtstruct`.
+
+    Returns
+    -------
+    structures : list of Structure
+        Every chosen ROI (number, name, ROIDisplayColor), in the file's order.
+    sections : list of CrossSections or None
+        Each ROI's planes on the shared grid; None for an ROI without closed
+        planar contours (reported with a warning).
+    union : CrossSections
+        All the chosen ROIs' planes together on that grid.
+
+    Raises
+    ------
+    InputError, FormatError, GeometryError
+        As :func:`read_rtstruct`.
+    EmptyMaskError
+        No chosen ROI has a closed planar contour.
+    """
+    with reading(path):
+        return _read_structures(path, rois, image_dir, pixel_spacing, allow_irregular,
+                                memory_budget_gb)
+
+
+def _read_structures(
+    path: str | os.PathLike[str],
+    rois: Sequence[int | str],
+    image_dir: str | os.PathLike[str] | None,
+    pixel_spacing: float | None,
+    allow_irregular: bool,
+    memory_budget_gb: float,
+) -> tuple[list[Structure], list[CrossSections | None], CrossSections]:
+    ds, p = _read_dataset(path)
+    available = _rois(ds, p)
+    if not available:
+        raise EmptyMaskError(f"{p} holds no ROI (its StructureSetROISequence is empty)")
+    chosen = [_choose_roi(available, r, p) for r in rois] if rois else available
+    colours = _roi_colours(ds)
+    structures = [Structure(number, name, colours.get(number)) for number, name in chosen]
+    polygons: list[list[NDArray[np.float64]]] = []
+    for number, name in chosen:
+        try:
+            polygons.append(_roi_polygons(ds, number, name, p)[0])
+        except EmptyMaskError as exc:
+            logger.warning("%s", exc)
+            polygons.append([])
+    everything = [poly for group in polygons for poly in group]
+    if not everything:
+        raise EmptyMaskError(f"{p}: no chosen ROI has a closed planar contour")
+    reference = None
+    if image_dir is not None:
+        from .dicom.series import dicom_series_geometry
+
+        affine, shape, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
+        reference = (affine, shape)
+        pixel_spacing = None
+    try:
+        union = sections_from_polygons(
+            everything, pixel_spacing=pixel_spacing, reference=reference,
+            memory_budget_gb=memory_budget_gb, own_planes=True,
+        )
+        sections = [
+            None if not group else sections_from_polygons(
+                group, reference=(union.affine, union.grid_shape),
+                memory_budget_gb=memory_budget_gb,
+            )
+            for group in polygons
+        ]
+    except OptionError:
+        raise
+    except SlicereconError as exc:
+        raise type(exc)(f"{p}: {exc}") from exc
+    return structures, sections, union
