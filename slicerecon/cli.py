@@ -315,6 +315,15 @@ def _print_summary(summary: dict[str, Any], outdir: Path) -> None:
         f"[bold]{summary['parts']}[/] part(s) from [bold]{summary['planes']}[/] planes -> "
         f"{summary['mesh']} (watertight: {summary['watertight']})"
     )
+    structures = summary.get("structures") or []
+    if len(structures) > 1:
+        listing = Table("value", "name", "status", "planes", "volume (mm³)", "mesh",
+                        title="structures")
+        for record in structures:
+            listing.add_row(str(record["value"]), record["name"], record["status"],
+                            str(record["planes"]), f"{record['volume_mm3']:.6g}",
+                            str(record.get("mesh", "")))
+        console.print(listing)
     metrics = summary.get("metrics")
     if metrics:
         table = Table("metric", "value", title="quality vs ground truth")
