@@ -176,7 +176,6 @@ def reconstruct_structures(
         No structure holds a voxel.
     """
     from .reconstruct import prepare_inputs
-    from .sampling import projections_from_volume
 
     if method != "sdf":
         raise OptionError(
@@ -208,7 +207,7 @@ def reconstruct_structures(
         if planes.any():
             own = CrossSections(planes, sections.indices, sections.axis, sections.affine,
                                 sections.grid_shape)
-        items.append((structure, own, projections_from_volume(Volume(mask, sections.affine))))
+        items.append((structure, own, mask))
     results, joint = _reconstruct_jointly(
         items, sections, timings, planner=planner, method=method,
         interpolation=interpolation, carve=carve, max_parts=max_parts, weights=weights,
@@ -255,7 +254,6 @@ def reconstruct_sparse_structures(
     StructuresReconstruction
         The label map on the shared (sections') grid; no ground truth.
     """
-    from .sampling import projections_from_sections
 
     if method != "sdf":
         raise OptionError(
@@ -263,8 +261,7 @@ def reconstruct_sparse_structures(
             f"(got {method!r}), or choose one ROI with --label"
         )
     timings: dict[str, float] = {}
-    items = [(structure, own, None if own is None else projections_from_sections(own))
-             for structure, own in zip(structures, sections, strict=True)]
+    items = [(structure, own, None) for structure, own in zip(structures, sections, strict=True)]
     results, joint = _reconstruct_jointly(
         items, union, timings, planner=planner, method=method, interpolation=interpolation,
         carve=carve, max_parts=max_parts, weights=weights,
@@ -287,10 +284,15 @@ def _reconstruct_jointly(
     timings: dict[str, float],
     **options: Any,
 ) -> tuple[list[StructureResult], Any]:
-    """Reconstruct each ``(structure, sections, projections)`` keeping its field; resolve.
+    """Reconstruct each ``(structure, sections, mask)`` keeping its field; resolve.
 
     All sections lie on the grid of ``shared`` (every structure's planes
-    together), whose field sampling every structure uses.
+    together), whose field sampling every structure uses. Each structure is
+    reconstructed on its own crop of that grid (:func:`_crop_to_structure`),
+    as a run on that structure alone would, so ``N`` structures cost about
+    the sum of ``N`` single runs. ``mask`` is the structure's dense mask on the
+    shared grid (its silhouettes are taken from it), or None for contours
+    (silhouettes derived from its sections).
     """
     from .reconstruct import axis_upsample, reconstruct
     from .surface.joint import resolve
@@ -298,7 +300,7 @@ def _reconstruct_jointly(
     upsample = axis_upsample(shared)
     results: list[StructureResult] = []
     fields = []
-    for structure, own, projections in items:
+    for structure, own, mask in items:
         if own is None or not own.masks.any():
             logger.warning("structure %s lies between the kept planes: not reconstructed",
                            structure.label)
@@ -307,11 +309,14 @@ def _reconstruct_jointly(
             continue
         crossed = int(np.count_nonzero(own.masks.any(axis=(1, 2))))
         start = time.perf_counter()
-        result = reconstruct(own, projections, keep_field=True, upsample=upsample, **options)
+        sub, projections, offset = _crop_to_structure(own, mask)
+        result = reconstruct(sub, projections, keep_field=True, upsample=upsample, **options)
         timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
         results.append(StructureResult(structure, "reconstructed", planes=crossed,
                                        plan=result.plan))
-        fields.append(result.field)
+        field = result.field
+        fields.append(field._replace(lo=tuple(int(a + b) for a, b in zip(field.lo, offset,
+                                                                          strict=True))))
     start = time.perf_counter()
     joint = resolve(fields, shared.grid_shape)
     for i, item in enumerate(results):
@@ -327,6 +332,46 @@ def _reconstruct_jointly(
     logger.info("%d structures: %d reconstructed", len(results),
                 sum(r.mesh is not None for r in results))
     return results, joint
+
+
+CROP_PAD = 3
+"""Voxels kept around a structure's extent when it is reconstructed on its own crop."""
+
+
+def _crop_to_structure(
+    own: CrossSections, mask: NDArray[np.bool_] | None
+) -> tuple[CrossSections, Any, NDArray[np.int64]]:
+    """A structure's sections on the crop of the shared grid around it, its silhouettes,
+    and where the crop starts on the shared grid."""
+    from .sampling import projections_from_sections, projections_from_volume
+
+    axis = own.axis
+    a, b = own.plane_axes
+    grid = np.asarray(own.grid_shape)
+    if mask is not None:
+        lo, hi = Volume(mask, own.affine).bounding_box_vox()
+    else:
+        rows = np.flatnonzero(own.masks.any(axis=(0, 2)))
+        cols = np.flatnonzero(own.masks.any(axis=(0, 1)))
+        drawn = own.indices[own.masks.any(axis=(1, 2))]
+        lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
+        lo[a], hi[a] = rows[0], rows[-1] + 1
+        lo[b], hi[b] = cols[0], cols[-1] + 1
+        lo[axis] = int(np.floor(drawn.min() + 0.5))
+        hi[axis] = int(np.ceil(drawn.max() + 0.5))
+    lo = np.maximum(lo - CROP_PAD, 0)
+    hi = np.minimum(hi + CROP_PAD, grid)
+    keep = np.flatnonzero((own.indices >= lo[axis] - 0.5) & (own.indices <= hi[axis] - 0.5))
+    affine = own.affine.copy()
+    affine[:3, 3] = own.affine[:3, :3] @ lo.astype(np.float64) + own.affine[:3, 3]
+    sub = CrossSections(own.masks[keep][:, lo[a]:hi[a], lo[b]:hi[b]], own.indices[keep] - lo[axis],
+                        axis, affine, tuple(int(v) for v in hi - lo))
+    if mask is not None:
+        crop = mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+        projections = projections_from_volume(Volume(crop, affine))
+    else:
+        projections = projections_from_sections(sub)
+    return sub, projections, lo
 
 
 def _mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, float]:
