@@ -288,7 +288,7 @@ def _reconstruct_jointly(
 
     All sections lie on the grid of ``shared`` (every structure's planes
     together), whose field sampling every structure uses. Each structure is
-    reconstructed on its own crop of that grid (:func:`_crop_to_structure`),
+    reconstructed on its own crop of that grid (:func:`crop_to_structure`),
     as a run on that structure alone would, so ``N`` structures cost about
     the sum of ``N`` single runs. ``mask`` is the structure's dense mask on the
     shared grid (its silhouettes are taken from it), or None for contours
@@ -309,7 +309,7 @@ def _reconstruct_jointly(
             continue
         crossed = int(np.count_nonzero(own.masks.any(axis=(1, 2))))
         start = time.perf_counter()
-        sub, projections, offset = _crop_to_structure(own, mask)
+        sub, projections, offset = crop_to_structure(own, mask)
         result = reconstruct(sub, projections, keep_field=True, upsample=upsample, **options)
         timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
         results.append(StructureResult(structure, "reconstructed", planes=crossed,
@@ -338,7 +338,7 @@ CROP_PAD = 3
 """Voxels kept around a structure's extent when it is reconstructed on its own crop."""
 
 
-def _crop_to_structure(
+def crop_to_structure(
     own: CrossSections, mask: NDArray[np.bool_] | None
 ) -> tuple[CrossSections, Any, NDArray[np.int64]]:
     """A structure's sections on the crop of the shared grid around it, its silhouettes,
