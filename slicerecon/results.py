@@ -418,6 +418,9 @@ class CaseResult:
         metrics, write).
     directory : Path or None
         The case folder.
+    structure_metrics : mapping of str to mapping, or None
+        A case with several structures: each structure's metrics by its
+        ``<value>_<name>`` (then :attr:`metrics` holds their mean).
     mesh_path, preview_path : Path or None
         The reconstructed mesh / preview PNG when present.
     """
@@ -442,6 +445,7 @@ class CaseResult:
     directory: Path | None = None
     mesh_path: Path | None = None
     preview_path: Path | None = None
+    structure_metrics: Mapping[str, Mapping[str, float]] | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -620,9 +624,15 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
         return _failed(case, folder, FailureRecord(case, None, f"unreadable plan.json ({exc})"))
     config = _sub(plan, "config")
     metrics: dict[str, float] | None = None
+    per_structure: dict[str, dict[str, float]] | None = None
     if files.metrics.is_file():
         try:
-            metrics = _numbers(_read_json(files.metrics))
+            raw = _read_json(files.metrics)
+            if isinstance(raw.get("structures"), dict):  # several structures and their mean
+                per_structure = {str(k): _numbers(v) for k, v in raw["structures"].items()
+                                 if isinstance(v, dict)}
+                raw = raw.get("mean") or {}
+            metrics = _numbers(raw)
         except (OSError, ValueError) as exc:
             record = FailureRecord.from_json(
                 {"input": plan.get("input"), "config": config,
@@ -633,6 +643,9 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
     done = _done_record(files)
     recorded_input = _str_or_none(plan.get("input"))
     parts = plan.get("parts")
+    if not isinstance(parts, list) and isinstance(plan.get("structures"), list):
+        parts = [p for item in plan["structures"] if isinstance(item, dict)
+                 for p in ((item.get("plan") or {}).get("parts") or [])]
     watertight = done.get("watertight")
     return CaseResult(
         case=case,
@@ -653,6 +666,7 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
         directory=folder,
         mesh_path=files.find_mesh(),
         preview_path=files.find_preview(),
+        structure_metrics=per_structure,
     )
 
 

@@ -156,3 +156,19 @@ def test_every_roi_of_an_rtstruct_with_its_name_and_colour(tmp_path: Path) -> No
     for name in ("1_Left.stl", "2_Right.stl"):
         mesh = trimesh.load(out / "meshes" / name)
         assert mesh.is_watertight and mesh.volume == pytest.approx(sphere, rel=0.06)
+
+
+def test_batch_and_report_give_one_row_per_structure(four: Path, tmp_path: Path) -> None:
+    import csv
+    import shutil
+
+    indir = tmp_path / "in"
+    indir.mkdir()
+    shutil.copy(four, indir / "four.nii.gz")
+    out = tmp_path / "batch"
+    assert main(["batch", str(indir), "-o", str(out), "--workers", "0", "--slices", "12"]) == 0
+    with (out / "metrics.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [(r["case"], r["structure"]) for r in rows] == [
+        ("four", "1"), ("four", "2"), ("four", "5"), ("four", "7"), ("four", "mean")]
+    assert all(float(r["volume_iou"]) > 0.9 for r in rows)

@@ -133,25 +133,33 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
     Returns
     -------
     str
-        Columns ``case, method, planner, planes, status`` (``ok`` / ``failed``),
-        every metric (full precision, empty when absent), ``seconds`` (the sum
-        of the stage timings), ``error``.
+        Columns ``case, structure, method, planner, planes, status`` (``ok`` /
+        ``failed``), every metric (full precision, empty when absent),
+        ``seconds`` (the sum of the stage timings), ``error``. A case with
+        several structures has one row per structure (``structure`` is its
+        ``<value>_<name>``) and a row of their ``mean``; other cases one row
+        with an empty ``structure``.
     """
     names = metric_names(cases)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["case", "method", "planner", "planes", "status", *names, "seconds", "error"])
+    writer.writerow(["case", "structure", "method", "planner", "planes", "status", *names,
+                     "seconds", "error"])
     for c in cases:
-        metrics = c.metrics or {}
         seconds = c.stage_seconds
-        writer.writerow([
-            c.case,
-            c.method or "",
-            c.planner or "",
-            "" if c.planes is None else c.planes,
-            "ok" if c.ok else "failed",
-            *(repr(metrics[n]) if n in metrics else "" for n in names),
-            "" if seconds is None else repr(round(seconds, 4)),
-            c.error_text,
-        ])
+        rows = [("", c.metrics or {})]
+        if c.structure_metrics:  # one row per structure, then their mean
+            rows = [*sorted(c.structure_metrics.items()), ("mean", c.metrics or {})]
+        for structure, metrics in rows:
+            writer.writerow([
+                c.case,
+                structure,
+                c.method or "",
+                c.planner or "",
+                "" if c.planes is None else c.planes,
+                "ok" if c.ok else "failed",
+                *(repr(metrics[n]) if n in metrics else "" for n in names),
+                "" if seconds is None else repr(round(seconds, 4)),
+                c.error_text,
+            ])
     return buffer.getvalue()
