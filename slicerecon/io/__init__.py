@@ -2,8 +2,9 @@
 
 :func:`load_input` looks at a path and returns what it holds:
 
-* a dense :class:`~slicerecon.sections.Volume` for NIfTI label maps, DICOM
-  image series of a mask, DICOM SEG files and closed meshes (voxelised);
+* a dense :class:`~slicerecon.sections.Volume` for NIfTI and NRRD label maps
+  (Slicer ``.seg.nrrd`` segmentations too), DICOM image series of a mask,
+  DICOM SEG files and closed meshes (voxelised);
 * sparse :class:`~slicerecon.sections.CrossSections` for contour files
   (JSON / CSV) and DICOM RTSTRUCT.
 
@@ -53,8 +54,8 @@ class InputKind:
     Attributes
     ----------
     kind : str
-        One of ``"nifti"``, ``"vti"``, ``"dicom-series"``, ``"dicom-seg"``, ``"rtstruct"``,
-        ``"contours"``, ``"mesh"``.
+        One of ``"nifti"``, ``"nrrd"``, ``"vti"``, ``"dicom-series"``, ``"dicom-seg"``,
+        ``"rtstruct"``, ``"contours"``, ``"mesh"``.
     path : Path
         The file or directory itself.
     image_dir : Path or None
@@ -111,6 +112,8 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         return InputKind("mesh", p)
     if suffix == ".vti":
         return InputKind("vti", p)
+    if suffix == ".nrrd":  # plain label maps and Slicer's .seg.nrrd
+        return InputKind("nrrd", p)
     if suffix in CONTOUR_SUFFIXES:
         return InputKind("contours", p)
     modality = dicom_modality(p)
@@ -124,8 +127,8 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         )
     raise FormatError(
         f"cannot tell the format of {p}: expected .nii/.nii.gz, a DICOM series directory, "
-        "a DICOM SEG or RTSTRUCT file, a contour file (.json/.csv), a VTK image (.vti) "
-        "or a mesh (.stl/.ply/.obj/.off)"
+        "a DICOM SEG or RTSTRUCT file, a contour file (.json/.csv), a VTK image (.vti), "
+        "a NRRD label map or Slicer segmentation (.nrrd/.seg.nrrd) or a mesh (.stl/.ply/.obj/.off)"
     )
 
 
@@ -150,15 +153,16 @@ def load_input(
     Parameters
     ----------
     path : path-like
-        NIfTI file, DICOM series directory, DICOM SEG / RTSTRUCT file, contour
+        NIfTI file, NRRD label map or Slicer segmentation (``.nrrd`` /
+        ``.seg.nrrd``), DICOM series directory, DICOM SEG / RTSTRUCT file, contour
         file (``.json`` / ``.csv``), VTK image (``.vti``) or closed mesh
         (``.stl`` / ``.ply`` / ``.obj`` / ``.off``).
     label : int or str, optional
         The structure to keep, by number or name
         (:func:`slicerecon.io.selection.choose_structure`): a label value (NIfTI,
-        VTI, DICOM series), a SegmentNumber or SegmentLabel (SEG), a ROINumber
-        or ROIName (RTSTRUCT). Default: every non-zero voxel of a label map,
-        the only segment or ROI.
+        NRRD, VTI, DICOM series), a segment name (``.seg.nrrd``), a SegmentNumber
+        or SegmentLabel (SEG), a ROINumber or ROIName (RTSTRUCT). Default: every
+        non-zero voxel of a label map, the only segment or ROI.
     roi : int or str, optional
         Another name for ``label`` (``--roi`` of the command line).
     image_dir : path-like, optional
@@ -273,6 +277,10 @@ def _read(
         from .nifti import read_nifti
 
         return read_nifti(kind.path, label=selector, **budget)
+    if kind.kind == "nrrd":
+        from .nrrd import read_nrrd
+
+        return read_nrrd(kind.path, label=selector, **budget)
     if kind.kind == "dicom-series":
         from .dicom import read_dicom_series
 

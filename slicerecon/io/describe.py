@@ -233,6 +233,20 @@ def describe_input(
             details.update(_grid(affine, values.shape))
             details["structures"] = describe_label_map(values, affine)
             details["labels"] = {str(s["value"]): s["voxels"] for s in details["structures"]}
+        elif kind.kind == "nrrd":
+            from .nrrd import nrrd_info, read_nrrd_label_map
+
+            header = nrrd_info(kind.path)
+            label_map = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
+            details["coordinates"] = label_map.coordinates
+            details.update(_grid(label_map.affine, label_map.shape))
+            records = describe_label_map(label_map.labels, label_map.affine,
+                                         names={s.value: s.name for s in label_map.structures})
+            for record, structure in zip(records, label_map.structures, strict=True):
+                record["colour"] = None if structure.colour is None else list(structure.colour)
+            details["structures"] = records
+            if header.is_segmentation:
+                details["segments"] = [s.to_dict() for s in header.segments]
         elif kind.kind == "vti":
             from .vti import read_vti
 

@@ -40,7 +40,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-LABEL_MAP_KINDS = ("nifti", "vti", "dicom-series", "dicom-seg")
+LABEL_MAP_KINDS = ("nifti", "nrrd", "vti", "dicom-series", "dicom-seg")
 """Input kinds (:func:`slicerecon.io.detect_kind`) that hold dense structures."""
 
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -162,7 +162,8 @@ def read_label_map(
     Parameters
     ----------
     path : path-like
-        A NIfTI or VTI label map, a DICOM mask series, a DICOM SEG.
+        A NIfTI, NRRD or VTI label map, a Slicer ``.seg.nrrd`` segmentation (names
+        and colours kept), a DICOM mask series, a DICOM SEG.
     allow_irregular, memory_budget_gb
         As for :func:`slicerecon.io.load_input`.
 
@@ -194,6 +195,10 @@ def _read_label_map(
         values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
         labels, frame = _as_labels(values), "RAS"
         result = LabelMap(labels, affine, _structures(labels), frame)
+    elif kind.kind == "nrrd":
+        from .nrrd import read_nrrd_label_map
+
+        result = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
     elif kind.kind == "vti":
         from .vti import read_vti
 

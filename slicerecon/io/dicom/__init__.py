@@ -20,6 +20,11 @@ Modules
     DICOM SEG: segments decoded by highdicom onto a grid checked here.
 :mod:`.info`
     Header-only descriptions for ``slicerecon info``.
+:mod:`.derived`
+    What a SEG or RTSTRUCT written by slicerecon needs from its image series:
+    the images on their grid, and a label map placed on that grid.
+:mod:`.seg_writer`
+    Writing a label map as a DICOM SEG (made by highdicom) referring to its series.
 
 Importing this package imports neither highdicom nor pixel decoders: the
 dispatcher imports it for every input to sniff files.
@@ -30,6 +35,7 @@ from __future__ import annotations
 from .geometry import ORIENTATION_TOLERANCE, POSITION_TOLERANCE_MM, POSITION_TOLERANCE_REL
 from .info import dicom_info
 from .seg import read_dicom_seg
+from .seg_writer import write_seg
 from .series import (
     FOREGROUND_EPSILON,
     MAX_RESAMPLE_FACTOR,
@@ -65,4 +71,5 @@ __all__ = [
     "read_dicom_seg",
     "read_dicom_series",
     "read_dicom_series_values",
+    "write_seg",
 ]

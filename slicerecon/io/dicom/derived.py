@@ -1,0 +1,371 @@
+"""What a derived DICOM object (SEG, RTSTRUCT) needs from the image series it refers to.
+
+A DICOM SEG or RT Structure Set written by slicerecon refers to the images of
+one series: their SOPInstanceUIDs, their study, their FrameOfReferenceUID.
+This module reads that series (a directory, files, or pydicom datasets; headers
+only), puts its images on the grid :func:`~slicerecon.io.dicom.dicom_series_geometry`
+defines (array axes (column, row, slice), voxel index → DICOM patient LPS mm),
+and places a label map onto that grid.
+
+The grid is the series reader's own (:mod:`.series`): slices sorted along
+``row_cosine × column_cosine``, a gantry tilt kept in the affine, an irregular
+series accepted only with ``allow_irregular`` (then planes that copy a
+neighbouring slice have no image, and nothing is written on them).
+
+Placing a label map on the series grid
+--------------------------------------
+A label map may come on the series grid itself (a DICOM mask series), on a
+grid that covers only some of its slices (a DICOM SEG is read over the planes
+that have frames) or whose slice axis is its own (an RTSTRUCT whose contours
+lie between the image's slices). :func:`labels_on_series` accepts any grid
+whose in-plane pixels are the series' pixels (same row and column steps, a
+whole-pixel offset) and whose planes are parallel to the series' slices: each
+image slice takes the label plane nearest to it (exactly the one at its
+position when the grids agree). Other grids are refused with a
+:class:`~slicerecon.errors.GeometryError`: rasterize the reconstruction onto
+the series grid first (:func:`slicerecon.rasterize.mesh_to_mask`).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ...errors import FormatError, GeometryError, InputError, LabelError, OptionError
+from ...sections import check_affine
+from ..labelmap import Structure
+from ..limits import check_geometry
+from .geometry import require_path
+from .series import _layout, _scan_series, _Slice, _slice_from
+from .sniff import read_dicom_header
+
+__all__ = [
+    "DEFAULT_COLOURS",
+    "SourceSeries",
+    "check_label_map",
+    "display_colour",
+    "labels_on_series",
+    "load_source_series",
+]
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_COLOURS: tuple[tuple[int, int, int], ...] = (
+    (230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48),
+    (145, 30, 180), (70, 240, 240), (240, 50, 230), (210, 245, 60), (250, 190, 212),
+    (0, 128, 128), (220, 190, 255), (170, 110, 40), (128, 0, 0), (170, 255, 195),
+    (128, 128, 0),
+)
+"""Display colours (RGB 0-255) of structures that have none, in turn (Trubetskoy's
+16 distinct colours without black, white and greys)."""
+
+GRID_TOLERANCE_PX = 0.01
+"""How far, in pixels, a label map's in-plane pixels may lie from the series' pixels."""
+
+_REQUIRED_UIDS = ("SOPClassUID", "SOPInstanceUID", "StudyInstanceUID", "SeriesInstanceUID",
+                  "FrameOfReferenceUID")
+
+
+@dataclass(frozen=True, eq=False)
+class SourceSeries:
+    """The images of one series on their voxel grid.
+
+    Attributes
+    ----------
+    affine : ndarray of shape (4, 4)
+        Voxel index → DICOM patient LPS mm (as :func:`dicom_series_geometry`).
+    shape : tuple of int
+        ``(I, J, K)`` = (Columns, Rows, planes).
+    images : tuple of pydicom.Dataset
+        The image of each plane that has one, in plane order (headers only).
+    planes : ndarray of shape (N,), int64
+        ``planes[n]`` is the plane of ``images[n]`` (all planes, unless the
+        series was put on a regular grid with ``allow_irregular``).
+    positions : ndarray of shape (N, 3)
+        ImagePositionPatient of each image, LPS mm: where its pixel (0, 0) is.
+        With ``allow_irregular`` an image may lie up to half a plane step from
+        its plane; contours drawn on it must lie on the image itself.
+    name : str
+        Where the series came from, for messages.
+    """
+
+    affine: NDArray[np.float64]
+    shape: tuple[int, int, int]
+    images: tuple[Any, ...]
+    planes: NDArray[np.int64]
+    positions: NDArray[np.float64]
+    name: str
+
+    def image_to_world(self, n: int, points_px: ArrayLike) -> NDArray[np.float64]:
+        """Map pixel coordinates on image ``n`` to LPS mm.
+
+        Parameters
+        ----------
+        n : int
+            Image number in ``[0, N)``.
+        points_px : array_like of shape (M, 2)
+            ``(column, row)`` index coordinates (array axes 0 and 1 of the grid).
+
+        Returns
+        -------
+        ndarray of shape (M, 3)
+            On the plane of the image itself.
+        """
+        pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 2)
+        return self.positions[n] + pts @ self.affine[:3, :2].T
+
+    @property
+    def first(self) -> Any:
+        """The first image (patient, study, series and frame of reference are shared)."""
+        return self.images[0]
+
+    @property
+    def frame_of_reference_uid(self) -> str:
+        """FrameOfReferenceUID of the images."""
+        return str(self.first.FrameOfReferenceUID)
+
+    @property
+    def study_instance_uid(self) -> str:
+        """StudyInstanceUID of the images."""
+        return str(self.first.StudyInstanceUID)
+
+    @property
+    def series_instance_uid(self) -> str:
+        """SeriesInstanceUID of the images."""
+        return str(self.first.SeriesInstanceUID)
+
+
+def _slices_from_items(items: Sequence[Any]) -> list[_Slice]:
+    from pydicom.dataset import Dataset
+
+    slices: list[_Slice] = []
+    for n, item in enumerate(items):
+        if isinstance(item, (str, os.PathLike)):
+            path = Path(item)
+            if not path.is_file():
+                raise InputError(f"source image not found: {path}")
+            ds = read_dicom_header(path, stop_before_pixels=True)
+        elif isinstance(item, Dataset):
+            ds = item
+            path = Path(str(getattr(item, "filename", "") or f"source_images[{n}]"))
+        else:
+            raise OptionError(
+                f"source_images[{n}] is a {type(item).__name__}: pass pydicom datasets, "
+                "paths of image files, or the directory of the series"
+            )
+        found = _slice_from(ds, path)
+        if found is not None:
+            slices.append(found)
+    if not slices:
+        raise InputError("source_images hold no DICOM image: pass the image series the "
+                         "label map was drawn on")
+    series = {s.series_uid for s in slices}
+    if len(series) > 1:
+        raise InputError(f"source_images belong to {len(series)} series "
+                         f"({', '.join(sorted(series))}); pass the images of one series")
+    return slices
+
+
+def load_source_series(
+    source_images: str | os.PathLike[str] | Sequence[Any],
+    *,
+    allow_irregular: bool = False,
+) -> SourceSeries:
+    """Read the headers of an image series and put its images on their grid.
+
+    Parameters
+    ----------
+    source_images : path-like or sequence of pydicom.Dataset or path-like
+        The directory of the series (non-image objects in it are skipped, as by
+        :func:`read_dicom_series`), or its images as datasets or file paths (in
+        any order).
+    allow_irregular : bool
+        Accept uneven slice spacing (the grid of :func:`read_dicom_series`
+        with ``allow_irregular=True``).
+
+    Returns
+    -------
+    SourceSeries
+
+    Raises
+    ------
+    InputError
+        No image, several series, a missing file.
+    FormatError
+        An unreadable file, or images lacking the UIDs a derived object refers to.
+    GeometryError
+        What the series reader refuses (non-parallel slices, irregular spacing, ...).
+    """
+    if isinstance(source_images, (str, os.PathLike)):
+        directory = require_path(source_images, want_dir=True)
+        slices = _scan_series(directory, stop_before_pixels=True)
+        name = str(directory)
+    else:
+        slices = _slices_from_items(list(source_images))
+        name = f"the {len(slices)} source images"
+    layout = _layout(slices, allow_irregular=allow_irregular)
+    check_geometry(layout.affine, layout.shape, what=name)
+    planes = np.flatnonzero(layout.own).astype(np.int64)
+    own = [layout.slices[int(layout.sources[k])] for k in planes]
+    images = tuple(item.dataset for item in own)
+    positions = np.array([item.position for item in own], dtype=np.float64)
+    for image, k in zip(images, planes, strict=True):
+        missing = [key for key in _REQUIRED_UIDS if not str(image.get(key, "") or "")]
+        if missing:
+            raise FormatError(
+                f"{name}: the image of plane {int(k)} lacks {', '.join(missing)}; a SEG or "
+                "RTSTRUCT cannot refer to it"
+            )
+    frames = {str(image.FrameOfReferenceUID) for image in images}
+    if len(frames) > 1:
+        raise GeometryError(f"{name}: the images have {len(frames)} FrameOfReferenceUIDs; "
+                            "they are not one series in one frame of reference")
+    return SourceSeries(layout.affine, layout.shape, images, planes, positions, name)
+
+
+def check_label_map(
+    labels: ArrayLike, affine: ArrayLike, structures: Sequence[Structure]
+) -> tuple[NDArray[np.integer], NDArray[np.float64], list[Structure]]:
+    """Validate a label map and its structures for writing.
+
+    Parameters
+    ----------
+    labels : array_like of shape (I, J, K), integer or bool
+        Label values, 0 for background.
+    affine : array_like of shape (4, 4)
+        Voxel index → LPS mm.
+    structures : sequence of Structure
+        One per label value to write (positive, distinct values).
+
+    Returns
+    -------
+    labels : ndarray of shape (I, J, K), integer
+    affine : ndarray of shape (4, 4)
+    structures : list of Structure
+        In the order given.
+
+    Raises
+    ------
+    OptionError
+        Not a 3-D integer array; no structure, or values not positive and distinct.
+    LabelError
+        Voxels hold a value that no structure describes.
+    """
+    values = np.asarray(labels)
+    if values.dtype == bool:
+        values = values.astype(np.uint8)
+    if values.ndim != 3 or values.dtype.kind not in "iu":
+        raise OptionError(f"labels must be a 3-D integer array (got {values.dtype} of shape "
+                          f"{values.shape})")
+    aff = check_affine(affine)
+    chosen = list(structures)
+    if not chosen or not all(isinstance(s, Structure) for s in chosen):
+        raise OptionError("structures must be a non-empty sequence of Structure")
+    numbers = [s.value for s in chosen]
+    if min(numbers) < 1 or len(set(numbers)) != len(numbers):
+        raise OptionError(f"structure values must be positive and distinct (got {numbers})")
+    lo, hi = (int(values.min()), int(values.max())) if values.size else (0, 0)
+    if lo >= 0 and hi < 2**16:  # faster than np.unique on a CT-sized grid, slice by slice
+        seen = np.zeros(hi + 1, dtype=bool)
+        for k in range(values.shape[2]):
+            seen[values[:, :, k]] = True
+        present = np.flatnonzero(seen)
+    else:
+        present = np.unique(values)
+    unknown = sorted(set(present[present != 0].tolist()) - set(numbers))
+    if unknown:
+        raise LabelError(
+            f"labels hold values {unknown} that no structure describes (structures: "
+            f"{sorted(numbers)}); pass a Structure for each value"
+        )
+    return values, aff, chosen
+
+
+def display_colour(structure: Structure, index: int) -> tuple[int, int, int]:
+    """The structure's colour, else the ``index``-th of :data:`DEFAULT_COLOURS`."""
+    if structure.colour is not None:
+        r, g, b = (int(np.clip(round(float(c)), 0, 255)) for c in structure.colour)
+        return r, g, b
+    return DEFAULT_COLOURS[index % len(DEFAULT_COLOURS)]
+
+
+def labels_on_series(
+    labels: NDArray[np.integer], affine: NDArray[np.float64], series: SourceSeries
+) -> NDArray[np.integer]:
+    """Place a label map on the grid of an image series.
+
+    Parameters
+    ----------
+    labels : ndarray of shape (I', J', K'), integer
+        A label map whose in-plane pixels are the series' pixels (same row and
+        column steps, offset by whole pixels) on planes parallel to its slices.
+    affine : ndarray of shape (4, 4)
+        Voxel index of ``labels`` → LPS mm.
+    series : SourceSeries
+
+    Returns
+    -------
+    ndarray of shape ``series.shape``, the dtype of ``labels``
+        On each image plane, the label plane nearest to it (none beyond half a
+        label step outside the label map's planes); voxels outside the label
+        map are 0. Foreground that falls outside the series is logged.
+
+    Raises
+    ------
+    GeometryError
+        The label map's grid is not the series' grid in-plane, or its planes
+        are not parallel to the series' slices.
+    """
+    shape = series.shape
+    if np.array_equal(np.asarray(labels.shape), shape) and np.allclose(
+        affine, series.affine, rtol=0, atol=1e-6 * float(np.abs(series.affine[:3]).max())
+    ):
+        return labels
+    # series index → label index
+    m = np.linalg.inv(affine) @ series.affine
+    size = float(max(shape[0], shape[1], labels.shape[0], labels.shape[1]))
+    in_plane = np.abs(m[:3, :2] - np.eye(3)[:, :2]).max() * size
+    if in_plane > GRID_TOLERANCE_PX:
+        raise GeometryError(
+            f"the label map is not on the grid of {series.name}: its in-plane pixels differ "
+            f"(by up to {in_plane:.3g} pixels across the image) or its planes are not "
+            "parallel to the image slices; rasterize the reconstruction onto the series' "
+            "grid (slicerecon.rasterize.mesh_to_mask with dicom_series_geometry) first"
+        )
+    out = np.zeros(shape, dtype=labels.dtype)
+    lost = int(np.count_nonzero(labels))
+    resampled = False
+    for k in range(shape[2]):
+        i0, j0, kk = m[:3, 2] * k + m[:3, 3]
+        di, dj, dk = round(float(i0)), round(float(j0)), round(float(kk))
+        if max(abs(i0 - di), abs(j0 - dj)) > GRID_TOLERANCE_PX:
+            raise GeometryError(
+                f"the label map is not on the grid of {series.name}: on plane {k} its pixels "
+                f"are shifted by a fraction of a pixel ({i0 - di:.3g}, {j0 - dj:.3g}); "
+                "rasterize the reconstruction onto the series' grid first"
+            )
+        if not 0 <= dk < labels.shape[2]:
+            continue
+        resampled |= abs(kk - dk) > GRID_TOLERANCE_PX
+        src_i = slice(max(di, 0), min(di + shape[0], labels.shape[0]))
+        src_j = slice(max(dj, 0), min(dj + shape[1], labels.shape[1]))
+        if src_i.start >= src_i.stop or src_j.start >= src_j.stop:
+            continue
+        dst = (slice(src_i.start - di, src_i.stop - di), slice(src_j.start - dj, src_j.stop - dj))
+        out[dst[0], dst[1], k] = labels[src_i, src_j, dk]
+    if resampled:
+        logger.info("the label map's planes are not the slices of %s: each image slice takes "
+                    "the nearest label plane", series.name)
+    else:
+        kept = int(np.count_nonzero(out))
+        if kept < lost:
+            logger.warning("%d of %d labelled voxels lie outside %s and are not written",
+                           lost - kept, lost, series.name)
+    return out

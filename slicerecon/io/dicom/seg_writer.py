@@ -1,0 +1,186 @@
+"""Write a label map as a DICOM SEG (Segmentation Storage) that refers to its image series.
+
+The SEG is made by highdicom (:class:`highdicom.seg.Segmentation`): BINARY,
+one segment per structure, one frame per image slice a segment covers (empty
+frames omitted), each frame referring to its source image
+(SourceImageSequence / DerivationImageSequence), in the images' study and
+frame of reference. highdicom writes everything the standard requires
+(Multi-frame Dimension module, functional groups, referenced series); this
+module only chooses what goes in.
+
+Segments
+--------
+* The standard numbers segments 1, 2, ... without gaps, and highdicom enforces
+  it; structures are numbered in the order of their values, so a label map
+  with values 1..N keeps them as SegmentNumbers. Each segment's
+  SegmentDescription records the label value (``"label value 5"``).
+* SegmentLabel: the structure's name, else ``"Structure <value>"``.
+* RecommendedDisplayCIELabValue: the structure's colour (RGB converted to
+  CIELab by highdicom), else one of
+  :data:`~slicerecon.io.dicom.derived.DEFAULT_COLOURS`.
+* SegmentedPropertyCategory / Type: SCT 85756007 "Tissue" / SCT 85756007
+  "Tissue" (3D Slicer's code for a segment of unknown kind: slicerecon does
+  not know what a structure is).
+* SegmentAlgorithmType SEMIAUTOMATIC (the surface is computed from a person's
+  cross-sections), algorithm "slicerecon" of family "Artificial Intelligence"
+  (CID 7162) with slicerecon's version.
+
+Grid: the label map is placed on the series grid by
+:func:`~slicerecon.io.dicom.derived.labels_on_series`.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ...errors import DependencyError, EmptyMaskError
+from ..atomic import atomic_path
+from ..labelmap import Structure
+from .derived import check_label_map, display_colour, labels_on_series, load_source_series
+
+__all__ = ["SEG_ALGORITHM_NAME", "write_seg"]
+
+logger = logging.getLogger(__name__)
+
+SEG_ALGORITHM_NAME = "slicerecon"
+"""AlgorithmName of every segment written."""
+
+
+def _segment_descriptions(structures: Sequence[Structure]) -> list[Any]:
+    from highdicom import AlgorithmIdentificationSequence
+    from highdicom.color import CIELabColor
+    from highdicom.seg import SegmentDescription
+    from pydicom.sr.codedict import codes
+
+    from ... import __version__
+
+    algorithm = AlgorithmIdentificationSequence(
+        name=SEG_ALGORITHM_NAME, family=codes.cid7162.ArtificialIntelligence,
+        version=str(__version__),
+    )
+    out = []
+    for number, structure in enumerate(structures, start=1):
+        description = SegmentDescription(
+            segment_number=number,
+            segment_label=structure.name.strip() or f"Structure {structure.value}",
+            segmented_property_category=codes.SCT.Tissue,
+            segmented_property_type=codes.SCT.Tissue,
+            algorithm_type="SEMIAUTOMATIC",
+            algorithm_identification=algorithm,
+            display_color=CIELabColor.from_rgb(*display_colour(structure, number - 1)),
+        )
+        description.SegmentDescription = f"label value {structure.value}"
+        out.append(description)
+    return out
+
+
+def write_seg(
+    labels: ArrayLike,
+    affine: ArrayLike,
+    structures: Sequence[Structure],
+    source_images: str | os.PathLike[str] | Sequence[Any],
+    path: str | os.PathLike[str],
+    *,
+    allow_irregular: bool = False,
+    series_number: int = 901,
+    series_description: str = "slicerecon reconstruction",
+) -> Path:
+    """Write a label map as a BINARY DICOM SEG referring to its image series.
+
+    Parameters
+    ----------
+    labels : array_like of shape (I, J, K), integer
+        Label values, 0 for background, on the grid of the image series
+        (array axes (column, row, slice), as :func:`read_dicom_series` reads
+        it), or on a grid sharing its in-plane pixels and slice direction
+        (:func:`~slicerecon.io.dicom.derived.labels_on_series`).
+    affine : array_like of shape (4, 4)
+        Voxel index of ``labels`` → DICOM patient LPS mm.
+    structures : sequence of Structure
+        One per label value (every non-zero value of ``labels`` needs one); a
+        structure without voxels becomes a segment without frames.
+    source_images : path-like or sequence of pydicom.Dataset or path-like
+        The image series: its directory, or its images (datasets, headers
+        suffice, or file paths) in any order.
+    path : path-like
+        Output file, written atomically (temporary file, then rename).
+    allow_irregular : bool
+        Accept an image series with uneven slice spacing (``--allow-irregular``).
+    series_number : int
+        SeriesNumber of the new SEG series.
+    series_description : str
+        SeriesDescription of the new SEG series.
+
+    Returns
+    -------
+    Path
+        The file written. Segment ``n`` (1-based) is the ``n``-th structure in
+        order of value; see the module docstring for labels, colours and codes.
+
+    Raises
+    ------
+    OptionError, LabelError
+        Bad labels or structures (:func:`~slicerecon.io.dicom.derived.check_label_map`).
+    InputError, FormatError, GeometryError
+        The image series cannot be read, or the label map is not on its grid.
+    EmptyMaskError
+        No structure holds a voxel on the series' images.
+    DependencyError
+        highdicom is not installed.
+    """
+    values, aff, chosen = check_label_map(labels, affine, structures)
+    try:
+        from highdicom.seg import Segmentation
+        from pydicom.uid import generate_uid
+    except ImportError as exc:  # pragma: no cover - highdicom is a dependency
+        raise DependencyError("writing a DICOM SEG needs highdicom: pip install highdicom") from exc
+
+    from ... import __version__
+
+    series = load_source_series(source_images, allow_irregular=allow_irregular)
+    on_grid = labels_on_series(values, aff, series)
+    ordered = sorted(chosen, key=lambda s: s.value)
+    lut = np.zeros(int(max(s.value for s in ordered)) + 1,
+                   dtype=np.uint8 if len(ordered) < 256 else np.uint16)
+    for number, structure in enumerate(ordered, start=1):
+        lut[structure.value] = number
+    frames = np.ascontiguousarray(lut[on_grid[:, :, series.planes]].transpose(2, 1, 0))
+    if not frames.any():
+        raise EmptyMaskError(f"no structure holds a voxel on the images of {series.name}: "
+                             "there is nothing to write in a SEG")
+    for number, structure in enumerate(ordered, start=1):
+        if not np.any(frames == number):
+            logger.warning("structure %d (%s) holds no voxel on the images; its segment has "
+                           "no frame", structure.value, structure.name)
+    segmentation = Segmentation(
+        source_images=list(series.images),
+        pixel_array=frames,
+        segmentation_type="BINARY",
+        segment_descriptions=_segment_descriptions(ordered),
+        series_instance_uid=generate_uid(),
+        series_number=series_number,
+        sop_instance_uid=generate_uid(),
+        instance_number=1,
+        manufacturer="slicerecon",
+        manufacturer_model_name="slicerecon",
+        software_versions=str(__version__),
+        device_serial_number="0",
+        content_label="SLICERECON",
+        content_description="surface reconstructed from cross-sections",
+        content_creator_name="slicerecon^",
+        omit_empty_frames=True,
+        series_description=series_description,
+    )
+    target = Path(path)
+    with atomic_path(target) as tmp:
+        segmentation.save_as(tmp)
+    logger.info("wrote DICOM SEG %s: %d segments, %d frames, referring to %s", target,
+                len(ordered), int(segmentation.NumberOfFrames), series.name)
+    return target
