@@ -1,10 +1,17 @@
-"""Episode bookkeeping of the partition process (numpy; the RL environment mirrors it).
+"""Episode bookkeeping of the partition process.
 
 One episode partitions a shape ``O`` (a boolean occupancy grid) into parts:
 each step applies one cut to the remaining region ``R``, separates the part
 ``W_i`` (:func:`~slicerecon.partition.cuts.split`) and scores it with the
 paper's reward ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)``.
-``docs/method.md`` states the rules.
+``docs/method.md`` (section 3) states the rules.
+
+The reward and the end of an episode are written once, as functions of voxel
+counts vectorised over a batch of episodes (:func:`count_iou`,
+:func:`part_rewards`, :func:`episode_done`): :class:`PartitionState` calls
+them for one episode, the torch training environment
+(:mod:`slicerecon.policy.env`) for all of its episodes, with counts it takes
+on its device.
 """
 
 from __future__ import annotations
@@ -21,7 +28,16 @@ from ..errors import EmptyMaskError, GeometryError, InputError, OptionError
 from ..sections import Box
 from .cuts import Cut, snap_action, split, view_shapes
 
-__all__ = ["Part", "StepResult", "PartitionState", "iou", "NOOP_REWARD"]
+__all__ = [
+    "Part",
+    "StepResult",
+    "PartitionState",
+    "iou",
+    "count_iou",
+    "part_rewards",
+    "episode_done",
+    "NOOP_REWARD",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -76,12 +92,83 @@ class StepResult(NamedTuple):
     info: dict[str, Any]
 
 
+def count_iou(intersection: ArrayLike, union: ArrayLike) -> NDArray[np.float64]:
+    """Intersection over union from voxel counts; 1.0 where the union is empty.
+
+    Parameters
+    ----------
+    intersection, union : ndarray of shape (B,), int
+        ``|A & B|`` and ``|A | B|`` of ``B`` pairs of masks.
+
+    Returns
+    -------
+    ndarray of shape (B,), float64
+    """
+    inter = np.asarray(intersection, dtype=np.float64)
+    total = np.asarray(union, dtype=np.float64)
+    return np.where(total > 0, inter / np.maximum(total, 1.0), 1.0)
+
+
 def iou(a: NDArray[np.bool_], b: NDArray[np.bool_]) -> float:
     """Voxel intersection over union of two same-shaped masks; 1.0 when both are empty."""
-    union = int(np.count_nonzero(a | b))
-    if union == 0:
-        return 1.0
-    return int(np.count_nonzero(a & b)) / union
+    inter, union = np.count_nonzero(a & b), np.count_nonzero(a | b)
+    return float(count_iou([inter], [union])[0])
+
+
+def part_rewards(
+    iou_part: ArrayLike, iou_reconstruction: ArrayLike | None, *, lam: float
+) -> NDArray[np.float64]:
+    """The reward of new parts, ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)``.
+
+    Parameters
+    ----------
+    iou_part : ndarray of shape (B,)
+        ``IoU(W_i, O)`` (``|W_i| / |O|``, as ``W_i`` lies in ``O``).
+    iou_reconstruction : ndarray of shape (B,) or None
+        ``IoU(S_i, W_i)`` inside the part's box; None: no reconstruction, the
+        reward is the first term alone.
+    lam : float
+        Weight of the reconstruction term.
+
+    Returns
+    -------
+    ndarray of shape (B,), float64
+        The rewards; a no-op step gets :data:`NOOP_REWARD` instead (no part).
+    """
+    first = np.asarray(iou_part, dtype=np.float64)
+    if iou_reconstruction is None:
+        return first
+    return first + float(lam) * np.asarray(iou_reconstruction, dtype=np.float64)
+
+
+def episode_done(
+    remaining_voxels: ArrayLike,
+    occupied_voxels: ArrayLike,
+    step_count: ArrayLike,
+    *,
+    max_steps: int,
+    min_remaining: float,
+) -> NDArray[np.bool_]:
+    """Whether episodes are over.
+
+    An episode ends when ``R`` is empty, when ``|R| < min_remaining * |O|``,
+    or when ``max_steps`` steps (no-ops included) are spent.
+
+    Parameters
+    ----------
+    remaining_voxels, occupied_voxels, step_count : ndarray of shape (B,), int
+        ``|R|``, ``|O|`` and the steps taken (no-ops included) of each episode.
+    max_steps : int
+    min_remaining : float
+
+    Returns
+    -------
+    ndarray of shape (B,), bool
+    """
+    left = np.asarray(remaining_voxels, dtype=np.float64)
+    total = np.asarray(occupied_voxels, dtype=np.float64)
+    steps = np.asarray(step_count)
+    return (left == 0) | (left < float(min_remaining) * total) | (steps >= int(max_steps))
 
 
 class PartitionState:
@@ -175,12 +262,13 @@ class PartitionState:
     @property
     def done(self) -> bool:
         """True when ``|R| < min_remaining * |O|``, ``R`` is empty, or ``max_steps`` are spent."""
-        left = self.remaining_voxels
-        return (
-            self._finished
-            or left == 0
-            or left < self.min_remaining * self.n_occupied
-            or self.step_count >= self.max_steps
+        if self._finished:
+            return True
+        return bool(
+            episode_done(
+                [self.remaining_voxels], [self.n_occupied], [self.step_count],
+                max_steps=self.max_steps, min_remaining=self.min_remaining,
+            )[0]
         )
 
     def projections(self) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
@@ -226,8 +314,9 @@ class PartitionState:
     def _make_part(self, w: NDArray[np.bool_], cut: Cut | None) -> tuple[Part, dict[str, Any]]:
         box = Box.of_mask(w)
         iou_part, iou_rec = self._score(w, box)
-        reward = iou_part + (0.0 if iou_rec is None else self.lam * iou_rec)
-        part = Part(box, int(np.count_nonzero(w)), float(reward), cut)
+        rec = None if iou_rec is None else [iou_rec]
+        reward = float(part_rewards([iou_part], rec, lam=self.lam)[0])
+        part = Part(box, int(np.count_nonzero(w)), reward, cut)
         return part, {"iou_part": iou_part, "iou_reconstruction": iou_rec}
 
     def _set_remaining(self, rest: NDArray[np.bool_]) -> None:

@@ -1,51 +1,30 @@
 """The cut environment in torch: many partition episodes stepped at once.
 
 :class:`CutEnv` runs ``B`` episodes of the partition process of
-:class:`~slicerecon.partition.state.PartitionState` side by side, with the voxel
-work (cuts, part boxes, rewards, the reconstruction surrogate) done on torch
-tensors on the CPU or a GPU. The rules are those of
-:mod:`slicerecon.partition.cuts` and :mod:`slicerecon.partition.state`
-(``docs/method.md``):
+:class:`~slicerecon.partition.state.PartitionState` side by side. The rules
+(snapping an action to corners, the cut's sides and the part ``W_i`` it
+separates, no-ops, the reward, the end of an episode) are written once, in
+:mod:`slicerecon.partition.cuts` and :mod:`slicerecon.partition.state`, as
+functions vectorised over a batch of episodes (``docs/method.md``, section 3);
+this module calls them with all its episodes at once and keeps only what
+needs the voxels on the device: counting the remaining voxels on each side of
+each cut, masking ``W_i``, its bounding box, and the IoU counts.
 
-* an action ``(x1, y1, x2, y2, c)`` in ``[0, 1]`` picks view
-  ``min(int(3 c), 2)`` and two points snapped to the nearest corner of that
-  view (ties to the first corner in ``(row, col)`` order);
-* the infinite line through the two corners, extruded along the view axis,
-  splits the remaining region; the strictly smaller open side is the part
-  ``W_i`` (equal counts: the ``+1`` side), voxels on the line stay;
-* a cut whose view has no corner, whose ends snap to the same corner, or whose
-  line leaves one side empty is a no-op (reward
-  :data:`~slicerecon.partition.state.NOOP_REWARD`; the step still counts);
-* ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)``; the episode ends after
-  ``max_steps`` steps or when fewer than ``min_remaining * |O|`` voxels remain.
+The episodes (shapes scaled into ``G^3`` cubes, their sections and visual
+hull) come from :mod:`slicerecon.partition.episodes`. The reward's
+reconstruction ``S_i`` is the part surface inference makes
+(:mod:`slicerecon.policy.reward`, the default), or its batched torch surrogate
+(:mod:`slicerecon.policy.surrogate`; agreement measured in ``docs/policy.md``).
 
-Corners are computed with the library's numpy
-:func:`~slicerecon.corners.harris_corners` (on the CPU, only for episodes whose
-remaining region changed), so snapping is exactly the numpy planner's.
-
-Reconstruction surrogate ``S_i``
---------------------------------
-The planner's reward needs a cheap voxel reconstruction of a part from the
-cross-sections inside its box. The library's
-:func:`~slicerecon.surface.part.part_voxels` linearly blends the planes'
-signed distance fields; here each episode keeps ``P`` planes of ``O``
-perpendicular to grid axis z (evenly spaced from the first to the last occupied
-plane, :func:`~slicerecon.sampling.evenly_spaced_planes`) and ``S_i`` is the
-*nearest-plane* extrusion: voxel ``(x, y, z)`` of the box copies ``O[x, y, p]``
-where ``p`` is the kept plane inside the box nearest to ``z`` (ties to the lower
-plane), or the nearest kept plane overall when the box holds none. This is the
-zeroth-order version of the SDF blend (the same on the planes, a step instead
-of a ramp between them, the same prism extension to the box faces).
-:func:`nearest_plane_voxels` is the numpy reference of the same rule.
+Corners are the library's numpy :func:`~slicerecon.corners.harris_corners` of
+each changed silhouette (on the CPU), so snapping is exactly the planner's.
 
 Observations
 ------------
 :class:`Observation`: the three silhouettes of the remaining region resized to
 ``R x R`` (:func:`resize_views`), the step ``t / max_steps``, and per view the
 ``K`` strongest corners normalised to ``[0, 1]``
-(:func:`~slicerecon.corners.pad_corners`) with a validity mask. Grids are
-cubes (``G^3``; shapes are centred in them, :func:`fit_to_cube`), so the three
-views share one size.
+(:func:`~slicerecon.corners.pad_corners`) with a validity mask.
 """
 
 from __future__ import annotations
@@ -53,7 +32,6 @@ from __future__ import annotations
 import logging
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -61,30 +39,35 @@ import torch
 import torch.nn.functional as F
 from numpy.typing import ArrayLike, NDArray
 
-from ..corners import harris_corners
+from ..corners import harris_corners, pad_corners
 from ..errors import EmptyMaskError, InputError, OptionError
+from ..partition.cuts import SnappedCuts, choose_sides, line_sides, snap_actions, view_shapes
+from ..partition.episodes import ShapePool, episode_sections, occupancy_hull
 from ..partition.heuristic import expert_action
-from ..partition.state import NOOP_REWARD, PartitionState
-from ..sampling import evenly_spaced_planes
-from ..sections import Box
+from ..partition.state import (
+    NOOP_REWARD,
+    PartitionState,
+    count_iou,
+    episode_done,
+    part_rewards,
+)
+from ..sections import Box, CrossSections
+from .reward import REWARD_SURFACES, mask_distances, part_surface_voxels, plane_distances
+from .surrogate import surrogate_parts
 
 __all__ = [
     "Observation",
     "EnvStep",
-    "ShapePool",
+    "StepRecord",
     "CutEnv",
     "resize_views",
-    "fit_to_cube",
-    "shape_occupancy",
-    "section_planes",
-    "nearest_plane_voxels",
     "observe_state",
 ]
 
 logger = logging.getLogger(__name__)
 
-_SECTION_AXIS = 2
-"""Grid axis the surrogate's section planes are perpendicular to (z)."""
+_NO_SIDE = 2
+"""A side no pixel has (sides are -1, 0, +1): the part of a no-op step is empty."""
 
 
 class Observation(NamedTuple):
@@ -138,7 +121,7 @@ class EnvStep(NamedTuple):
         Sum of rewards of the episodes that ended (NaN elsewhere).
     final_iou : Tensor of shape (B,), float32
         For the episodes that ended: voxel IoU between ``O`` and the union of the
-        parts' surrogates ``S_i``, the leftover region counted as a last part
+        parts' reconstructions ``S_i``, the leftover region counted as a last part
         (as :meth:`PartitionState.finish`); NaN elsewhere.
     n_parts : Tensor of shape (B,), int64
         Parts of the ended episodes including the leftover (0 elsewhere).
@@ -153,161 +136,35 @@ class EnvStep(NamedTuple):
     n_parts: torch.Tensor
 
 
-# -- shapes -----------------------------------------------------------------------------
-def fit_to_cube(mask: ArrayLike, size: int) -> NDArray[np.bool_]:
-    """Centre a 3-D mask's foreground in a ``size^3`` grid.
-
-    Parameters
-    ----------
-    mask : ndarray of shape (I, J, K), bool
-    size : int
-        Side of the cube, voxels; must hold the foreground's bounding box.
-
-    Returns
-    -------
-    ndarray of shape (size, size, size), bool
-        The foreground, shifted so that its bounding box is centred (rounded down).
-    """
-    arr = np.asarray(mask, dtype=bool)
-    if arr.ndim != 3:
-        raise InputError(f"mask must be 3-D (got shape {arr.shape})")
-    if not arr.any():
-        raise EmptyMaskError("the mask is empty: nothing to place in the grid")
-    box = Box.of_mask(arr)
-    if max(box.shape) > size:
-        raise OptionError(f"the shape's bounding box {box.shape} does not fit a {size}^3 grid")
-    out = np.zeros((size, size, size), dtype=bool)
-    lo = [(size - s) // 2 for s in box.shape]
-    dst = tuple(slice(a, a + s) for a, s in zip(lo, box.shape, strict=True))
-    out[dst] = arr[box.slices]
-    return out
-
-
-def shape_occupancy(name: str, *, seed: int, grid: int, margin: int = 1) -> NDArray[np.bool_]:
-    """A seeded procedural shape (:func:`slicerecon.shapes.make_shape`) scaled into ``grid^3``.
-
-    The voxel size is chosen so that the shape's longest side spans
-    ``grid - 2 * margin`` voxels; the shape is then centred (:func:`fit_to_cube`).
-
-    Parameters
-    ----------
-    name : str
-        A registered shape family (:func:`slicerecon.shapes.shape_names`).
-    seed : int
-        Seed of the shape's random proportions.
-    grid : int
-        Side of the cubic grid, voxels.
-    margin : int, optional
-        Empty voxels kept on each side.
-
-    Returns
-    -------
-    ndarray of shape (grid, grid, grid), bool
-    """
-    from ..shapes import make_shape
-
-    inner = int(grid) - 2 * int(margin)
-    if inner < 4:
-        raise OptionError(f"grid {grid} is too small for margin {margin}")
-    coarse = make_shape(name, seed=seed, spacing=2.0, margin=0)
-    lo, hi = coarse.bounding_box_vox()
-    extent_mm = float(np.max((hi - lo) * coarse.spacing))
-    spacing = extent_mm / inner
-    for _ in range(20):
-        vol = make_shape(name, seed=seed, spacing=spacing, margin=0)
-        lo, hi = vol.bounding_box_vox()
-        if int(np.max(hi - lo)) <= inner:
-            return fit_to_cube(vol.mask, int(grid))
-        spacing *= 1.03
-    raise OptionError(f"could not fit shape {name!r} (seed {seed}) into a {grid}^3 grid")
-
-
-def section_planes(occupancy: ArrayLike, n: int) -> NDArray[np.int64]:
-    """``n`` z-planes evenly spaced over the occupied z-range (fewer if the range is short)."""
-    occ = np.asarray(occupancy, dtype=bool)
-    planes = np.flatnonzero(occ.any(axis=(0, 1)))
-    if planes.size == 0:
-        raise EmptyMaskError("the occupancy is empty")
-    first, last = int(planes[0]), int(planes[-1])
-    count = min(int(n), last - first + 1)
-    if count < 2:
-        return np.array([first], dtype=np.int64)
-    return evenly_spaced_planes(first, last, count)
-
-
-def nearest_plane_voxels(
-    occupancy: ArrayLike, planes: ArrayLike, box: Box
-) -> NDArray[np.bool_]:
-    """Numpy reference of the environment's reconstruction surrogate ``S_i``.
-
-    Parameters
-    ----------
-    occupancy : ndarray of shape (I, J, K), bool
-        The shape ``O`` whose z-planes are the cross-sections.
-    planes : ndarray of shape (P,), int
-        Kept z-plane indices, increasing.
-    box : Box
-        The part's box.
-
-    Returns
-    -------
-    ndarray of shape box.shape, bool
-        Voxel ``(x, y, z)`` is ``O[x, y, p]`` with ``p`` the kept plane inside the
-        box nearest to ``z`` (ties to the lower one), or the nearest kept plane
-        overall when none lies inside the box.
-    """
-    occ = np.asarray(occupancy, dtype=bool)
-    kept = np.asarray(planes, dtype=np.int64).reshape(-1)
-    if kept.size == 0:
-        raise OptionError("give at least one section plane")
-    lo, hi = box.lo[_SECTION_AXIS], box.hi[_SECTION_AXIS]
-    inside = kept[(kept >= lo) & (kept < hi)]
-    candidates = inside if inside.size else kept
-    z = np.arange(lo, hi)
-    nearest = candidates[np.argmin(np.abs(z[:, None] - candidates[None, :]), axis=1)]
-    return occ[box.slices[0], box.slices[1], :][:, :, nearest]
-
-
-@dataclass(frozen=True)
-class ShapePool:
-    """Occupancy grids an environment draws its episodes from.
+class StepRecord(NamedTuple):
+    """What the last :meth:`CutEnv.step` did in each episode, before any reset.
 
     Attributes
     ----------
-    occupancies : ndarray of shape (N, G, G, G), bool
-    names : tuple of str
-        Shape family of each grid.
-    seeds : tuple of int
-        Seed of each grid's proportions.
+    cuts : SnappedCuts
+        The snapped cuts (:func:`~slicerecon.partition.cuts.snap_actions`).
+    removes_nothing : ndarray of shape (B,), bool
+        The cut's line left one side of the remaining region empty.
+    noop : ndarray of shape (B,), bool
+        Degenerate or removes nothing: no part.
+    part : Tensor of shape (B, G, G, G), bool
+        ``W_i`` (empty for no-ops).
+    lo, hi : ndarray of shape (B, 3), int64
+        The part's box (``hi`` exclusive; zeros for no-ops).
+    iou_part, iou_reconstruction : ndarray of shape (B,), float64
+        The reward's two terms (NaN for no-ops).
+    reward : ndarray of shape (B,), float64
     """
 
-    occupancies: NDArray[np.bool_]
-    names: tuple[str, ...]
-    seeds: tuple[int, ...]
-
-    @classmethod
-    def build(
-        cls, names: Sequence[str], seeds: Sequence[int], *, grid: int
-    ) -> ShapePool:
-        """Every family in ``names`` with every seed in ``seeds``, on a ``grid^3`` cube."""
-        if not names or not seeds:
-            raise OptionError("a shape pool needs at least one family and one seed")
-        grids, out_names, out_seeds = [], [], []
-        for name in names:
-            for seed in seeds:
-                grids.append(shape_occupancy(name, seed=int(seed), grid=grid))
-                out_names.append(str(name))
-                out_seeds.append(int(seed))
-        logger.info("shape pool: %d grids of %d^3", len(grids), grid)
-        return cls(np.stack(grids), tuple(out_names), tuple(out_seeds))
-
-    def __len__(self) -> int:
-        return int(self.occupancies.shape[0])
-
-    @property
-    def grid(self) -> int:
-        """Side ``G`` of the cubic grids."""
-        return int(self.occupancies.shape[1])
+    cuts: SnappedCuts
+    removes_nothing: NDArray[np.bool_]
+    noop: NDArray[np.bool_]
+    part: torch.Tensor
+    lo: NDArray[np.int64]
+    hi: NDArray[np.int64]
+    iou_part: NDArray[np.float64]
+    iou_reconstruction: NDArray[np.float64]
+    reward: NDArray[np.float64]
 
 
 # -- observation helpers ----------------------------------------------------------------
@@ -353,17 +210,15 @@ def _cached_corners(image: NDArray[np.bool_], k: int) -> NDArray[np.float64]:
     return corners
 
 
-def _padded_corner_array(
-    views: Sequence[NDArray[np.bool_]], k: int
-) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    """Pixel-coordinate corners (V, K, 2) and validity (V, K) of V silhouettes."""
-    pts = np.zeros((len(views), k, 2), dtype=np.float64)
-    valid = np.zeros((len(views), k), dtype=bool)
-    for v, img in enumerate(views):
-        c = _cached_corners(np.asarray(img, dtype=bool), k)
-        pts[v, : len(c)] = c
-        valid[v, : len(c)] = True
-    return pts, valid
+def _padded_corners(
+    image: NDArray[np.bool_], k: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Pixel corners (K, 2), their :func:`pad_corners` encoding (K, 2) and validity (K,)."""
+    corners = _cached_corners(image, k)
+    px = np.zeros((k, 2), dtype=np.float64)
+    px[: len(corners)] = corners
+    norm, valid = pad_corners(corners, n_max=k, image_shape=image.shape)
+    return px, norm, valid
 
 
 # -- environment ------------------------------------------------------------------------
@@ -387,10 +242,16 @@ class CutEnv:
     lam : float, optional
         Weight of the reconstruction term of the reward.
     planes : tuple of int, optional
-        ``(min, max)`` number of section planes of the surrogate ``S_i``,
-        drawn per episode.
+        ``(min, max)`` number of section planes of an episode (along z), drawn
+        per episode (:func:`~slicerecon.partition.episodes.episode_sections`).
     augment : bool, optional
         Randomly permute and flip the grid axes of each drawn shape.
+    reward_surface : {"exact", "surrogate"}, optional
+        The reward's reconstruction ``S_i``: ``"exact"`` (the default) is the
+        part surface of inference
+        (:func:`~slicerecon.policy.reward.part_surface_voxels`, numpy on the
+        CPU, a few ms per part); ``"surrogate"`` its batched torch
+        approximation (:mod:`slicerecon.policy.surrogate`), for a GPU.
     device : str or torch.device, optional
     seed : int, optional
         Seed of the episode draws.
@@ -408,6 +269,7 @@ class CutEnv:
         lam: float = 1.0,
         planes: tuple[int, int] = (8, 16),
         augment: bool = True,
+        reward_surface: str = "exact",
         device: str | torch.device = "cpu",
         seed: int = 0,
     ) -> None:
@@ -428,9 +290,15 @@ class CutEnv:
         lo_p, hi_p = (int(p) for p in planes)
         if not 1 <= lo_p <= hi_p:
             raise OptionError(f"planes must be (min, max) with 1 <= min <= max (got {planes})")
+        if reward_surface not in REWARD_SURFACES:
+            raise OptionError(
+                f"reward_surface must be one of {', '.join(REWARD_SURFACES)} "
+                f"(got {reward_surface!r})"
+            )
         self.pool = pool
         self.n_envs = int(n_envs)
         self.grid = pool.grid
+        self.image_shapes = view_shapes((self.grid,) * 3)
         self.resolution = int(resolution)
         self.max_corners = int(max_corners)
         self.max_steps = int(max_steps)
@@ -438,39 +306,93 @@ class CutEnv:
         self.lam = float(lam)
         self.planes = (lo_p, hi_p)
         self.augment = bool(augment)
+        self.reward_surface = reward_surface
         self.device = torch.device(device)
         self.rng = np.random.default_rng(seed)
-        b, g = self.n_envs, self.grid
-        self.occupancy = torch.zeros((b, g, g, g), dtype=torch.bool, device=self.device)
+        b, g, k = self.n_envs, self.grid, self.max_corners
+        dev = self.device
+        # Voxels on the device.
+        self.occupancy = torch.zeros((b, g, g, g), dtype=torch.bool, device=dev)
         self.remaining = torch.zeros_like(self.occupancy)
         self.recon = torch.zeros_like(self.occupancy)
-        self.n_occupied = torch.ones(b, dtype=torch.float64, device=self.device)
-        self.step_count = torch.zeros(b, dtype=torch.int64, device=self.device)
-        self.returns = torch.zeros(b, dtype=torch.float64, device=self.device)
-        self.n_parts = torch.zeros(b, dtype=torch.int64, device=self.device)
-        p_max = hi_p
-        self.plane_index = torch.zeros((b, p_max), dtype=torch.int64, device=self.device)
-        self.plane_valid = torch.zeros((b, p_max), dtype=torch.bool, device=self.device)
-        self.corner_px = torch.zeros((b, 3, self.max_corners, 2), dtype=torch.float64,
-                                     device=self.device)
-        self.corner_valid = torch.zeros((b, 3, self.max_corners), dtype=torch.bool,
-                                        device=self.device)
-        self._silhouettes = torch.zeros((b, 3, g, g), dtype=torch.bool, device=self.device)
+        self.hull = torch.zeros_like(self.occupancy)
+        self.plane_index = torch.zeros((b, hi_p), dtype=torch.int64, device=dev)
+        self.plane_valid = torch.zeros((b, hi_p), dtype=torch.bool, device=dev)
+        self.plane_dist = torch.zeros((b, hi_p, g, g), dtype=torch.float32, device=dev)
+        self._silhouettes = torch.zeros((b, 3, g, g), dtype=torch.bool, device=dev)
+        self._arange = torch.arange(g, device=dev)
+        # Per-episode numbers on the CPU, where the rules are evaluated.
+        self.n_occupied = np.ones(b, dtype=np.int64)
+        self._steps = np.zeros(b, dtype=np.int64)
+        self.returns = np.zeros(b, dtype=np.float64)
+        self.n_parts = np.zeros(b, dtype=np.int64)
+        self.corner_px = np.zeros((b, 3, k, 2), dtype=np.float64)
+        self.corner_norm = np.zeros((b, 3, k, 2), dtype=np.float64)
+        self.corner_valid = np.zeros((b, 3, k), dtype=bool)
         self.shape_id = np.zeros(b, dtype=np.int64)
+        self._sections: list[CrossSections | None] = [None] * b
+        self._hulls: list[NDArray[np.bool_] | None] = [None] * b
         self._expert: list[NDArray[np.float64] | None | bool] = [False] * b
-        self._arange = torch.arange(g, device=self.device)
+        self._orient: list[tuple[int, tuple[int, ...], tuple[int, ...]] | None] = [None] * b
+        self._plane_cache: dict[tuple[int, int], tuple[NDArray[np.float32], NDArray[np.bool_]]] = {}
+        self.last_step: StepRecord | None = None
+
+    @property
+    def step_count(self) -> torch.Tensor:
+        """Steps taken in each running episode (no-ops included), Tensor of shape (B,), int64."""
+        return torch.from_numpy(self._steps.copy())
 
     # -- episodes -------------------------------------------------------------------------
     def _draw(self, env: int, shape: int | None) -> NDArray[np.bool_]:
         idx = int(self.rng.integers(len(self.pool))) if shape is None else int(shape)
         self.shape_id[env] = idx
         occ = self.pool.occupancies[idx]
+        perm: tuple[int, ...] = (0, 1, 2)
+        flips: tuple[int, ...] = ()
         if self.augment and shape is None:
-            occ = np.transpose(occ, self.rng.permutation(3))
+            perm = tuple(int(a) for a in self.rng.permutation(3))
+            occ = np.transpose(occ, perm)
             flips = tuple(int(a) for a in np.flatnonzero(self.rng.random(3) < 0.5))
             if flips:
                 occ = np.flip(occ, axis=flips)
+        self._orient[env] = (idx, perm, flips)
         return np.ascontiguousarray(occ)
+
+    def _plane_distances(self, env: int, sections: CrossSections) -> NDArray[np.float32]:
+        """:func:`plane_distances` of an episode's sections, from a per-shape cache.
+
+        The distance of a plane of a pool shape (along an axis of its original
+        orientation) is computed the first time an episode uses it; an
+        augmented episode's planes are those planes transposed and flipped
+        (a distance transform commutes with both exactly).
+        """
+        orient = self._orient[env]
+        if orient is None:
+            return plane_distances(sections)
+        idx, perm, flips = orient
+        axis = perm[2]
+        entry = self._plane_cache.get((idx, axis))
+        if entry is None:
+            g = self.grid
+            entry = (np.zeros((g, g, g), dtype=np.float32), np.zeros(g, dtype=bool))
+            self._plane_cache[(idx, axis)] = entry
+        stack, known = entry
+        k = sections.indices.astype(np.int64)
+        if 2 in flips:
+            k = self.grid - 1 - k
+        missing = k[~known[k]]
+        if missing.size:
+            masks = np.moveaxis(self.pool.occupancies[idx], axis, 0)[missing]
+            stack[missing] = mask_distances(masks)
+            known[missing] = True
+        dist = stack[k]
+        if perm[0] > perm[1]:
+            dist = dist.transpose(0, 2, 1)
+        if 0 in flips:
+            dist = dist[:, ::-1, :]
+        if 1 in flips:
+            dist = dist[:, :, ::-1]
+        return np.ascontiguousarray(dist)
 
     def _start(
         self, envs: Sequence[int], occupancies: Sequence[NDArray[np.bool_]],
@@ -482,19 +404,26 @@ class CutEnv:
                 count = int(self.rng.integers(self.planes[0], self.planes[1] + 1))
             else:
                 count = int(n_planes[i])
-            planes = section_planes(occ, count)
+            sections = episode_sections(occ, count)
+            hull = occupancy_hull(occ)
+            planes = sections.indices.astype(np.int64)
             t = torch.from_numpy(occ).to(self.device)
             self.occupancy[env] = t
             self.remaining[env] = t
             self.recon[env] = False
-            self.n_occupied[env] = float(np.count_nonzero(occ))
-            self.step_count[env] = 0
-            self.returns[env] = 0.0
-            self.n_parts[env] = 0
+            self.hull[env] = torch.from_numpy(hull).to(self.device)
             self.plane_valid[env] = False
             self.plane_index[env] = 0
             self.plane_index[env, : planes.size] = torch.from_numpy(planes).to(self.device)
             self.plane_valid[env, : planes.size] = True
+            if self.reward_surface == "surrogate":
+                dist = torch.from_numpy(self._plane_distances(env, sections)).to(self.device)
+                self.plane_dist[env, : planes.size] = dist
+            self._sections[env], self._hulls[env] = sections, hull
+            self.n_occupied[env] = int(np.count_nonzero(occ))
+            self._steps[env] = 0
+            self.returns[env] = 0.0
+            self.n_parts[env] = 0
         self._refresh_corners(list(envs))
 
     def reset(self, seed: int | None = None, *, shapes: Sequence[int] | None = None) -> Observation:
@@ -534,6 +463,7 @@ class CutEnv:
             if not arr.any():
                 raise EmptyMaskError("an occupancy grid is empty")
             grids.append(arr)
+        self._orient = [None] * self.n_envs
         self._start(list(range(self.n_envs)), grids, n_planes)
         return self.observation()
 
@@ -557,20 +487,27 @@ class CutEnv:
         for i, env in enumerate(envs):
             self._expert[env] = False
             for v in np.flatnonzero(changed_np[i]):
-                pts, valid = _padded_corner_array([sil_np[i, v]], self.max_corners)
-                self.corner_px[env, v] = torch.from_numpy(pts[0]).to(self.device)
-                self.corner_valid[env, v] = torch.from_numpy(valid[0]).to(self.device)
+                px, norm, valid = _padded_corners(sil_np[i, v], self.max_corners)
+                self.corner_px[env, v] = px
+                self.corner_norm[env, v] = norm
+                self.corner_valid[env, v] = valid
 
     def observation(self) -> Observation:
         """The current states."""
         b, g, r = self.n_envs, self.grid, self.resolution
         views = resize_views(self.silhouettes().reshape(b * 3, g, g), r).reshape(b, 3, r, r)
-        step = (self.step_count.to(torch.float32) / self.max_steps).unsqueeze(1)
-        corners = ((self.corner_px + 0.5) / g).clamp(0.0, 1.0)
-        corners = corners * self.corner_valid.unsqueeze(-1)
-        return Observation(
-            views, step, corners.to(torch.float32), self.corner_valid.to(torch.float32)
-        )
+        step = torch.from_numpy(self._steps / self.max_steps).to(torch.float32).unsqueeze(1)
+        corners = torch.from_numpy(self.corner_norm).to(torch.float32)
+        mask = torch.from_numpy(self.corner_valid).to(torch.float32)
+        dev = self.device
+        return Observation(views, step.to(dev), corners.to(dev), mask.to(dev))
+
+    def episode(self, env: int) -> tuple[NDArray[np.bool_], CrossSections, NDArray[np.bool_]]:
+        """The running episode of slot ``env``: its occupancy ``O``, sections and visual hull."""
+        sections, hull = self._sections[env], self._hulls[env]
+        if sections is None or hull is None:
+            raise OptionError("no episode has started: call reset() or load() first")
+        return self.occupancy[env].cpu().numpy(), sections, hull
 
     def state_of(self, env: int) -> PartitionState:
         """A numpy :class:`PartitionState` whose remaining region is this episode's.
@@ -580,8 +517,8 @@ class CutEnv:
         """
         rem = self.remaining[env].cpu().numpy().copy()
         state = PartitionState(rem, max_corners=self.max_corners, max_steps=self.max_steps)
-        valid = self.corner_valid[env].cpu().numpy()
-        px = self.corner_px[env].cpu().numpy()
+        valid = self.corner_valid[env]
+        px = self.corner_px[env]
         state._corners = tuple(px[v][valid[v]] for v in range(3))  # noqa: SLF001
         return state
 
@@ -607,62 +544,56 @@ class CutEnv:
                 valid[env] = True
         return actions, valid
 
-    # -- transition -----------------------------------------------------------------------
-    def _snap(self, act: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor,
-                                                torch.Tensor]:
-        """View (B,), canonical end points p1, p2 (B, 2) and degenerate flags (B,)."""
-        b = self.n_envs
-        rows = torch.arange(b, device=self.device)
-        view = torch.clamp((3.0 * act[:, 4]).floor().to(torch.int64), 0, 2)
-        pts = self.corner_px[rows, view]  # (B, K, 2)
-        valid = self.corner_valid[rows, view]  # (B, K)
-        scale = float(self.grid)
-        ends = []
-        for t in (act[:, 0:2], act[:, 2:4]):
-            target = t * scale - 0.5
-            d2 = ((pts - target[:, None, :]) ** 2).sum(-1)
-            d2 = torch.where(valid, d2, torch.full_like(d2, float("inf")))
-            ends.append(torch.argmin(d2, dim=1))
-        i1, i2 = ends
-        degenerate = (~valid.any(dim=1)) | (i1 == i2)
-        p1 = pts[rows, i1]
-        p2 = pts[rows, i2]
-        swap = (p1[:, 0] > p2[:, 0]) | ((p1[:, 0] == p2[:, 0]) & (p1[:, 1] > p2[:, 1]))
-        q1 = torch.where(swap[:, None], p2, p1)
-        q2 = torch.where(swap[:, None], p1, p2)
-        return view, q1, q2, degenerate
+    # -- voxel work on the device ---------------------------------------------------------
+    def _column_counts(self, view: torch.Tensor) -> torch.Tensor:
+        """Remaining voxels per pixel of each episode's view, (B, G, G) int64."""
+        counts = torch.zeros((self.n_envs, self.grid, self.grid), dtype=torch.int64,
+                             device=self.device)
+        for v in range(3):
+            sel = view == v
+            if bool(sel.any()):
+                counts[sel] = self.remaining[sel].sum(dim=v + 1)
+        return counts
 
-    def _box_mask(self, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Bounding boxes of masks (B, G, G, G): lo (B, 3), hi (B, 3), box mask (B, G, G, G)."""
+    @staticmethod
+    def _extrude(pixels: torch.Tensor, view: torch.Tensor) -> torch.Tensor:
+        """Pixel masks (B, G, G) of each episode's view extruded along it, (B, G, G, G)."""
+        v = view[:, None, None, None]
+        return torch.where(
+            v == 0, pixels[:, None, :, :],
+            torch.where(v == 1, pixels[:, :, None, :], pixels[:, :, :, None]),
+        )
+
+    def _boxes(self, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Bounding boxes (:meth:`Box.of_mask`) of masks (n, G, G, G): lo, hi (n, 3); 0 if empty."""
         a = self._arange
         u = mask.view(torch.uint8)
-        los, his, axes = [], [], []
+        los, his = [], []
         for dims in ((2, 3), (1, 3), (1, 2)):
-            occ = u.amax(dim=dims[1]).amax(dim=dims[0]) > 0  # (B, G)
-            big = torch.where(occ, a, torch.full_like(a, self.grid))
-            small = torch.where(occ, a, torch.full_like(a, -1))
-            lo = big.min(dim=1).values
-            hi = small.max(dim=1).values + 1
-            los.append(lo)
-            his.append(hi)
-            axes.append((a[None, :] >= lo[:, None]) & (a[None, :] < hi[:, None]))
-        box = axes[0][:, :, None, None] & axes[1][:, None, :, None] & axes[2][:, None, None, :]
-        return torch.stack(los, 1), torch.stack(his, 1), box
+            occ = u.amax(dim=dims[1]).amax(dim=dims[0]) > 0  # (n, G)
+            lo = torch.where(occ, a, torch.full_like(a, self.grid)).min(dim=1).values
+            hi = torch.where(occ, a, torch.full_like(a, -1)).max(dim=1).values + 1
+            empty = ~occ.any(dim=1)
+            los.append(torch.where(empty, 0, lo))
+            his.append(torch.where(empty, 0, hi))
+        return torch.stack(los, 1), torch.stack(his, 1)
 
-    def _surrogate(self, lo_z: torch.Tensor, hi_z: torch.Tensor, box: torch.Tensor
-                   ) -> torch.Tensor:
-        """``S`` of parts with z-range [lo_z, hi_z) and box mask ``box`` (B, G, G, G)."""
-        planes, valid = self.plane_index, self.plane_valid
-        inside = valid & (planes >= lo_z[:, None]) & (planes < hi_z[:, None])
-        cand = torch.where(inside.any(dim=1, keepdim=True), inside, valid)
-        z = self._arange
-        dist = (z[None, :, None] - planes[:, None, :]).abs().to(torch.float32)
-        dist = torch.where(cand[:, None, :], dist, torch.full_like(dist, float("inf")))
-        nearest = torch.gather(planes, 1, dist.argmin(dim=2))  # (B, G)
-        g = self.grid
-        index = nearest[:, None, None, :].expand(-1, g, g, -1)
-        return torch.gather(self.occupancy, 3, index) & box
+    def _reconstruct(self, envs: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor
+                     ) -> torch.Tensor:
+        """``S_i`` of parts with boxes ``[lo, hi)`` in episodes ``envs``, (n, G, G, G) bool."""
+        if self.reward_surface == "surrogate":
+            return surrogate_parts(self.plane_dist[envs], self.plane_index[envs],
+                                   self.plane_valid[envs], self.hull[envs], lo, hi)
+        out = torch.zeros((len(envs), *(self.grid,) * 3), dtype=torch.bool, device=self.device)
+        lo_np, hi_np = lo.cpu().numpy(), hi.cpu().numpy()
+        for i, env in enumerate(envs.tolist()):
+            _, sections, hull = self.episode(env)
+            box = Box(tuple(int(v) for v in lo_np[i]), tuple(int(v) for v in hi_np[i]))  # type: ignore[arg-type]
+            voxels = part_surface_voxels(sections, hull, box)
+            out[(i, *box.slices)] = torch.from_numpy(voxels).to(self.device)
+        return out
 
+    # -- transition -----------------------------------------------------------------------
     def step(self, actions: torch.Tensor | ArrayLike) -> EnvStep:
         """Apply one action per episode.
 
@@ -675,88 +606,83 @@ class CutEnv:
         -------
         EnvStep
         """
-        act = torch.as_tensor(actions, device=self.device).to(torch.float64)
+        act = torch.as_tensor(actions).detach().cpu().numpy().astype(np.float64)
         if act.shape != (self.n_envs, 5):
             raise OptionError(
                 f"actions must have shape ({self.n_envs}, 5) (got {tuple(act.shape)})"
             )
-        if not bool(torch.isfinite(act).all()):
-            raise OptionError("actions hold NaN or infinite values")
-        act = act.clamp(0.0, 1.0)
-        view, p1, p2, degenerate = self._snap(act)
-        g = self.grid
-        centres = self._arange.to(torch.float64)
-        rows = centres[None, :, None]
-        cols = centres[None, None, :]
-        r1, c1 = p1[:, 0, None, None], p1[:, 1, None, None]
-        r2, c2 = p2[:, 0, None, None], p2[:, 1, None, None]
-        side = torch.sign((r2 - r1) * (cols - c1) - (c2 - c1) * (rows - r1)).to(torch.int8)
-        rem = self.remaining
-        counts = torch.zeros((self.n_envs, g, g), dtype=torch.int64, device=self.device)
-        for v in range(3):  # voxels per pixel of each episode's chosen view
-            sel_v = view == v
-            if bool(sel_v.any()):
-                counts[sel_v] = rem[sel_v].sum(dim=v + 1)
-        n_pos = (counts * (side > 0)).sum(dim=(1, 2))
-        n_neg = (counts * (side < 0)).sum(dim=(1, 2))
-        noop = degenerate | (n_pos == 0) | (n_neg == 0)
-        keep = torch.where(n_pos <= n_neg, 1, -1).to(torch.int8)
-        sel = side == keep[:, None, None]  # (B, G, G) in the view's (row, col)
-        view4 = view[:, None, None, None]
-        side3 = torch.where(
-            view4 == 0,
-            sel[:, None, :, :],
-            torch.where(view4 == 1, sel[:, :, None, :], sel[:, :, :, None]),
+        b, g, dev = self.n_envs, self.grid, self.device
+        # The rules (numpy, all episodes at once): snap, sides of the line.
+        cuts = snap_actions(act, self.corner_px, self.corner_valid, self.image_shapes)
+        sides = torch.from_numpy(line_sides(cuts.p1, cuts.p2, (g, g))).to(dev)
+        view = torch.from_numpy(cuts.view).to(dev)
+        # Voxel counts on the device, the choice of side by the rules.
+        counts = self._column_counts(view)
+        n_side = torch.stack([(counts * (sides > 0)).sum(dim=(1, 2)),
+                              (counts * (sides < 0)).sum(dim=(1, 2))]).cpu().numpy()
+        keep, removes_nothing = choose_sides(n_side[0], n_side[1])
+        noop = cuts.degenerate | removes_nothing
+        keep = np.where(noop, _NO_SIDE, keep).astype(np.int8)
+        chosen = sides == torch.from_numpy(keep).to(dev)[:, None, None]
+        w = self.remaining & self._extrude(chosen, view)
+        # The part's box and reconstruction; the reward's counts.
+        lo, hi = self._boxes(w)
+        parts = torch.from_numpy(np.flatnonzero(~noop)).to(dev)
+        s = torch.zeros_like(w)
+        if parts.numel():
+            s[parts] = self._reconstruct(parts, lo[parts], hi[parts])
+        sums = torch.stack([w.sum(dim=(1, 2, 3)), (s & w).sum(dim=(1, 2, 3)),
+                            (s | w).sum(dim=(1, 2, 3))]).cpu().numpy()
+        iou_part = count_iou(sums[0], self.n_occupied)
+        iou_rec = count_iou(sums[1], sums[2])
+        reward = np.where(noop, NOOP_REWARD, part_rewards(iou_part, iou_rec, lam=self.lam))
+        self.last_step = StepRecord(
+            cuts, removes_nothing, noop, w, lo.cpu().numpy(), hi.cpu().numpy(),
+            np.where(noop, np.nan, iou_part), np.where(noop, np.nan, iou_rec), reward,
         )
-        w = rem & side3 & ~noop[:, None, None, None]
-        lo, hi, box = self._box_mask(w)
-        s = self._surrogate(lo[:, 2], hi[:, 2], box)
-        w_count = w.sum(dim=(1, 2, 3)).to(torch.float64)
-        inter = (s & w).sum(dim=(1, 2, 3)).to(torch.float64)
-        union = (s | w).sum(dim=(1, 2, 3)).to(torch.float64)
-        iou_rec = torch.where(union > 0, inter / union.clamp(min=1.0), torch.ones_like(union))
-        reward = torch.where(
-            noop, torch.full_like(w_count, NOOP_REWARD), w_count / self.n_occupied
-            + self.lam * iou_rec
-        )
-        self.remaining = rem & ~w
+        # Bookkeeping and the end of episodes (the rules again).
+        self.remaining = self.remaining & ~w
         self.recon = self.recon | s
-        self.step_count = self.step_count + 1
-        self.returns = self.returns + reward
-        self.n_parts = self.n_parts + (~noop).to(torch.int64)
-        left = self.remaining.sum(dim=(1, 2, 3)).to(torch.float64)
-        done = (left == 0) | (left < self.min_remaining * self.n_occupied) | (
-            self.step_count >= self.max_steps
-        )
-        changed = torch.nonzero(~noop).flatten().tolist()
-        ended = torch.nonzero(done).flatten().tolist()
-        episode_return = torch.full((self.n_envs,), float("nan"), device=self.device)
-        final_iou = torch.full((self.n_envs,), float("nan"), device=self.device)
-        n_parts = torch.zeros(self.n_envs, dtype=torch.int64, device=self.device)
+        self._steps += 1
+        self.returns += reward
+        self.n_parts += ~noop
+        left = self.remaining.sum(dim=(1, 2, 3)).cpu().numpy()
+        done = episode_done(left, self.n_occupied, self._steps, max_steps=self.max_steps,
+                            min_remaining=self.min_remaining)
+        ended = [int(e) for e in np.flatnonzero(done)]
+        episode_return = np.full(b, np.nan)
+        final_iou = np.full(b, np.nan)
+        n_parts = np.zeros(b, dtype=np.int64)
         if ended:
-            iou, parts = self._finish(ended)
-            final_iou[ended] = iou
-            n_parts[ended] = parts
-            episode_return[ended] = self.returns[ended].to(torch.float32)
-            grids = [self._draw(e, None) for e in ended]
-            self._start(ended, grids)
-        self._refresh_corners([e for e in changed if e not in set(ended)], force=False)
+            final_iou[ended], n_parts[ended] = self._finish(ended)
+            episode_return[ended] = self.returns[ended]
+            self._start(ended, [self._draw(e, None) for e in ended])
+        changed = [int(e) for e in np.flatnonzero(~noop & ~done)]
+        self._refresh_corners(changed, force=False)
         return EnvStep(
-            self.observation(), reward.to(torch.float32), done, noop, episode_return,
-            final_iou, n_parts,
+            self.observation(),
+            torch.from_numpy(reward.astype(np.float32)).to(dev),
+            torch.from_numpy(done).to(dev),
+            torch.from_numpy(noop).to(dev),
+            torch.from_numpy(episode_return.astype(np.float32)).to(dev),
+            torch.from_numpy(final_iou.astype(np.float32)).to(dev),
+            torch.from_numpy(n_parts).to(dev),
         )
 
-    def _finish(self, envs: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
-        """Surrogate IoU of ended episodes, the leftover region a last part."""
-        rem = self.remaining
-        left = rem.any(dim=(1, 2, 3))
-        lo, hi, box = self._box_mask(rem)
-        s = self._surrogate(lo[:, 2], hi[:, 2], box) & left[:, None, None, None]
-        recon = (self.recon | s)[envs]
-        occ = self.occupancy[envs]
-        inter = (recon & occ).sum(dim=(1, 2, 3)).to(torch.float32)
-        union = (recon | occ).sum(dim=(1, 2, 3)).to(torch.float32).clamp(min=1.0)
-        return inter / union, self.n_parts[envs] + left[envs].to(torch.int64)
+    def _finish(self, envs: list[int]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """IoU of ``∪ S_i`` with ``O`` for ended episodes, the leftover region a last part."""
+        idx = torch.tensor(envs, device=self.device)
+        rem = self.remaining[idx]
+        lo, hi = self._boxes(rem)
+        left = rem.flatten(1).any(dim=1)
+        recon = self.recon[idx].clone()
+        rows = torch.nonzero(left).flatten()
+        if rows.numel():
+            recon[rows] |= self._reconstruct(idx[rows], lo[rows], hi[rows])
+        occ = self.occupancy[idx]
+        sums = torch.stack([(recon & occ).sum(dim=(1, 2, 3)),
+                            (recon | occ).sum(dim=(1, 2, 3))]).cpu().numpy()
+        return count_iou(sums[0], sums[1]), self.n_parts[envs] + left.cpu().numpy()
 
 
 def observe_state(

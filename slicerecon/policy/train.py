@@ -14,7 +14,8 @@ One run (``slicerecon train --config il_rl``):
    state) go to ``R_A``; ``updates_per_step`` updates per batched env step on
    minibatches from ``R_D`` and ``R_A``.
 5. Every ``eval_every`` updates: the greedy actor on the held-out shapes; the
-   CSV log gets the mean surrogate IoU (``docs/policy.md``).
+   CSV log gets the mean IoU of the parts' reconstructions with the shapes
+   (the reward's reconstruction, ``reward_surface``; ``docs/policy.md``).
 
 Outputs in ``out``: ``log.csv``, ``checkpoint.pt`` (networks, optimizers,
 buffers, counters, RNG states; ``resume=True`` continues from it; plain data
@@ -43,11 +44,13 @@ import numpy as np
 import torch
 
 from ..errors import FormatError, InputError, OptionError
+from ..partition.episodes import ShapePool
 from .buffers import ReplayBuffer
 from .checkpoint import load_checkpoint, save_checkpoint
 from .ddpg import DDPG, TARGET_UPDATES
-from .env import CutEnv, Observation, ShapePool
+from .env import CutEnv, Observation
 from .networks import NetConfig
+from .reward import REWARD_SURFACES
 from .weights import save_actor
 
 __all__ = [
@@ -104,9 +107,14 @@ class TrainConfig:
     lam: float = 1.0
     """Weight ``lambda`` of the reconstruction term of the reward."""
     planes_min: int = 8
-    """Fewest section planes of the reward's reconstruction surrogate."""
+    """Fewest section planes (along z) the reward reconstructs a part from."""
     planes_max: int = 16
-    """Most section planes of the surrogate (drawn per episode)."""
+    """Most section planes (drawn per episode)."""
+    reward_surface: str = "exact"
+    """The reward's reconstruction of a part: ``exact`` (the part surface
+    inference makes; numpy on the CPU, a few ms per part) or ``surrogate`` (its
+    batched torch approximation, for a GPU); ``docs/policy.md`` gives their
+    agreement and speed."""
     augment: bool = True
     """Randomly permute and flip the axes of each training shape."""
     n_envs: int = 8
@@ -184,6 +192,11 @@ class TrainConfig:
             raise OptionError("grid and resolution must be >= 16")
         if self.train_shapes > EVAL_SEED_OFFSET:
             raise OptionError(f"train_shapes must be <= {EVAL_SEED_OFFSET}")
+        if self.reward_surface not in REWARD_SURFACES:
+            raise OptionError(
+                f"reward_surface must be one of {', '.join(REWARD_SURFACES)} "
+                f"(got {self.reward_surface!r})"
+            )
         if self.noise not in NOISES:
             raise OptionError(f"noise must be one of {', '.join(NOISES)} (got {self.noise!r})")
         if self.target_update not in TARGET_UPDATES:
@@ -284,7 +297,7 @@ class TrainResult:
         ``log.csv``.
     n_updates : int
     eval_iou : float
-        Last evaluation's mean surrogate IoU on the held-out shapes.
+        Last evaluation's mean IoU of ``∪ S_i`` with the held-out shapes.
     heuristic_eval_iou : float
         The heuristic expert's on the same shapes (NaN when not measured).
     agent : DDPG
@@ -318,8 +331,8 @@ def _make_env(config: TrainConfig, pool: ShapePool, *, n_envs: int, augment: boo
     return CutEnv(
         pool, n_envs=n_envs, resolution=config.resolution, max_corners=config.max_corners,
         max_steps=config.max_steps, min_remaining=config.min_remaining, lam=config.lam,
-        planes=(config.planes_min, config.planes_max), augment=augment, device=device,
-        seed=seed,
+        planes=(config.planes_min, config.planes_max), augment=augment,
+        reward_surface=config.reward_surface, device=device, seed=seed,
     )
 
 
@@ -339,7 +352,7 @@ def evaluate_actor(
 
     Returns
     -------
-    (mean surrogate IoU, mean episode return)
+    (mean IoU of ``∪ S_i`` with ``O``, mean episode return)
     """
     obs = env.reset(seed=seed, shapes=list(range(env.n_envs)))
     iou = torch.full((env.n_envs,), float("nan"))
@@ -561,7 +574,7 @@ def train(
         if resume:
             logger.info("no checkpoint in %s: starting a new run", outdir)
         heuristic_iou, _ = evaluate_actor(_expert_policy, eval_env, seed=eval_seed)
-        logger.info("heuristic expert on the held-out shapes: surrogate IoU %.4f", heuristic_iou)
+        logger.info("heuristic expert on the held-out shapes: IoU %.4f", heuristic_iou)
         if config.demo_episodes:
             demo_return = _collect_demos(env, demos, config.demo_episodes, config.seed)
             logger.info("%d demonstration transitions (mean return %.3f)", len(demos),

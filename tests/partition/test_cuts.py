@@ -7,7 +7,17 @@ import pytest
 
 from slicerecon.corners import harris_corners
 from slicerecon.errors import GeometryError, OptionError
-from slicerecon.partition.cuts import Cut, cut_to_action, snap_action, split, view_shapes
+from slicerecon.partition.cuts import (
+    Cut,
+    choose_sides,
+    cut_to_action,
+    line_sides,
+    side_image,
+    snap_action,
+    snap_actions,
+    split,
+    view_shapes,
+)
 from slicerecon.sections import Box
 
 SHAPE = (16, 14, 4)
@@ -149,3 +159,56 @@ def test_invalid_cuts_and_actions_raise() -> None:
 def test_cut_dict_round_trip() -> None:
     cut = Cut(1, (0.5, -0.5), (10.5, 3.5))
     assert Cut.from_dict(cut.to_dict()) == cut
+
+
+def _padded(corners: tuple[np.ndarray, ...], k: int) -> tuple[np.ndarray, np.ndarray]:
+    pts = np.zeros((3, k, 2))
+    valid = np.zeros((3, k), dtype=bool)
+    for v, c in enumerate(corners):
+        pts[v, : len(c)] = c[:k]
+        valid[v, : len(c)] = True
+    return pts, valid
+
+
+def test_batched_snapping_is_the_single_action_rule_per_row() -> None:
+    rng = np.random.default_rng(0)
+    shapes = [_l_shape(), rng.random(SHAPE) < 0.3, np.zeros(SHAPE, dtype=bool)]
+    shapes[2][3:6, 2:9, 1:3] = True
+    corners = [_corners(occ) for occ in shapes]
+    corners.append((np.zeros((0, 2)), corners[0][1], np.zeros((0, 2))))  # views without corners
+    k = max(len(c) for cs in corners for c in cs)
+    padded = [_padded(c, k) for c in corners]
+    actions = rng.random((400, 5))
+    actions[::7] = rng.random((len(actions[::7]), 5)) * 1.4 - 0.2  # clipped to [0, 1]
+    which = rng.integers(len(corners), size=len(actions))
+    pts = np.stack([padded[w][0] for w in which])
+    valid = np.stack([padded[w][1] for w in which])
+    snapped = snap_actions(actions, pts, valid, view_shapes(SHAPE))
+    for i, (action, w) in enumerate(zip(actions, which, strict=True)):
+        expected = snap_action(action, corners[w], view_shapes(SHAPE))
+        assert snapped.cut(i) == expected
+        assert bool(snapped.degenerate[i]) == (expected is None)
+    assert snapped.degenerate.any() and not snapped.degenerate.all()
+    with pytest.raises(OptionError, match="rows of 5"):
+        snap_actions(np.zeros((3, 4)), pts[:3], valid[:3], view_shapes(SHAPE))
+    with pytest.raises(OptionError, match="corners must be"):
+        snap_actions(actions[:2], pts[:3], valid[:3], view_shapes(SHAPE))
+
+
+def test_line_sides_are_side_image_per_row_and_ignore_end_point_order() -> None:
+    cuts = [Cut(2, (0.5, 0.5), (4.5, 4.5)), Cut(2, (4.5, 12.5), (4.5, 4.5)),
+            Cut(2, (10.5, -0.5), (0.5, 3.5))]
+    p1 = np.array([c.p1 for c in cuts])
+    p2 = np.array([c.p2 for c in cuts])
+    sides = line_sides(p1, p2, (16, 14))
+    assert sides.shape == (3, 16, 14) and sides.dtype == np.int8
+    np.testing.assert_array_equal(line_sides(p2, p1, (16, 14)), sides)
+    for cut, image in zip(cuts, sides, strict=True):
+        np.testing.assert_array_equal(image, side_image(cut, (16, 14)))
+    assert (line_sides(p1[:1], p1[:1], (16, 14)) == 0).all()  # no line: no side
+
+
+def test_choose_sides_takes_the_smaller_side_and_the_plus_side_on_ties() -> None:
+    keep, nothing = choose_sides([3, 9, 5, 0, 4], [8, 2, 5, 7, 0])
+    assert keep.tolist() == [1, -1, 1, 1, -1]
+    assert nothing.tolist() == [False, False, False, True, True]

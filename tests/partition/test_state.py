@@ -7,7 +7,14 @@ import pytest
 
 from slicerecon.errors import EmptyMaskError, GeometryError, OptionError
 from slicerecon.partition.cuts import Cut, cut_to_action
-from slicerecon.partition.state import NOOP_REWARD, PartitionState, iou
+from slicerecon.partition.state import (
+    NOOP_REWARD,
+    PartitionState,
+    count_iou,
+    episode_done,
+    iou,
+    part_rewards,
+)
 from slicerecon.sampling import projections_from_volume
 from slicerecon.sections import Box, Volume
 
@@ -130,3 +137,18 @@ def test_iou_of_empty_masks_is_one() -> None:
     empty = np.zeros((2, 2), dtype=bool)
     assert iou(empty, empty) == 1.0
     assert iou(np.eye(2, dtype=bool), np.ones((2, 2), dtype=bool)) == 0.5
+
+
+def test_batched_rules_are_the_states_rules() -> None:
+    np.testing.assert_array_equal(count_iou([0, 3, 2], [0, 6, 8]), [1.0, 0.5, 0.25])
+    np.testing.assert_allclose(part_rewards([0.5, 0.25], [1.0, 0.5], lam=0.5), [1.0, 0.5])
+    np.testing.assert_array_equal(part_rewards([0.5, 0.25], None, lam=0.5), [0.5, 0.25])
+    done = episode_done([0, 5, 100, 100], [100, 100, 100, 100], [1, 1, 1, 3],
+                        max_steps=3, min_remaining=0.06)
+    assert done.tolist() == [True, True, False, True]
+    # PartitionState's reward and end are these functions of its counts
+    state = PartitionState(_l_shape(), reconstruct=_full_box, lam=0.3, min_remaining=0.7)
+    result = state.apply_cut(DIAGONAL)
+    expected = part_rewards([120 / 288], [count_iou([120], [144])[0]], lam=0.3)[0]
+    assert result.reward == expected
+    assert result.done == episode_done([168], [288], [1], max_steps=8, min_remaining=0.7)[0]

@@ -1,23 +1,19 @@
-"""The torch cut environment against the numpy partition episode."""
+"""The torch cut environment against the numpy partition episode (the rules' one implementation)."""
 
 from __future__ import annotations
-
-import functools
 
 import numpy as np
 import pytest
 import torch
 
 from slicerecon.errors import OptionError
+from slicerecon.partition.cuts import Cut, cut_to_action, snap_action
+from slicerecon.partition.episodes import ShapePool, episode_sections, occupancy_hull
 from slicerecon.partition.heuristic import expert_action
-from slicerecon.partition.state import PartitionState
-from slicerecon.policy.env import (
-    CutEnv,
-    ShapePool,
-    nearest_plane_voxels,
-    observe_state,
-    section_planes,
-)
+from slicerecon.partition.state import NOOP_REWARD, PartitionState, iou
+from slicerecon.policy.env import CutEnv, observe_state
+from slicerecon.policy.reward import part_surface_voxels
+from slicerecon.policy.surrogate import surrogate_reconstruction
 from slicerecon.sections import Box
 
 FAMILIES = ("chair", "torus", "two_spheres", "y_branch", "box")
@@ -28,43 +24,129 @@ def pool() -> ShapePool:
     return ShapePool.build(FAMILIES, [3], grid=28)
 
 
-def _numpy_states(pool: ShapePool, n_planes: int, max_steps: int) -> list[PartitionState]:
-    states = []
-    for occ in pool.occupancies:
-        planes = section_planes(occ, n_planes)
-        recon = functools.partial(nearest_plane_voxels, occ, planes)
-        states.append(PartitionState(occ, reconstruct=recon, lam=0.7, max_steps=max_steps,
-                                     max_corners=12))
-    return states
+@pytest.fixture(scope="module")
+def big_pool() -> ShapePool:
+    return ShapePool.build(FAMILIES + ("table", "lamp", "genus2", "vessel_tree"), [0, 1],
+                           grid=24)
 
 
-def test_env_matches_partition_state(pool: ShapePool) -> None:
-    """Same actions -> same remaining region, reward, no-op and done flags as numpy."""
-    n, steps = len(pool), 6
-    env = CutEnv(pool, n_envs=n, resolution=32, max_corners=12, max_steps=steps, lam=0.7,
-                 augment=False)
-    env.load(list(pool.occupancies), n_planes=[9] * n)
-    states = _numpy_states(pool, 9, steps)
-    rng = np.random.default_rng(7)
-    n_cuts = n_noops = 0
+def _reference(env: CutEnv, i: int, surface: str) -> PartitionState:
+    """A numpy episode on the same shape with the same reconstruction as slot ``i``."""
+    occ, sections, hull = env.episode(i)
+    make = (surrogate_reconstruction(sections, hull) if surface == "surrogate"
+            else (lambda box: part_surface_voxels(sections, hull, box)))
+    memo: dict[Box, np.ndarray] = {}
+
+    def recon(box: Box) -> np.ndarray:  # memoised: the final IoU reuses the parts' S_i
+        if box not in memo:
+            memo[box] = make(box)
+        return memo[box]
+
+    state = PartitionState(occ, reconstruct=recon, lam=env.lam, max_steps=env.max_steps,
+                           min_remaining=env.min_remaining, max_corners=env.max_corners)
+    state.recon_fn = recon  # type: ignore[attr-defined]
+    return state
+
+
+def _final_iou(state: PartitionState) -> float:
+    union = np.zeros(state.occupancy.shape, dtype=bool)
+    for part in state.finish():
+        union[part.box.slices] |= state.recon_fn(part.box)  # type: ignore[attr-defined]
+    return iou(union, np.asarray(state.occupancy))
+
+
+def _actions(env: CutEnv, rng: np.random.Generator) -> np.ndarray:
+    """Half uniform actions, half cuts between two random corners of a random view."""
+    actions = rng.random((env.n_envs, 5))
+    for i in range(env.n_envs):
+        view = int(rng.integers(3))
+        corners = env.corner_px[i, view][env.corner_valid[i, view]]
+        if rng.random() < 0.5 and len(corners) >= 2:
+            a, b = rng.choice(len(corners), 2, replace=False)
+            cut = Cut(view, tuple(corners[a]), tuple(corners[b]))
+            actions[i] = cut_to_action(cut, env.image_shapes)
+    return actions
+
+
+def _run_contract(env: CutEnv, steps: int, seed: int, surface: str) -> dict[str, int]:
+    """Step env and numpy episodes in lockstep; every rule must agree exactly."""
+    rng = np.random.default_rng(seed)
+    states = [_reference(env, i, surface) for i in range(env.n_envs)]
+    seen = {"cuts": 0, "degenerate": 0, "removes_nothing": 0, "ends": 0}
     for _ in range(steps):
-        actions = rng.random((n, 5))
-        expert, valid = env.expert_actions()
-        use = valid & (rng.random(n) < 0.6)
-        actions[use] = expert[use]
+        actions = _actions(env, rng)
+        befores = [s.remaining for s in states]
+        snapped = [snap_action(actions[i], s.corners(), s.image_shapes)
+                   for i, s in enumerate(states)]
         out = env.step(actions)
+        rec = env.last_step
+        assert rec is not None
         for i, state in enumerate(states):
-            if state.done:
-                continue
+            assert rec.cuts.cut(i) == snapped[i]  # same snapped cut (or both degenerate)
             result = state.step(actions[i])
-            assert out.reward[i].item() == pytest.approx(result.reward, abs=1e-6)
-            assert bool(out.noop[i]) == (result.part is None)
+            assert bool(out.noop[i]) == (result.part is None) == bool(rec.noop[i])
+            if result.part is None:
+                reason = "degenerate" if rec.cuts.degenerate[i] else "removes_nothing"
+                assert result.info["noop"] == reason
+                assert out.reward[i].item() == NOOP_REWARD
+                assert not rec.part[i].any()
+                seen[reason] += 1
+            else:
+                w = befores[i] & ~state.remaining
+                np.testing.assert_array_equal(rec.part[i].cpu().numpy(), w)  # same W_i
+                assert Box(tuple(rec.lo[i]), tuple(rec.hi[i])) == result.part.box
+                assert rec.iou_part[i] == pytest.approx(result.info["iou_part"], abs=1e-12)
+                assert rec.iou_reconstruction[i] == pytest.approx(
+                    result.info["iou_reconstruction"], abs=1e-12)
+                assert rec.reward[i] == pytest.approx(result.reward, abs=1e-12)
+                assert out.reward[i].item() == pytest.approx(result.reward, abs=1e-6)
+                seen["cuts"] += 1
             assert bool(out.done[i]) == result.done
-            n_cuts += result.part is not None
-            n_noops += result.part is None
-            if not result.done:
-                np.testing.assert_array_equal(env.remaining[i].numpy(), state.remaining)
-    assert n_cuts >= 5 and n_noops >= 1  # both kinds of step were exercised
+            if result.done:
+                assert out.final_iou[i].item() == pytest.approx(_final_iou(state), abs=1e-6)
+                assert int(out.n_parts[i]) == len(state.parts)
+                assert out.episode_return[i].item() == pytest.approx(
+                    sum(p.reward for p in state.parts if p.cut is not None), abs=1e-5)
+                states[i] = _reference(env, i, surface)  # the env started a new episode
+                seen["ends"] += 1
+            else:
+                np.testing.assert_array_equal(env.remaining[i].cpu().numpy(), state.remaining)
+                assert int(env.step_count[i]) == state.step_count
+    return seen
+
+
+def test_env_follows_the_partition_rules(big_pool: ShapePool) -> None:
+    """Thousands of random actions: same snapped cuts, parts W_i, no-ops, rewards and ends."""
+    env = CutEnv(big_pool, n_envs=12, resolution=32, max_corners=12, max_steps=6, lam=0.7,
+                 augment=True, reward_surface="surrogate", seed=5)
+    env.reset(seed=5)
+    seen = _run_contract(env, steps=170, seed=11, surface="surrogate")
+    assert sum(seen.values()) - seen["ends"] == 12 * 170 >= 2000
+    assert seen["cuts"] >= 500 and seen["degenerate"] >= 50 and seen["removes_nothing"] >= 20
+    assert seen["ends"] >= 200
+
+
+def test_env_reward_equals_partition_state_with_the_exact_surface(pool: ShapePool) -> None:
+    """reward_surface="exact": the reward is PartitionState's with inference's part surface."""
+    env = CutEnv(pool, n_envs=len(pool), resolution=32, max_corners=12, max_steps=5,
+                 augment=False, reward_surface="exact")
+    env.load(list(pool.occupancies), n_planes=[9] * len(pool))
+    seen = _run_contract(env, steps=12, seed=3, surface="exact")
+    assert seen["cuts"] >= 15
+
+
+def test_episodes_use_the_library_sections_and_hull(pool: ShapePool) -> None:
+    env = CutEnv(pool, n_envs=len(pool), resolution=32, max_corners=12, augment=False)
+    env.load(list(pool.occupancies), n_planes=[9, 12, 30, 2, 1])
+    for i, (occ, n) in enumerate(zip(pool.occupancies, [9, 12, 30, 2, 1], strict=True)):
+        got_occ, sections, hull = env.episode(i)
+        np.testing.assert_array_equal(got_occ, occ)
+        ref = episode_sections(occ, n)
+        np.testing.assert_array_equal(sections.indices, ref.indices)
+        np.testing.assert_array_equal(sections.masks, ref.masks)
+        np.testing.assert_array_equal(hull, occupancy_hull(occ))
+        planes = env.plane_index[i][env.plane_valid[i]].numpy()
+        np.testing.assert_array_equal(planes, ref.indices.astype(int))
 
 
 def test_expert_action_matches_numpy(pool: ShapePool) -> None:
@@ -93,22 +175,6 @@ def test_observation_matches_observe_state(pool: ShapePool) -> None:
             torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
 
 
-def test_nearest_plane_surrogate_copies_planes() -> None:
-    occ = np.zeros((6, 6, 10), dtype=bool)
-    occ[1:5, 1:5, 2:8] = True
-    occ[2:3, 2:3, 5] = False  # a hole on plane 5 only
-    box = Box((0, 0, 3), (6, 6, 8))
-    s = nearest_plane_voxels(occ, np.array([2, 5, 7]), box)
-    assert s.shape == box.shape
-    # z = 3 -> plane 5 (2 is outside the box), z = 6 -> plane 5 (tie goes to the lower)
-    np.testing.assert_array_equal(s[:, :, 0], occ[:, :, 5])
-    np.testing.assert_array_equal(s[:, :, 3], occ[:, :, 5])
-    np.testing.assert_array_equal(s[:, :, 4], occ[:, :, 7])
-    # a box without a plane uses the nearest plane overall
-    s2 = nearest_plane_voxels(occ, np.array([2, 7]), Box((0, 0, 4), (6, 6, 5)))
-    np.testing.assert_array_equal(s2[:, :, 0], occ[:, :, 2])
-
-
 def test_episode_statistics_and_bad_actions(pool: ShapePool) -> None:
     env = CutEnv(pool, n_envs=3, resolution=32, max_corners=12, max_steps=2, seed=1)
     env.reset(seed=1)
@@ -116,6 +182,8 @@ def test_episode_statistics_and_bad_actions(pool: ShapePool) -> None:
         env.step(np.zeros((2, 5)))
     with pytest.raises(OptionError):
         env.step(np.full((3, 5), np.nan))
+    with pytest.raises(OptionError):
+        CutEnv(pool, n_envs=1, reward_surface="loft")
     env.step(np.random.default_rng(0).random((3, 5)))
     out = env.step(np.random.default_rng(1).random((3, 5)))
     assert bool(out.done.all())  # max_steps = 2

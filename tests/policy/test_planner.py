@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import json
 import subprocess
 import sys
@@ -42,10 +41,10 @@ def test_policy_plan_covers_the_occupancy() -> None:
 
 
 def test_policy_with_reconstructor_and_other_weights() -> None:
-    from slicerecon.policy.env import nearest_plane_voxels, section_planes
+    from slicerecon.policy.reward import episode_reconstruction
 
     occ = make_shape("two_spheres", seed=12346, spacing=3.0).mask
-    recon = functools.partial(nearest_plane_voxels, occ, section_planes(occ, 10))
+    recon, _, _ = episode_reconstruction(occ, 10)
     plan = plan_partition(occ, planner="policy", reconstruct=recon,
                           weights=shipped_weights("il"))
     assert plan.covers(occ)

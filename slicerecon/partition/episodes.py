@@ -1,0 +1,206 @@
+"""What a partition episode of training is made of: a shape, its sections and its hull.
+
+The learned planner is trained on procedural shapes (:mod:`slicerecon.shapes`)
+scaled into cubic grids (:func:`shape_occupancy`, :func:`fit_to_cube`,
+:class:`ShapePool`). An episode partitions the ground-truth occupancy ``O``
+(``docs/method.md``, section 3); its reward reconstructs each part from
+cross-sections of ``O`` (:func:`episode_sections`: the library's own
+:func:`~slicerecon.sampling.sample_sections`) guided and carved by the visual
+hull of ``O``'s projections (:func:`occupancy_hull`), as inference does with
+ground-truth projections. Everything here is numpy; the torch environment
+(:mod:`slicerecon.policy.env`) only batches it.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import EmptyMaskError, InputError, OptionError
+from ..sampling import projections_from_volume, sample_sections, visual_hull
+from ..sections import Box, CrossSections, Volume
+
+__all__ = [
+    "SECTION_AXIS",
+    "ShapePool",
+    "fit_to_cube",
+    "shape_occupancy",
+    "episode_sections",
+    "occupancy_hull",
+]
+
+logger = logging.getLogger(__name__)
+
+SECTION_AXIS = 2
+"""Grid axis the training episodes' section planes are perpendicular to (z)."""
+
+
+def _as_occupancy(occupancy: ArrayLike) -> NDArray[np.bool_]:
+    occ = np.asarray(occupancy)
+    if occ.ndim != 3:
+        raise InputError(f"occupancy must be a 3-D array (got shape {occ.shape})")
+    occ = occ.astype(bool, copy=False)
+    if not occ.any():
+        raise EmptyMaskError("the occupancy is empty")
+    return occ
+
+
+def fit_to_cube(mask: ArrayLike, size: int) -> NDArray[np.bool_]:
+    """Centre a 3-D mask's foreground in a ``size^3`` grid.
+
+    Parameters
+    ----------
+    mask : ndarray of shape (I, J, K), bool
+    size : int
+        Side of the cube, voxels; must hold the foreground's bounding box.
+
+    Returns
+    -------
+    ndarray of shape (size, size, size), bool
+        The foreground, shifted so that its bounding box is centred (rounded down).
+    """
+    arr = np.asarray(mask, dtype=bool)
+    if arr.ndim != 3:
+        raise InputError(f"mask must be 3-D (got shape {arr.shape})")
+    if not arr.any():
+        raise EmptyMaskError("the mask is empty: nothing to place in the grid")
+    box = Box.of_mask(arr)
+    if max(box.shape) > size:
+        raise OptionError(f"the shape's bounding box {box.shape} does not fit a {size}^3 grid")
+    out = np.zeros((size, size, size), dtype=bool)
+    lo = [(size - s) // 2 for s in box.shape]
+    dst = tuple(slice(a, a + s) for a, s in zip(lo, box.shape, strict=True))
+    out[dst] = arr[box.slices]
+    return out
+
+
+def shape_occupancy(name: str, *, seed: int, grid: int, margin: int = 1) -> NDArray[np.bool_]:
+    """A seeded procedural shape (:func:`slicerecon.shapes.make_shape`) scaled into ``grid^3``.
+
+    The voxel size is chosen so that the shape's longest side spans
+    ``grid - 2 * margin`` voxels; the shape is then centred (:func:`fit_to_cube`).
+
+    Parameters
+    ----------
+    name : str
+        A registered shape family (:func:`slicerecon.shapes.shape_names`).
+    seed : int
+        Seed of the shape's random proportions.
+    grid : int
+        Side of the cubic grid, voxels.
+    margin : int, optional
+        Empty voxels kept on each side.
+
+    Returns
+    -------
+    ndarray of shape (grid, grid, grid), bool
+    """
+    from ..shapes import make_shape
+
+    inner = int(grid) - 2 * int(margin)
+    if inner < 4:
+        raise OptionError(f"grid {grid} is too small for margin {margin}")
+    coarse = make_shape(name, seed=seed, spacing=2.0, margin=0)
+    lo, hi = coarse.bounding_box_vox()
+    extent_mm = float(np.max((hi - lo) * coarse.spacing))
+    spacing = extent_mm / inner
+    for _ in range(20):
+        vol = make_shape(name, seed=seed, spacing=spacing, margin=0)
+        lo, hi = vol.bounding_box_vox()
+        if int(np.max(hi - lo)) <= inner:
+            return fit_to_cube(vol.mask, int(grid))
+        spacing *= 1.03
+    raise OptionError(f"could not fit shape {name!r} (seed {seed}) into a {grid}^3 grid")
+
+
+@dataclass(frozen=True)
+class ShapePool:
+    """Occupancy grids training episodes are drawn from.
+
+    Attributes
+    ----------
+    occupancies : ndarray of shape (N, G, G, G), bool
+    names : tuple of str
+        Shape family of each grid.
+    seeds : tuple of int
+        Seed of each grid's proportions.
+    """
+
+    occupancies: NDArray[np.bool_]
+    names: tuple[str, ...]
+    seeds: tuple[int, ...]
+
+    @classmethod
+    def build(cls, names: Sequence[str], seeds: Sequence[int], *, grid: int) -> ShapePool:
+        """Every family in ``names`` with every seed in ``seeds``, on a ``grid^3`` cube."""
+        if not names or not seeds:
+            raise OptionError("a shape pool needs at least one family and one seed")
+        grids, out_names, out_seeds = [], [], []
+        for name in names:
+            for seed in seeds:
+                grids.append(shape_occupancy(name, seed=int(seed), grid=grid))
+                out_names.append(str(name))
+                out_seeds.append(int(seed))
+        logger.info("shape pool: %d grids of %d^3", len(grids), grid)
+        return cls(np.stack(grids), tuple(out_names), tuple(out_seeds))
+
+    def __len__(self) -> int:
+        return int(self.occupancies.shape[0])
+
+    @property
+    def grid(self) -> int:
+        """Side ``G`` of the cubic grids."""
+        return int(self.occupancies.shape[1])
+
+
+def episode_sections(occupancy: ArrayLike, n: int) -> CrossSections:
+    """The cross-sections of an episode: ``n`` z-planes of the occupancy, evenly spaced.
+
+    :func:`~slicerecon.sampling.sample_sections` with ``n`` planes from the
+    first to the last occupied z-plane (as ``slicerecon run --slices n``), on
+    the occupancy's own grid (identity affine: 1 mm voxels); fewer planes when
+    the occupied range is shorter than ``n``.
+
+    Parameters
+    ----------
+    occupancy : ndarray of shape (I, J, K), bool
+    n : int
+        Planes wanted, ``>= 1``.
+
+    Returns
+    -------
+    CrossSections
+        Planes perpendicular to :data:`SECTION_AXIS`; ``indices`` are integers.
+    """
+    occ = _as_occupancy(occupancy)
+    if int(n) < 1:
+        raise OptionError(f"an episode needs at least one section plane (got {n})")
+    volume = Volume(occ)
+    occupied = np.flatnonzero(occ.any(axis=tuple(a for a in range(3) if a != SECTION_AXIS)))
+    count = min(int(n), int(occupied[-1] - occupied[0] + 1))
+    if count < 2:  # one plane, the first occupied one (a step past the range)
+        span = int(occupied[-1] - occupied[0])
+        return sample_sections(volume, every=span + 1, axis=SECTION_AXIS)
+    return sample_sections(volume, n=count, axis=SECTION_AXIS)
+
+
+def occupancy_hull(occupancy: ArrayLike) -> NDArray[np.bool_]:
+    """The visual hull of an occupancy's own projections (:func:`~slicerecon.sampling.visual_hull`).
+
+    What inference plans on and carves with when it is given ground-truth
+    projections; it contains the occupancy.
+
+    Parameters
+    ----------
+    occupancy : ndarray of shape (I, J, K), bool
+
+    Returns
+    -------
+    ndarray of shape (I, J, K), bool
+    """
+    occ = _as_occupancy(occupancy)
+    return visual_hull(projections_from_volume(Volume(occ)), occ.shape)
