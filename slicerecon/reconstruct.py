@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from .errors import OptionError
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid
-from .partition.planner import PlannerEntry, planner_names, register_planner
+from . import policy as _policy  # noqa: F401  (registers the "policy" planner, no torch)
+from .partition.planner import planner_names
 from .sections import AXIS_NAMES, CrossSections, Projections, Volume, axis_index
 from .surface.methods import method_entry, method_names
 
@@ -45,19 +46,9 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-def _plan_policy(occupancy: np.ndarray, **options: Any) -> Any:
-    """The learned planner, imported (with torch) only when it runs."""
-    from .policy.planner import plan_policy
-
-    return plan_policy(occupancy, **options)
-
-
-register_planner(PlannerEntry("policy", _plan_policy, needs_torch=True, takes_weights=True,
-                              summary="a trained actor (docs/policy.md)"))
-
 PLANNERS = tuple(planner_names())
 """Planner names (the registry of :mod:`slicerecon.partition.planner`, with the
-learned planner registered here, the layer that composes partition and policy)."""
+learned planner registered by :mod:`slicerecon.policy`, which this module imports)."""
 METHODS = method_names()
 """Surface method names (:data:`slicerecon.surface.methods.METHODS`)."""
 WHOLE_SHAPE_METHODS = method_names(per_part=False)

@@ -4,8 +4,8 @@ A planner is a :class:`PlannerEntry` in :data:`PLANNERS` (a function and what it
 needs); :func:`plan_partition` looks it up by name. ``"none"`` is the paper's
 no-projection baseline (one part, the bounding box of the shape);
 ``"heuristic"`` runs the heuristic expert to the end of an episode. The learned
-planner ``"policy"`` lives in :mod:`slicerecon.policy` and is registered by the
-layer above (:mod:`slicerecon.reconstruct`): this package imports nothing of it.
+planner ``"policy"`` lives in :mod:`slicerecon.policy`, which registers it when
+imported (without importing torch): this package imports nothing of it.
 """
 
 from __future__ import annotations
@@ -227,7 +227,7 @@ class PlannerEntry:
 
 PLANNERS: dict[str, PlannerEntry | PlannerFn] = {}
 """Registered planners by name (:func:`register_planner`). Higher layers add
-their own: the learned planner is registered by :mod:`slicerecon.reconstruct`,
+their own: the learned planner is registered by :mod:`slicerecon.policy` on import,
 so this module never knows the policy package."""
 
 
