@@ -63,6 +63,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "sdf-pchip-none": {"method": "sdf", "planner": "none", "interpolation": "pchip"},
     "hybrid-linear-heuristic": {"method": "hybrid", "planner": "heuristic",
                                 "interpolation": "linear"},
+    "sdf-carve-only": {"method": "sdf", "planner": "heuristic", "cover": False},
 }
 """Variant name → keyword arguments of :func:`slicerecon.reconstruct.reconstruct`.
 
@@ -83,6 +84,8 @@ VARIANT_NOTES: dict[str, str] = {
     "sdf-pchip-none": "signed-distance interpolation, PCHIP across planes, one part, carved",
     "hybrid-linear-heuristic": "the default until 2026-11-29: hybrid surface, linear, heuristic "
     "planner, carved",
+    "sdf-carve-only": "the default until 2026-12-01: sdf, PCHIP, heuristic planner, carved but "
+    "not covering the silhouettes",
 }
 
 DEFAULT_VARIANTS = ("sdf-plain", "default", "loft-heuristic", "itk-mci")

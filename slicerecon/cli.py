@@ -181,6 +181,12 @@ SmoothOpt = Annotated[bool, typer.Option("--smooth", help="Taubin-smooth the mes
 CarveOpt = Annotated[
     bool, typer.Option("--carve/--no-carve", help="Cut the surface to the projections' hull.")
 ]
+CoverOpt = Annotated[
+    bool,
+    typer.Option("--cover/--no-cover",
+                 help="With --carve (sdf): also fill the silhouettes whose rays lie in the "
+                 "section planes."),
+]
 LabelOpt = Annotated[
     str | None,
     typer.Option(help="Structures to reconstruct (default: all): label values, SEG segments or "
@@ -219,6 +225,7 @@ def run(
     mesh_format: FormatOpt = "stl",
     smooth: SmoothOpt = False,
     carve: CarveOpt = True,
+    cover: CoverOpt = True,
     label: LabelOpt = None,
     roi: RoiOpt = None,
     union: UnionOpt = False,
@@ -371,6 +378,7 @@ def batch(
     mesh_format: FormatOpt = "stl",
     smooth: SmoothOpt = False,
     carve: CarveOpt = True,
+    cover: CoverOpt = True,
     label: LabelOpt = None,
     roi: RoiOpt = None,
     allow_irregular: IrregularOpt = False,

@@ -144,6 +144,7 @@ def reconstruct_structures(
     method: str = "sdf",
     interpolation: str = "pchip",
     carve: bool = True,
+    cover: bool = True,
     max_parts: int = 8,
     weights: str | None = None,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
@@ -157,7 +158,7 @@ def reconstruct_structures(
     slices, every, axis
         Plane choice over the union of the structures
         (:func:`slicerecon.reconstruct.prepare_inputs`).
-    planner, interpolation, carve, max_parts, weights
+    planner, interpolation, carve, cover, max_parts, weights
         As for :func:`slicerecon.reconstruct.reconstruct`, for every structure.
     method : {"sdf"}
         The joint resolution works on signed distances: ``sdf`` only.
@@ -210,7 +211,8 @@ def reconstruct_structures(
         items.append((structure, own, mask))
     results, joint = _reconstruct_jointly(
         items, sections, timings, planner=planner, method=method,
-        interpolation=interpolation, carve=carve, max_parts=max_parts, weights=weights,
+        interpolation=interpolation, carve=carve, cover=cover, max_parts=max_parts,
+        weights=weights,
     )
     values = np.array([s.structure.value for s in results], dtype=np.int64)
     labels = np.zeros(label_map.shape, dtype=np.result_type(label_map.labels.dtype, np.uint8))
@@ -230,6 +232,7 @@ def reconstruct_sparse_structures(
     method: str = "sdf",
     interpolation: str = "pchip",
     carve: bool = True,
+    cover: bool = True,
     max_parts: int = 8,
     weights: str | None = None,
 ) -> StructuresReconstruction:
@@ -245,7 +248,7 @@ def reconstruct_sparse_structures(
         All the ROIs' planes together (:func:`slicerecon.io.rtstruct.read_rtstruct_structures`).
     coordinates : {"RAS", "LPS"}
         The world frame of the grid (LPS for DICOM).
-    planner, method, interpolation, carve, max_parts, weights
+    planner, method, interpolation, carve, cover, max_parts, weights
         As for :func:`reconstruct_structures`; each ROI's silhouettes are
         derived from its own sections.
 
@@ -264,7 +267,7 @@ def reconstruct_sparse_structures(
     items = [(structure, own, None) for structure, own in zip(structures, sections, strict=True)]
     results, joint = _reconstruct_jointly(
         items, union, timings, planner=planner, method=method, interpolation=interpolation,
-        carve=carve, max_parts=max_parts, weights=weights,
+        carve=carve, cover=cover, max_parts=max_parts, weights=weights,
     )
     for item, own in zip(results, sections, strict=True):
         if own is None:
@@ -427,7 +430,7 @@ def run_structures_case(
     times = dict(timings or {})
     say("reconstruct")
     options = {"planner": config.planner, "method": config.method,
-               "interpolation": config.interpolation, "carve": config.carve,
+               "interpolation": config.interpolation, "carve": config.carve, "cover": config.cover,
                "max_parts": config.max_parts, "weights": config.weights}
     if isinstance(source, LabelMap):
         result = reconstruct_structures(

@@ -199,6 +199,7 @@ def reconstruct_parts(
     interpolation: str = "linear",
     carve: NDArray[np.bool_] | None = None,
     upsample: int = 1,
+    cover: bool = False,
 ) -> trimesh.Trimesh:
     """Reconstruct every part and merge them into one watertight mesh.
 
@@ -221,6 +222,9 @@ def reconstruct_parts(
     upsample : int, default 1
         ``method="sdf"`` only: field samples per voxel along the section axis
         (:func:`~slicerecon.surface.sdf.sdf_field`).
+    cover : bool, default False
+        ``method="sdf"`` with ``carve`` only: also fill the silhouettes whose
+        rays lie in the section planes (:func:`~slicerecon.surface.sdf.sdf_parts_mesh`).
 
     Returns
     -------
@@ -236,7 +240,7 @@ def reconstruct_parts(
     """
     return reconstruct_surface(
         sections, boxes, method=method, smooth=smooth, extend_to_box=extend_to_box,
-        hull=hull, interpolation=interpolation, carve=carve, upsample=upsample,
+        hull=hull, interpolation=interpolation, carve=carve, upsample=upsample, cover=cover,
     ).mesh
 
 
@@ -273,6 +277,7 @@ def reconstruct_surface(
     carve: NDArray[np.bool_] | None = None,
     upsample: int = 1,
     keep_field: bool = False,
+    cover: bool = False,
 ) -> Surface:
     """As :func:`reconstruct_parts`, with the occupancy when the method gives it for free.
 
@@ -312,7 +317,7 @@ def reconstruct_surface(
         # Implicit union: the minimum of the parts' signed distances, meshed once.
         surface = sdf_parts_surface(sections, boxes, extend_to_box=extend_to_box, hull=hull,
                                     interpolation=interpolation, carve=carve,
-                                    upsample=upsample, keep_field=keep_field)
+                                    upsample=upsample, keep_field=keep_field, cover=cover)
         mesh, occupancy, field = surface.mesh, surface.occupancy, surface.field
     logger.debug("merged %d parts (%s): %d faces", len(boxes), method, len(mesh.faces))
     if smooth:

@@ -496,6 +496,7 @@ def sdf_parts_mesh(
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
     carve: NDArray[np.bool_] | None = None,
+    cover: bool = False,
 ) -> trimesh.Trimesh:
     """Closed surface of the union of several parts' SDF interpolations, world mm.
 
@@ -537,7 +538,7 @@ def sdf_parts_mesh(
     """
     union, lo, _ = _parts_union(sections, boxes, upsample=upsample,
                                 extend_to_box=extend_to_box, hull=hull,
-                                interpolation=interpolation, carve=carve)
+                                interpolation=interpolation, carve=carve, cover=cover)
     return _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample)
 
 
@@ -550,6 +551,7 @@ def _parts_union(
     hull: NDArray[np.bool_] | None,
     interpolation: str,
     carve: NDArray[np.bool_] | None,
+    cover: bool = False,
 ) -> tuple[NDArray[np.float32], tuple[int, int, int], tuple[int, int, int]]:
     """The union of the parts' padded fields (carved), its box ``[lo, hi)`` on the grid."""
     upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
@@ -573,7 +575,7 @@ def _parts_union(
             raise EmptyMaskError("no part's box holds any section foreground")
         union = np.ascontiguousarray(np.moveaxis(_mirror_pad(part), 0, axis))
         del part
-        return _carve_union(sections, union, lo, hi, upsample, carve), lo, hi
+        return _carve_union(sections, union, lo, hi, upsample, carve, cover), lo, hi
     inner: NDArray[np.float32] | None = None
     covered = np.zeros(shape, dtype=bool)
     padding = np.full(shape, -1.0, dtype=np.float32)
@@ -600,7 +602,7 @@ def _parts_union(
     union = np.where(covered, inner, np.where(padding >= 0, padding, far))
     del inner, padding, covered
     logger.debug("merged %d SDF parts on a %s grid", len(regions), tuple(shape))
-    return _carve_union(sections, union, lo, hi, upsample, carve), lo, hi
+    return _carve_union(sections, union, lo, hi, upsample, carve, cover), lo, hi
 
 
 def _carve_union(
@@ -610,19 +612,78 @@ def _carve_union(
     hi: tuple[int, int, int],
     upsample: int,
     carve: NDArray[np.bool_] | None,
+    cover: bool = False,
 ) -> NDArray[np.float32]:
-    """Raise the samples outside the hull to the hull level (the implicit carve), in place."""
+    """The implicit carve (and, with ``cover``, the silhouette cover) of the union, in place."""
     if carve is not None:
         check_hull(carve, sections.grid_shape)
-        outside = ~_hull_inside(sections, carve, lo, hi, upsample)
+        inside = _hull_inside(sections, carve, lo, hi, upsample)
         level = np.float32(HULL_LEVEL * float(np.min(sections.spacing)))
-        np.maximum(union, level, out=union, where=outside)
-        del outside
+        np.maximum(union, level, out=union, where=~inside)
+        if cover:
+            core = (slice(1, -1),) * 3  # the padding stays positive: the surface stays closed
+            _cover_silhouettes(union[core], inside[core], sections.axis, level,
+                               np.float32(COVER_DEPTH * float(np.min(sections.spacing))))
+        del inside
         if not union.min() < 0:
             raise EmptyMaskError(
                 "the reconstruction lies entirely outside the projections' visual hull"
             )
     return union
+
+
+COVER_DEPTH = 0.5
+"""How far above its ray's deepest hull sample a sample may lie and still be
+added by the silhouette cover, in units of the smallest voxel size (chosen on the
+real-anatomy development half from 0.1, 0.25, 0.5 and 1: 0.5 and 1 tied,
+``docs/method.md``, section 7)."""
+
+
+def _cover_silhouettes(
+    union: NDArray[np.float32],
+    inside: NDArray[np.bool_],
+    axis: int,
+    level: np.float32,
+    depth: np.float32,
+) -> None:
+    """Make every silhouette ray that lies in a section plane meet the shape, in place.
+
+    The carve removes what the silhouettes rule out; this adds what they
+    require. A ray of a view whose viewing axis lies in the section planes
+    (the two views other than the one along ``axis``) crosses one layer of
+    samples; its silhouette pixel is set when the hull (``inside``) holds a
+    sample on it. Where such a ray holds no inside sample, the interpolation
+    missed the shape there (the shape reaches that far between two planes,
+    which neither plane shows). The ray's samples inside the hull whose field
+    is within ``depth`` of its lowest one (the places the interpolation found
+    nearest to inside) are set to ``-level``, so the surface passes around
+    them. Rays along ``axis`` are left alone: they cross every interpolated
+    layer, so the missing voxel has no good place along them.
+
+    ``union`` and ``inside`` share their shape (padded samples, grid axis order).
+    """
+    layers = np.moveaxis(union, axis, 0)
+    hull_layers = np.moveaxis(inside, axis, 0)
+    for k in range(layers.shape[0]):
+        hull = hull_layers[k]
+        if not hull.any():
+            continue
+        layer = layers[k]  # a view: writes go to ``union``
+        for ray_axis in (0, 1):
+            shape_hits = np.any(layer < 0, axis=ray_axis)
+            missed = np.any(hull, axis=ray_axis) & ~shape_hits
+            if not missed.any():
+                continue
+            lines = np.flatnonzero(missed)
+            values = np.take(layer, lines, axis=1 - ray_axis)  # rays along ray_axis
+            held = np.take(hull, lines, axis=1 - ray_axis)
+            values = np.where(held, values, np.inf)
+            near = held & (values <= values.min(axis=ray_axis, keepdims=True) + depth)
+            rows, cols = np.nonzero(near)
+            if ray_axis == 0:
+                layer[rows, lines[cols]] = -level
+            else:
+                layer[lines[rows], cols] = -level
 
 
 class SdfField(NamedTuple):
@@ -681,6 +742,7 @@ def sdf_parts_surface(
     interpolation: str = "linear",
     carve: NDArray[np.bool_] | None = None,
     keep_field: bool = False,
+    cover: bool = False,
 ) -> SdfSurface:
     """As :func:`sdf_parts_mesh`, also returning the occupancy the mesh encloses.
 
@@ -691,7 +753,7 @@ def sdf_parts_surface(
     """
     union, lo, hi = _parts_union(sections, boxes, upsample=upsample,
                                  extend_to_box=extend_to_box, hull=hull,
-                                 interpolation=interpolation, carve=carve)
+                                 interpolation=interpolation, carve=carve, cover=cover)
     occupancy = None
     if upsample == 1:
         inside = union[1:-1, 1:-1, 1:-1] < 0
