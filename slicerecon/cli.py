@@ -235,7 +235,11 @@ def run(
         bool, typer.Option("--quiet", "-q", help="No progress and no summary; errors only.")
     ] = False,
 ) -> None:
-    """Reconstruct one input; write mesh, plan.json, metrics.json and preview.png."""
+    """Reconstruct one input; write meshes, label maps, plan.json, metrics.json and preview.png.
+
+    The label map comes as labels.nii.gz and labels.seg.nrrd (3D Slicer); a DICOM input with
+    its image series also gets seg.dcm, and an RTSTRUCT input rtstruct.dcm.
+    """
     with _ctrl_c_after():
         from .reconstruct import run_case
 

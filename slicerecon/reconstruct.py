@@ -555,6 +555,7 @@ def run_case(
     timings: dict[str, float] = {}
     say("read")
     value, name = 1, ""
+    described = None
     with _timed(timings, "read"):
         label_map = None if config.union or ground_truth is not None else read_label_map(
             input_path, allow_irregular=config.allow_irregular,
@@ -567,10 +568,11 @@ def run_case(
             from .structures import run_structures_case
 
             return run_structures_case(several, input_path, out, config, progress=progress,
-                                       timings=timings, coordinates="LPS")
+                                       timings=timings, coordinates="LPS", image_dir=image_dir)
         if single is not None:
             config = replace(config, label=str(single.value), roi=None)
             value, name = single.value, single.name
+            described = single
     if label_map is not None:
         if config.selectors:
             label_map = label_map.select(config.selectors, source=input_path)
@@ -578,9 +580,10 @@ def run_case(
             from .structures import run_structures_case
 
             return run_structures_case(label_map, input_path, out, config, progress=progress,
-                                       timings=timings)
+                                       timings=timings, image_dir=image_dir)
         only = label_map.structures[0]
         value, name = only.value, only.name
+        described = only
         data: Volume | CrossSections = label_map.mask(only.value)
         frame = label_map.coordinates
     else:
@@ -649,17 +652,24 @@ def run_case(
             _write_json(out / "metrics.json", metrics.to_dict())
         grid = data if isinstance(data, Volume) else None
         labels, labels_affine = _label_grid(result, sections, grid, value)
-        from .io.labelmap import Structure, write_label_map
+        from .io.labelmap import Structure
+        from .io.outputs import dicom_image_series, write_label_outputs
 
-        write_label_map(labels, labels_affine, out / "labels.nii.gz", coordinates=frame)
-        structure = Structure(value, name)
+        structure = described if described is not None else Structure(value, name)
+        outputs = write_label_outputs(
+            out, labels, labels_affine, [structure], coordinates=frame,
+            series=dicom_image_series(kind.kind, input_path,
+                                      image_dir if image_dir is not None else kind.image_dir),
+            rtstruct=kind.path if kind.kind == "rtstruct" else None,
+            allow_irregular=config.allow_irregular,
+        )
         _write_json(out / "structures.json", {"structures": [{
             **structure.to_dict(), "status": "reconstructed",
             "planes": int(np.count_nonzero(sections.masks.any(axis=(1, 2)))),
             "volume_mm3": round(float(np.count_nonzero(labels))
                                 * abs(float(np.linalg.det(labels_affine[:3, :3]))), 3),
             "parts": len(result.plan.parts), "mesh": mesh_path.name,
-        }]})
+        }], "outputs": outputs.to_dict()})
         write_preview(
             out / "preview.png", mesh=result.mesh, boxes=result.plan.boxes,
             planner=result.plan.planner, sections=sections, projections=projections,

@@ -393,6 +393,7 @@ def run_structures_case(
     progress: Any = None,
     timings: dict[str, float] | None = None,
     coordinates: str = "LPS",
+    image_dir: Any = None,
 ) -> dict[str, Any]:
     """Reconstruct every structure and write the case's outputs into ``out``.
 
@@ -407,7 +408,10 @@ def run_structures_case(
     ``structures.json`` (every structure: value, name, colour, status, planes
     used, volume in mm³, mesh), ``metrics.json`` (per structure and their
     mean, dense inputs), ``plan.json`` and ``preview.png``; every file
-    atomically. Called by :func:`slicerecon.reconstruct.run_case`.
+    atomically. ``labels.seg.nrrd``, and for DICOM inputs with their image
+    series (``image_dir``, or a DICOM mask series) ``seg.dcm`` and for RTSTRUCT
+    inputs ``rtstruct.dcm``, come from :func:`slicerecon.io.outputs.write_label_outputs`.
+    Called by :func:`slicerecon.reconstruct.run_case`.
 
     Returns
     -------
@@ -416,8 +420,9 @@ def run_structures_case(
     """
     from pathlib import Path
 
-    from .io.labelmap import write_label_map
+    from .io import detect_kind
     from .io.mesh import write_mesh
+    from .io.outputs import dicom_image_series, write_label_outputs
     from .metrics import evaluate
     from .preview import write_preview
     from .reconstruct import _write_json
@@ -464,9 +469,17 @@ def run_structures_case(
                               f"{config.mesh_format}")
             record["mesh"] = f"meshes/{path.name}"
         records.append(record)
-    write_label_map(result.labels, result.affine, outdir / "labels.nii.gz",
-                    coordinates=result.coordinates)
-    _write_json(outdir / "structures.json", {"structures": records})
+    kind = detect_kind(input_path)
+    outputs = write_label_outputs(
+        outdir, result.labels, result.affine, [item.structure for item in result.results],
+        coordinates=result.coordinates,
+        series=dicom_image_series(kind.kind, input_path,
+                                  image_dir if image_dir is not None else kind.image_dir),
+        rtstruct=kind.path if kind.kind == "rtstruct" else None,
+        allow_irregular=config.allow_irregular,
+    )
+    _write_json(outdir / "structures.json", {"structures": records,
+                                              "outputs": outputs.to_dict()})
     mean = _mean_metrics(metrics) if metrics else None
     if metrics:
         _write_json(outdir / "metrics.json", {"structures": metrics, "mean": mean})

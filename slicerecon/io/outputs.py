@@ -1,0 +1,180 @@
+"""The label-map outputs of a run: NIfTI, 3D Slicer segmentation, DICOM SEG and RTSTRUCT.
+
+Every ``slicerecon run`` writes the reconstructed label map twice, on the
+input's grid with the input's label values:
+
+* ``labels.nii.gz`` (NIfTI, RAS: :func:`slicerecon.io.labelmap.write_label_map`);
+* ``labels.seg.nrrd`` (a 3D Slicer segmentation with the structures' names and
+  colours: :func:`slicerecon.io.nrrd.write_seg_nrrd`).
+
+When the input comes with its DICOM image series (a DICOM mask series, an
+RTSTRUCT beside its series, or any input given ``image_dir``) it also writes
+
+* ``seg.dcm``: a DICOM SEG made by highdicom referring to that series
+  (:func:`slicerecon.io.dicom.seg_writer.write_seg`);
+
+and for an RTSTRUCT input
+
+* ``rtstruct.dcm``: the reconstruction as contours on every image slice it
+  crosses, with the input's ROI names and colours
+  (:func:`slicerecon.io.rtstruct_writer.write_rtstruct`).
+
+A DICOM output that cannot be made (the series lacks the UIDs a derived object
+refers to, the label map is not on its grid) is logged as a warning and
+listed as skipped; the other outputs stand.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import SlicereconError
+from .labelmap import Structure
+
+__all__ = ["LabelOutputs", "dicom_image_series", "write_label_outputs"]
+
+logger = logging.getLogger(__name__)
+
+_LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+@dataclass
+class LabelOutputs:
+    """What :func:`write_label_outputs` wrote.
+
+    Attributes
+    ----------
+    written : dict of str to Path
+        Output name (``"labels"``, ``"seg_nrrd"``, ``"seg"``, ``"rtstruct"``) → file.
+    skipped : dict of str to str
+        Output name → why it was not written.
+    """
+
+    written: dict[str, Path] = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-ready: file names written and reasons for those skipped."""
+        return {"written": {k: v.name for k, v in self.written.items()},
+                "skipped": dict(self.skipped)}
+
+
+def dicom_image_series(
+    kind: str, path: str | os.PathLike[str], image_dir: str | os.PathLike[str] | None
+) -> Path | None:
+    """The DICOM image series an input comes with, if any.
+
+    Parameters
+    ----------
+    kind : str
+        The input's kind (:func:`slicerecon.io.detect_kind`).
+    path : path-like
+        The input.
+    image_dir : path-like or None
+        The series directory given with the input (``image_dir``), or found
+        beside an RTSTRUCT.
+
+    Returns
+    -------
+    Path or None
+        ``image_dir`` when given; the input itself for a DICOM mask series;
+        None otherwise.
+    """
+    if image_dir is not None:
+        return Path(image_dir)
+    if kind == "dicom-series":
+        return Path(path)
+    return None
+
+
+def write_label_outputs(
+    outdir: str | os.PathLike[str],
+    labels: NDArray[np.integer],
+    affine: NDArray[np.float64],
+    structures: Sequence[Structure],
+    *,
+    coordinates: str = "RAS",
+    series: str | os.PathLike[str] | None = None,
+    rtstruct: str | os.PathLike[str] | None = None,
+    allow_irregular: bool = False,
+) -> LabelOutputs:
+    """Write the reconstructed label map in every format the input's workflow reads.
+
+    Parameters
+    ----------
+    outdir : path-like
+        The run's output directory.
+    labels : ndarray of shape (I, J, K), integer
+        Label values (0 background) on the input's grid.
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm in ``coordinates``.
+    structures : sequence of Structure
+        The structures (values, names, colours) in the order to list them.
+    coordinates : {"RAS", "LPS"}
+        The frame of ``affine`` (LPS for DICOM inputs).
+    series : path-like, optional
+        The DICOM image series the input comes with (:func:`dicom_image_series`):
+        ``seg.dcm`` is written referring to it.
+    rtstruct : path-like, optional
+        The RTSTRUCT the structures were read from: ``rtstruct.dcm`` is written
+        (needs ``series``), copying its identifiers, ROI names and colours.
+    allow_irregular : bool
+        Accept uneven slice spacing in ``series`` (``--allow-irregular``).
+
+    Returns
+    -------
+    LabelOutputs
+
+    Raises
+    ------
+    SlicereconError
+        When ``labels.nii.gz`` or ``labels.seg.nrrd`` cannot be written; DICOM
+        outputs that cannot be made are skipped with a warning instead.
+    """
+    from .labelmap import write_label_map
+    from .nrrd import write_seg_nrrd
+
+    out = Path(outdir)
+    result = LabelOutputs()
+    result.written["labels"] = write_label_map(labels, affine, out / "labels.nii.gz",
+                                               coordinates=coordinates)
+    result.written["seg_nrrd"] = write_seg_nrrd(labels, affine, list(structures),
+                                                out / "labels.seg.nrrd", coordinates=coordinates)
+    if series is None:
+        if rtstruct is not None:
+            result.skipped["rtstruct"] = "the RTSTRUCT's image series was not found beside it"
+        return result
+    lps = np.asarray(affine, dtype=np.float64)
+    if coordinates == "RAS":
+        lps = _LPS_TO_RAS @ lps
+    chosen = [s for s in structures if np.any(labels == s.value)]
+    if not chosen:
+        result.skipped["seg"] = "no structure holds a voxel"
+        return result
+    from .dicom.seg_writer import write_seg
+
+    try:
+        result.written["seg"] = write_seg(labels, lps, chosen, series, out / "seg.dcm",
+                                          allow_irregular=allow_irregular)
+    except SlicereconError as exc:
+        logger.warning("seg.dcm not written: %s", exc)
+        result.skipped["seg"] = str(exc)
+    if rtstruct is not None:
+        from .rtstruct_writer import write_rtstruct
+
+        try:
+            result.written["rtstruct"] = write_rtstruct(
+                labels, lps, list(structures), series, out / "rtstruct.dcm",
+                reference=rtstruct, allow_irregular=allow_irregular,
+            )
+        except SlicereconError as exc:
+            logger.warning("rtstruct.dcm not written: %s", exc)
+            result.skipped["rtstruct"] = str(exc)
+    return result

@@ -1,0 +1,107 @@
+"""What a run writes for a clinical workflow: label maps, a Slicer segmentation, SEG, RTSTRUCT."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import dicom_factory as factory  # tests/io, on pytest's pythonpath
+import nibabel as nib
+import numpy as np
+import pytest
+
+from slicerecon.cli import main
+from slicerecon.io.nrrd import read_nrrd_label_map
+from slicerecon.io.rtstruct import read_rtstruct_structures
+
+
+def _ct(root: Path) -> np.ndarray:
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0],
+                                          [-31.5, -23.5, 0.0])
+    factory.write_series(root, np.zeros((64, 48, 21), np.uint16), affine, modality="CT")
+    return affine
+
+
+def _rings(radius: float, centre: tuple[float, float], centre_z: float) -> list:
+    zs = [3.0 * k for k in range(21) if k % 2 == 0]  # every other CT slice
+    return [factory.contour_item(factory.circle(math.sqrt(radius**2 - (z - centre_z) ** 2),
+                                                centre, z))
+            for z in zs if abs(z - centre_z) < radius]
+
+
+def _nifti_labels(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    image = nib.load(path)
+    return np.asarray(image.dataobj), image.affine
+
+
+def test_rtstruct_beside_its_series_writes_seg_and_rtstruct_that_read_back(tmp_path: Path) -> None:
+    _ct(tmp_path / "ct")
+    factory.write_rtstruct(tmp_path / "ct" / "rs.dcm", {
+        (3, "Left"): _rings(12.0, (-14.0, 0.0), 30.0),
+        (7, "Right"): _rings(9.0, (15.0, 0.0), 27.0),
+    })
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out), "-q"]) == 0
+    for name in ("labels.nii.gz", "labels.seg.nrrd", "seg.dcm", "rtstruct.dcm"):
+        assert (out / name).is_file(), name
+    record = json.loads((out / "structures.json").read_text())
+    assert record["outputs"]["skipped"] == {}
+    labels, _ = _nifti_labels(out / "labels.nii.gz")
+    voxel_mm3 = 1.0 * 1.0 * 3.0
+    volumes = {v: float(np.count_nonzero(labels == v)) * voxel_mm3 for v in (3, 7)}
+    assert min(volumes.values()) > 0
+
+    # the DICOM SEG: highdicom reads the same segments, names and label values
+    import highdicom as hd
+
+    seg = hd.seg.segread(out / "seg.dcm")
+    names = {seg.get_segment_description(n).SegmentLabel for n in seg.segment_numbers}
+    assert names == {"Left", "Right"}
+    import pydicom
+
+    image = pydicom.dcmread(sorted((tmp_path / "ct").glob("slice_*.dcm"))[0])
+    assert seg.FrameOfReferenceUID == image.FrameOfReferenceUID
+    assert seg.ReferencedSeriesSequence[0].SeriesInstanceUID == image.SeriesInstanceUID
+
+    # the RTSTRUCT: read back by slicerecon into the same structures (volumes within 2 %)
+    structures, sections, _ = read_rtstruct_structures(out / "rtstruct.dcm",
+                                                       image_dir=tmp_path / "ct")
+    by_name = {s.name: (s, own) for s, own in zip(structures, sections, strict=True)}
+    assert set(by_name) == {"Left", "Right"}
+    for value, name in ((3, "Left"), (7, "Right")):
+        structure, own = by_name[name]
+        assert structure.value == value and own is not None
+        thickness = abs(float(own.normal @ own.affine[:3, 2]))
+        read_mm3 = sum(own.area_mm2(p) for p in range(own.n_planes)) * thickness
+        assert read_mm3 == pytest.approx(volumes[value], rel=0.02)
+
+    # the Slicer segmentation holds the same label map, names and values
+    seg_nrrd = read_nrrd_label_map(out / "labels.seg.nrrd")
+    assert {s.name for s in seg_nrrd.structures} == {"Left", "Right"}
+    np.testing.assert_array_equal(np.sort(np.unique(seg_nrrd.labels)), [0, 3, 7])
+    assert int(np.count_nonzero(seg_nrrd.labels == 3)) == int(np.count_nonzero(labels == 3))
+
+
+def test_a_nifti_label_map_gets_a_slicer_segmentation_and_no_dicom(tmp_path: Path) -> None:
+    i, j, k = np.ogrid[:40, :36, :30]
+    labels = np.zeros((40, 36, 30), np.uint8)
+    labels[(i - 12) ** 2 + (j - 18) ** 2 + (k - 15) ** 2 <= 64] = 2
+    labels[(i - 28) ** 2 + (j - 18) ** 2 + (k - 15) ** 2 <= 49] = 5
+    affine = np.diag([0.8, 0.8, 1.5, 1.0])
+    path = tmp_path / "labels.nii.gz"
+    nib.save(nib.Nifti1Image(labels, affine), str(path))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--slices", "8", "-o", str(out), "-q"]) == 0
+    assert not (out / "seg.dcm").exists() and not (out / "rtstruct.dcm").exists()
+    written, written_affine = _nifti_labels(out / "labels.nii.gz")
+    seg_nrrd = read_nrrd_label_map(out / "labels.seg.nrrd")
+    assert seg_nrrd.labels.shape == written.shape
+    np.testing.assert_array_equal(np.sort(np.unique(seg_nrrd.labels)), [0, 2, 5])
+    for value in (2, 5):
+        assert int(np.count_nonzero(seg_nrrd.labels == value)) == int(
+            np.count_nonzero(written == value))
+    # the same world geometry: the Slicer file is LPS, the NIfTI RAS
+    ras = np.diag([-1.0, -1.0, 1.0, 1.0]) @ seg_nrrd.affine if seg_nrrd.coordinates == "LPS" \
+        else seg_nrrd.affine
+    np.testing.assert_allclose(ras, written_affine, atol=1e-5)
