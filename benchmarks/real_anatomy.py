@@ -64,6 +64,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "hybrid-linear-heuristic": {"method": "hybrid", "planner": "heuristic",
                                 "interpolation": "linear"},
     "sdf-carve-only": {"method": "sdf", "planner": "heuristic", "cover": False},
+    "sdf-cover-none": {"method": "sdf", "planner": "none"},
 }
 """Variant name → keyword arguments of :func:`slicerecon.reconstruct.reconstruct`.
 
@@ -86,6 +87,7 @@ VARIANT_NOTES: dict[str, str] = {
     "planner, carved",
     "sdf-carve-only": "the default until 2026-12-01: sdf, PCHIP, heuristic planner, carved but "
     "not covering the silhouettes",
+    "sdf-cover-none": "sdf, PCHIP, carved and covering, one part (no planner)",
 }
 
 DEFAULT_VARIANTS = ("sdf-plain", "default", "loft-heuristic", "itk-mci")

@@ -233,12 +233,15 @@ def _sparse_volume_to_sections(volume: Volume, axis: int) -> CrossSections:
 def looks_sparse(volume: Volume, axis: int) -> bool:
     """Guess whether a mask annotates only some planes along ``axis``.
 
-    A mask is taken as sparse when at least three planes hold foreground and
+    A mask is taken as sparse when at least two planes hold foreground and
     more than half of the planes between the first and the last of them are
-    empty (a dense organ mask has no empty planes inside its extent).
+    empty (a dense organ mask has no empty planes inside its extent). Two
+    annotated planes with a gap between them are sparse (ITK's morphological
+    contour interpolation examples are such label maps); two neighbouring
+    planes are a dense mask two slices thick.
     """
     planes = volume.occupied_planes(axis)
-    if planes.size < 3:
+    if planes.size < 2:
         return False
     span = int(planes[-1] - planes[0] + 1)
     return (span - planes.size) > 0.5 * span

@@ -154,7 +154,11 @@ def reconstruct_structures(
     Parameters
     ----------
     label_map : LabelMap
-        The structures (dense: each is its own ground truth).
+        The structures. Dense: planes are chosen over their union and each
+        structure is its own ground truth (silhouettes from its mask). Sparse
+        (annotated on some planes only, :func:`slicerecon.reconstruct.looks_sparse`):
+        the annotated planes are the sections, silhouettes are derived from
+        each structure's sections, and there is no ground truth.
     slices, every, axis
         Plane choice over the union of the structures
         (:func:`slicerecon.reconstruct.prepare_inputs`).
@@ -187,14 +191,14 @@ def reconstruct_structures(
     start = time.perf_counter()
     union = label_map.union()
     sections, _, cropped = prepare_inputs(union, slices=slices, every=every, axis=axis,
-                                          projections="gt", memory_budget_gb=memory_budget_gb)
-    if cropped is None:  # a sparse union: the input annotates only some planes
-        raise OptionError("the structures annotate only some planes; several sparse "
-                          "structures are read from an RTSTRUCT or contour files")
+                                          projections="auto", memory_budget_gb=memory_budget_gb)
+    # A sparse union (the structures annotate only some planes) has no ground
+    # truth: each structure's silhouettes are derived from its own sections.
+    dense = cropped is not None
     crop_lo = np.rint(np.linalg.solve(label_map.affine[:3, :3],
-                                      cropped.affine[:3, 3] - label_map.affine[:3, 3]))
+                                      sections.affine[:3, 3] - label_map.affine[:3, 3]))
     crop_lo = crop_lo.astype(np.int64)
-    region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, cropped.shape,
+    region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, sections.grid_shape,
                                                              strict=True))
     labels_crop = label_map.labels[region]
     plane_index = np.rint(sections.indices).astype(np.int64)
@@ -208,7 +212,7 @@ def reconstruct_structures(
         if planes.any():
             own = CrossSections(planes, sections.indices, sections.axis, sections.affine,
                                 sections.grid_shape)
-        items.append((structure, own, mask))
+        items.append((structure, own, mask if dense else None))
     results, joint = _reconstruct_jointly(
         items, sections, timings, planner=planner, method=method,
         interpolation=interpolation, carve=carve, cover=cover, max_parts=max_parts,
@@ -218,8 +222,8 @@ def reconstruct_structures(
     labels = np.zeros(label_map.shape, dtype=np.result_type(label_map.labels.dtype, np.uint8))
     won = joint.labels >= 0
     labels[region][won] = values[joint.labels[won]]
-    return StructuresReconstruction(results, labels, sections, label_map, crop_lo, timings,
-                                    label_map.affine, label_map.coordinates)
+    return StructuresReconstruction(results, labels, sections, label_map if dense else None,
+                                    crop_lo, timings, label_map.affine, label_map.coordinates)
 
 
 def reconstruct_sparse_structures(

@@ -516,10 +516,6 @@ def test_mci_examples_reconstruct(mci_examples: dict[str, Path], tmp_path: Path,
         assert lo <= 2.0 + 1.5 * PLANES[0] and hi >= 2.0 + 1.5 * PLANES[1]
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "two annotated planes are taken as a dense mask (reconstruct.looks_sparse wants >= 3 "
-    "planes), so each structure is two slabs; and reconstruct_structures refuses a sparse "
-    "label map of several structures: the pipeline change is reported, not made here"))
 @pytest.mark.parametrize("name", ["SevenLabels", "ManyToMany"])
 def test_mci_examples_are_interpolated_between_the_planes(
     mci_examples: dict[str, Path], tmp_path: Path, name: str
