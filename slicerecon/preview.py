@@ -45,15 +45,17 @@ def _step(grid_shape: tuple[int, int, int]) -> int:
 
 
 def _coarse(mask: NDArray[np.bool_], step: int) -> NDArray[np.bool_]:
-    """Any-pooling of a mask by ``step`` along every axis."""
+    """Any-pooling of a mask by ``step`` along every axis (one axis at a time)."""
     if step == 1:
         return mask
-    pad = [(0, (-n) % step) for n in mask.shape]
-    padded = np.pad(mask, pad)
-    shape: list[int] = []
-    for n in padded.shape:
-        shape += [n // step, step]
-    return padded.reshape(shape).any(axis=tuple(range(1, 2 * mask.ndim, 2)))
+    out = mask
+    for axis in range(mask.ndim):
+        extra = (-out.shape[axis]) % step
+        if extra:
+            out = np.pad(out, [(0, extra) if a == axis else (0, 0) for a in range(out.ndim)])
+        shape = out.shape[:axis] + (out.shape[axis] // step, step) + out.shape[axis + 1:]
+        out = out.reshape(shape).any(axis=axis + 1)
+    return out
 
 
 def _on_grid(volume: Volume, affine: NDArray[np.float64],
@@ -152,12 +154,13 @@ def write_preview(
         truth.affine, sections.affine
     )
     zoom = _scale_px(coarse_shape)
+    coarse_truth = _coarse(truth.mask, step) if same_grid and truth is not None else None
     panels: list[list[NDArray[np.uint8]]] = [[], []]
     titles: list[list[str]] = [[], []]
     for ax_id in range(3):
         rows, cols = in_plane_axes(ax_id)
-        if same_grid and truth is not None:
-            top = _coarse(truth.mask, step).any(axis=ax_id)
+        if coarse_truth is not None:
+            top = coarse_truth.any(axis=ax_id)
             label = "ground truth"
         else:
             view = projections[ax_id].image

@@ -180,9 +180,10 @@ class MetricInput:
 
     @cached_property
     def surface(self) -> trimesh.Trimesh:
-        """The closed surface, world mm (marching cubes for a Volume)."""
+        """The surface to sample, world mm (marching cubes for a Volume, not repaired:
+        sampling needs no closed mesh, :func:`~slicerecon.surface.marching.volume_to_mesh`)."""
         if isinstance(self.shape, Volume):
-            return volume_to_mesh(self.shape)
+            return volume_to_mesh(self.shape, repair=False)
         return self.shape
 
     @cached_property

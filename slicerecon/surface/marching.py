@@ -31,7 +31,9 @@ logger = logging.getLogger(__name__)
 _INSIDE_CHOICES = ("negative", "positive")
 
 
-def volume_to_mesh(volume: Volume, *, level: float = 0.5, step_size: int = 1) -> trimesh.Trimesh:
+def volume_to_mesh(
+    volume: Volume, *, level: float = 0.5, step_size: int = 1, repair: bool = True
+) -> trimesh.Trimesh:
     """Watertight surface of the foreground of a binary volume, in world mm.
 
     Parameters
@@ -45,6 +47,12 @@ def volume_to_mesh(volume: Volume, *, level: float = 0.5, step_size: int = 1) ->
     step_size : int, optional
         Marching-cubes step in voxels (>= 1). Larger steps give coarser,
         faster meshes; the mask is sampled every ``step_size`` voxels.
+    repair : bool, optional
+        Check that the mesh is closed and, in the rare voxel configurations
+        where skimage's marching cubes leaves edges shared by four faces, fill
+        the ambiguous blocks and march again (the default). ``False`` returns
+        the first marching-cubes surface unchecked: what a metric needs to
+        sample the surface, at a third less time.
 
     Returns
     -------
@@ -77,9 +85,10 @@ def volume_to_mesh(volume: Volume, *, level: float = 0.5, step_size: int = 1) ->
     step = _check_step(step_size)
     # Marching cubes only needs the foreground and one background layer around it.
     cropped = volume.crop(pad=1)
-    field = cropped.mask.astype(np.float32)
+    # C order for skimage (a NIfTI mask is often Fortran-ordered: no second copy)
+    field = np.ascontiguousarray(cropped.mask, dtype=np.float32)
     mesh = _march(field, cropped.affine, level=level, inside_high=True, pad_value=0.0, step=step)
-    if mesh.is_watertight or step != 1:
+    if not repair or step != 1 or mesh.is_watertight:
         return mesh
     # Rare voxel configurations make skimage's marching cubes emit edges shared by
     # four faces; fill the ambiguous 2x2x2 blocks next to them and march again.

@@ -660,30 +660,21 @@ def _cover_silhouettes(
     them. Rays along ``axis`` are left alone: they cross every interpolated
     layer, so the missing voxel has no good place along them.
 
-    ``union`` and ``inside`` share their shape (padded samples, grid axis order).
+    ``union`` and ``inside`` share their shape (samples in grid axis order).
     """
-    layers = np.moveaxis(union, axis, 0)
-    hull_layers = np.moveaxis(inside, axis, 0)
-    for k in range(layers.shape[0]):
-        hull = hull_layers[k]
-        if not hull.any():
+    shape_inside = union < 0
+    for ray_axis in (ax for ax in range(3) if ax != axis):
+        missed = np.any(inside, axis=ray_axis) & ~np.any(shape_inside, axis=ray_axis)
+        lines = np.nonzero(missed)  # each missed ray by its indices on the other two axes
+        if lines[0].size == 0:
             continue
-        layer = layers[k]  # a view: writes go to ``union``
-        for ray_axis in (0, 1):
-            shape_hits = np.any(layer < 0, axis=ray_axis)
-            missed = np.any(hull, axis=ray_axis) & ~shape_hits
-            if not missed.any():
-                continue
-            lines = np.flatnonzero(missed)
-            values = np.take(layer, lines, axis=1 - ray_axis)  # rays along ray_axis
-            held = np.take(hull, lines, axis=1 - ray_axis)
-            values = np.where(held, values, np.inf)
-            near = held & (values <= values.min(axis=ray_axis, keepdims=True) + depth)
-            rows, cols = np.nonzero(near)
-            if ray_axis == 0:
-                layer[rows, lines[cols]] = -level
-            else:
-                layer[lines[rows], cols] = -level
+        values = np.moveaxis(union, ray_axis, -1)  # views: writes reach ``union``
+        held = np.moveaxis(inside, ray_axis, -1)[lines]  # (rays, samples along the ray)
+        rays = np.where(held, values[lines], np.inf)
+        near = held & (rays <= rays.min(axis=1, keepdims=True) + depth)
+        ray, along = np.nonzero(near)
+        values[lines[0][ray], lines[1][ray], along] = -level
+        np.moveaxis(shape_inside, ray_axis, -1)[lines[0][ray], lines[1][ray], along] = True
 
 
 class SdfField(NamedTuple):
