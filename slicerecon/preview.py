@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from .sampling import pool_any
 from .sections import AXIS_NAMES, Box, CrossSections, Projections, Volume, in_plane_axes
 
 if TYPE_CHECKING:
@@ -42,20 +43,6 @@ _GAP_PX = 8
 def _step(grid_shape: tuple[int, int, int]) -> int:
     """Voxels per preview pixel, so that no panel is wider than :data:`MAX_PANEL_PX`."""
     return max(1, math.ceil(max(grid_shape) / MAX_PANEL_PX))
-
-
-def _coarse(mask: NDArray[np.bool_], step: int) -> NDArray[np.bool_]:
-    """Any-pooling of a mask by ``step`` along every axis (one axis at a time)."""
-    if step == 1:
-        return mask
-    out = mask
-    for axis in range(mask.ndim):
-        extra = (-out.shape[axis]) % step
-        if extra:
-            out = np.pad(out, [(0, extra) if a == axis else (0, 0) for a in range(out.ndim)])
-        shape = out.shape[:axis] + (out.shape[axis] // step, step) + out.shape[axis + 1:]
-        out = out.reshape(shape).any(axis=axis + 1)
-    return out
 
 
 def _on_grid(volume: Volume, affine: NDArray[np.float64],
@@ -143,7 +130,7 @@ def write_preview(
     affine[:3, :3] = affine[:3, :3] * step
     affine[:3, 3] = sections.affine[:3, :3] @ np.full(3, (step - 1) / 2.0) + sections.affine[:3, 3]
     if occupancy is not None:
-        recon = _coarse(_on_grid(occupancy, sections.affine, grid), step)
+        recon = pool_any(_on_grid(occupancy, sections.affine, grid), step)
     else:
         recon = mesh_to_mask(mesh, affine, coarse_shape)  # type: ignore[arg-type]
     owner = np.full(coarse_shape, -1, dtype=np.int16)
@@ -154,7 +141,7 @@ def write_preview(
         truth.affine, sections.affine
     )
     zoom = _scale_px(coarse_shape)
-    coarse_truth = _coarse(truth.mask, step) if same_grid and truth is not None else None
+    coarse_truth = pool_any(truth.mask, step) if same_grid and truth is not None else None
     panels: list[list[NDArray[np.uint8]]] = [[], []]
     titles: list[list[str]] = [[], []]
     for ax_id in range(3):
@@ -164,7 +151,7 @@ def write_preview(
             label = "ground truth"
         else:
             view = projections[ax_id].image
-            top = _coarse(view[:, :, None], step)[:, :, 0]
+            top = pool_any(view[:, :, None], step)[:, :, 0]
             label = f"projection ({projections.source})"
         image = np.full(top.shape + (3,), 255, dtype=np.uint8)
         image[top] = (90, 90, 90)

@@ -51,6 +51,7 @@ from .sections import (
 )
 
 __all__ = [
+    "pool_any",
     "visual_hull",
     "dense_count",
     "evenly_spaced_planes",
@@ -381,6 +382,33 @@ def projections_from_sections(sections: CrossSections) -> Projections:
             image = image.T
         views[a] = Projection(image, a, sections.affine)
     return Projections((views[0], views[1], views[2]), source="sections")
+
+
+def pool_any(mask: NDArray[np.bool_], factor: int) -> NDArray[np.bool_]:
+    """Any-pooling: a coarser mask whose cell is set when any voxel of its block is.
+
+    Parameters
+    ----------
+    mask : ndarray of shape (N_0, ..., N_d), bool
+    factor : int
+        Block size along every axis (>= 1). The grid is padded with background
+        up to a multiple of ``factor``.
+
+    Returns
+    -------
+    ndarray of shape (ceil(N_0 / factor), ...), bool
+        ``mask`` itself when ``factor`` is 1.
+    """
+    if factor == 1:
+        return mask
+    out = mask
+    for axis in range(mask.ndim):  # one axis at a time: each reduction reads one axis
+        extra = (-out.shape[axis]) % factor
+        if extra:
+            out = np.pad(out, [(0, extra) if a == axis else (0, 0) for a in range(out.ndim)])
+        shape = out.shape[:axis] + (out.shape[axis] // factor, factor) + out.shape[axis + 1:]
+        out = out.reshape(shape).any(axis=axis + 1)
+    return out
 
 
 def visual_hull(projections: Projections, grid_shape: tuple[int, int, int]) -> NDArray[np.bool_]:

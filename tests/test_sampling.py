@@ -230,3 +230,16 @@ def test_single_fractional_plane_lands_on_nearest_row() -> None:
     expected = np.zeros_like(view)
     expected[10:20, 6] = True
     np.testing.assert_array_equal(view, expected)
+
+
+@pytest.mark.parametrize("factor", [1, 2, 3, 5])
+def test_pool_any_sets_a_cell_exactly_when_its_block_holds_a_voxel(factor: int) -> None:
+    from slicerecon.sampling import pool_any
+
+    rng = np.random.default_rng(3)
+    mask = rng.random((13, 7, 11)) > 0.97
+    pooled = pool_any(mask, factor)
+    assert pooled.shape == tuple(-(-n // factor) for n in mask.shape)
+    for index in np.ndindex(pooled.shape):
+        block = mask[tuple(slice(i * factor, (i + 1) * factor) for i in index)]
+        assert pooled[index] == block.any()

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, OptionError
+from ..sampling import pool_any
 from ..sections import Box
 from .cuts import Cut
 from .heuristic import expert_cut
@@ -334,7 +335,7 @@ def plan_partition(
     if factor > 1:
         if reconstruct is not None:
             raise OptionError("a reward reconstruction needs the full grid: give max_grid=None")
-        coarse = _pool(occ.astype(bool, copy=False), factor)
+        coarse = pool_any(occ.astype(bool, copy=False), factor)
         parts = entry(
             coarse, reconstruct=None, max_parts=int(max_parts),
             min_remaining=float(min_remaining), lam=float(lam), **options,
@@ -356,14 +357,6 @@ def plan_partition(
     plan = Plan(name, tuple(PlanPart(p.box, p.cut, p.mask_voxels) for p in parts), shape)  # type: ignore[arg-type]
     logger.info("planner %s: %d parts", name, len(plan.parts))
     return plan
-
-
-def _pool(mask: NDArray[np.bool_], factor: int) -> NDArray[np.bool_]:
-    """Any-pooling of a 3-D mask by ``factor`` per axis (the grid padded up to a multiple)."""
-    pad = [(0, (-n) % factor) for n in mask.shape]
-    padded = np.pad(mask, pad)
-    i, j, k = (n // factor for n in padded.shape)
-    return padded.reshape(i, factor, j, factor, k, factor).any(axis=(1, 3, 5))
 
 
 def _refine(parts: list[Part], occupancy: NDArray[np.bool_], factor: int) -> tuple[PlanPart, ...]:
