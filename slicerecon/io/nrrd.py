@@ -561,9 +561,12 @@ def _labels_dtype(values: Sequence[int]) -> np.dtype[Any]:
 
 
 def _present(layer: NDArray[np.integer]) -> set[int]:
+    """The values a label layer holds (0 when any voxel is background)."""
+    foreground = layer[layer != 0]  # label maps are mostly background: count only the rest
+    found = {0} if foreground.size < layer.size else set()
     if layer.dtype.kind == "u" and layer.dtype.itemsize <= 2:
-        return {int(v) for v in np.flatnonzero(np.bincount(layer.ravel()))}
-    return {int(v) for v in np.unique(layer)}
+        return found | {int(v) for v in np.flatnonzero(np.bincount(foreground))}
+    return found | {int(v) for v in np.unique(foreground)}
 
 
 def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:

@@ -52,8 +52,12 @@ def sample_surface(
     """
     n = check_n_points(n_points)
     rng = as_rng(seed)
-    triangles = np.asarray(mesh.triangles, dtype=np.float64)
-    cumulative = np.cumsum(np.asarray(mesh.area_faces, dtype=np.float64))
+    # The triangles and their areas as trimesh computes them (``triangles``,
+    # ``area_faces``), without its cache bookkeeping on a mesh sampled once.
+    triangles = np.asarray(mesh.vertices, dtype=np.float64)[np.asarray(mesh.faces)]
+    edges = triangles[:, 1:, :] - triangles[:, :2, :]
+    crosses = np.cross(edges[:, 0], edges[:, 1])
+    cumulative = np.cumsum(np.sqrt((crosses**2).sum(axis=1)) / 2.0)
     if len(cumulative) == 0 or not cumulative[-1] > 0:
         raise GeometryError("the mesh has no surface area to sample")
     face = np.searchsorted(cumulative, rng.random(n) * cumulative[-1], side="right")

@@ -257,6 +257,68 @@ def occupancy_dice(occ: Occupancy) -> float:
     return float(2.0 * inter / total) if total else 1.0
 
 
+def _shifted_morphology(
+    mask: NDArray[np.bool_], reach: NDArray[np.int64], offsets: NDArray[np.int64], *, dilate: bool
+) -> NDArray[np.bool_]:
+    """Binary dilation (OR) or erosion (AND) of ``mask`` by a set of grid offsets.
+
+    The offsets (rows of ``offsets``, within ``reach`` per axis) are grouped by
+    their position on the two axes other than the one of longest reach (the
+    run axis). Each group must span a symmetric run ``-w..w`` along the run
+    axis, as the offsets of a ball or an ellipsoid do: the 1-D dilations along
+    the run axis are built once per width, by two shifted views per width,
+    and each group then costs one more shifted view. An ellipsoid reaching 3
+    voxels in-plane and 1 across (39 offsets) takes 15 passes instead of 39.
+    Any other offset set is combined one shifted view per offset. Beyond the
+    grid counts as outside for a dilation and inside for an erosion.
+    """
+    ndim = mask.ndim
+    padded = np.pad(mask, [(int(r), int(r)) for r in reach], constant_values=not dilate)
+    combine = np.logical_or if dilate else np.logical_and
+    run = int(np.argmax(reach))
+    others = [a for a in range(ndim) if a != run]
+    groups: dict[tuple[int, ...], list[int]] = {}
+    for offset in offsets:
+        groups.setdefault(tuple(int(offset[a]) for a in others), []).append(int(offset[run]))
+    widths: dict[tuple[int, ...], int] = {}
+    for key, along in groups.items():
+        w = max(abs(v) for v in along)
+        if sorted(along) != list(range(-w, w + 1)):
+            widths = {}
+            break
+        widths[key] = w
+
+    def view(shift: dict[int, int], axes: list[int]) -> tuple[slice, ...]:
+        index = [slice(None)] * ndim
+        for a in axes:
+            start = int(reach[a]) + shift.get(a, 0)
+            index[a] = slice(start, start + mask.shape[a])
+        return tuple(index)
+
+    if not widths:  # not runs along one axis: one shifted view per offset
+        out = padded[view(dict(enumerate(offsets[0])), list(range(ndim)))].copy()
+        for offset in offsets[1:]:
+            combine(out, padded[view(dict(enumerate(offset)), list(range(ndim)))], out=out)
+        return out
+    lines: dict[int, NDArray[np.bool_]] = {}
+    current = padded[view({}, [run])].copy()
+    for w in range(max(widths.values()) + 1):
+        if w:
+            combine(current, padded[view({run: w}, [run])], out=current)
+            combine(current, padded[view({run: -w}, [run])], out=current)
+        if w in widths.values():
+            lines[w] = current.copy() if w < max(widths.values()) else current
+    out = None
+    for key, w in widths.items():
+        piece = lines[w][view(dict(zip(others, key, strict=True)), others)]
+        if out is None:
+            out = piece.copy()
+        else:
+            combine(out, piece, out=out)
+    assert out is not None
+    return out
+
+
 def _shell(mask: NDArray[np.bool_], spacing: NDArray[np.float64], tol: float) -> NDArray:
     """Voxels whose centre lies within ``tol`` mm of a centre of opposite occupancy.
 
@@ -276,19 +338,13 @@ def _shell(mask: NDArray[np.bool_], spacing: NDArray[np.float64], tol: float) ->
     )
     structure = np.sqrt(((offsets * np.asarray(spacing)) ** 2).sum(axis=-1)) <= limit
     if structure.sum() <= 125:
-        # Dilation and erosion by the structure's offsets, one shifted view at a
-        # time (a few times faster than scipy's binary morphology here). As with
-        # scipy's default border, nothing beyond the grid is near the mask's
-        # other side: the shell is dilation(mask) minus erosion(mask).
-        near_inside = np.zeros_like(mask)
-        deep_inside = mask.copy()
-        low = np.pad(mask, [(r, r) for r in reach], constant_values=False)
-        high = np.pad(mask, [(r, r) for r in reach], constant_values=True)
-        for offset in offsets[structure]:
-            view = tuple(slice(r + o, r + o + n)
-                         for r, o, n in zip(reach, offset, mask.shape, strict=True))
-            near_inside |= low[view]
-            deep_inside &= high[view]
+        # Dilation and erosion by the structure's offsets on shifted views (a few
+        # times faster than scipy's binary morphology here). As with scipy's
+        # default border, nothing beyond the grid is near the mask's other side:
+        # the shell is dilation(mask) minus erosion(mask).
+        chosen = offsets[structure]
+        near_inside = _shifted_morphology(mask, reach, chosen, dilate=True)
+        deep_inside = _shifted_morphology(mask, reach, chosen, dilate=False)
         return near_inside & ~deep_inside
     inside = ndimage.distance_transform_edt(mask, sampling=spacing)
     outside = ndimage.distance_transform_edt(~mask, sampling=spacing)

@@ -197,7 +197,7 @@ def _box_field(
         elif used.size == 1:
             near = (samples >= w[first] - 0.5) & (samples < w[first] + 0.5)
             field[near] = np.minimum(distances[first], far)
-    return np.ascontiguousarray(field[:, inner[0], inner[1]])
+    return field[:, inner[0], inner[1]]  # a view: callers copy or reduce it once
 
 
 def _extend(
@@ -795,8 +795,17 @@ def _hull_inside(
 
 def _mirror_pad(field: NDArray[np.float32]) -> NDArray[np.float32]:
     """Pad with one layer of ``+|f|`` of the neighbouring sample: the surface meets the faces."""
-    padded = np.pad(np.abs(field), 1, mode="edge")
+    padded = np.empty(tuple(n + 2 for n in field.shape), dtype=field.dtype)
     padded[1:-1, 1:-1, 1:-1] = field
+    # Edge padding of |f|, one axis at a time (each pass also fills the earlier
+    # axes' padding), without an |f| copy of the whole field.
+    for axis in range(3):
+        for side, source in ((0, 1), (-1, -2)):
+            out = [slice(None)] * 3
+            out[axis] = side
+            inner = [slice(None)] * 3
+            inner[axis] = source
+            np.abs(padded[tuple(inner)], out=padded[tuple(out)])
     return padded
 
 
