@@ -28,7 +28,7 @@ def main() -> None:
     parser.add_argument("--shapes", default="y_branch,chair,torus,two_spheres")
     parser.add_argument("--axes", default="x,y,z")
     parser.add_argument("--slices", default="6,10,16")
-    parser.add_argument("--method", default="hybrid")
+    parser.add_argument("--method", default="sdf", help="surface method (default: the library's)")
     parser.add_argument("--no-carve", action="store_true", help="do not carve by the hull")
     parser.add_argument("--n-points", type=int, default=20_000)
     parser.add_argument("--out", type=Path)

@@ -8,18 +8,16 @@ code; ``--debug`` shows the full traceback instead.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
-import signal
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from . import __version__
+from .console import StageProgress, ctrl_c_after, keep_freed_memory, print_run_summary
 from .errors import SlicereconError
 
 app = typer.Typer(
@@ -35,25 +33,6 @@ EXIT_INPUT = 2
 DEFAULT_MAX_MEMORY_GB = 8.0
 """Default of ``--max-memory``; equal to ``slicerecon.io.limits.DEFAULT_MEMORY_BUDGET_GB``
 (a test checks it), written here so that ``--help`` imports nothing heavy."""
-@contextlib.contextmanager
-def _ctrl_c_after() -> Iterator[None]:
-    """Deliver a Ctrl-C pressed inside the block when it is done.
-
-    trimesh imports its optional dependencies under ``except BaseException`` and
-    would swallow a KeyboardInterrupt raised while the heavy modules load.
-    """
-    noted: list[int] = []
-    try:
-        previous = signal.signal(signal.SIGINT, lambda signum, frame: noted.append(signum))
-    except ValueError:  # not the main thread: nothing to defer
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if noted:
-            raise KeyboardInterrupt
 
 
 def _version(value: bool) -> None:
@@ -240,14 +219,14 @@ def run(
     The label map comes as labels.nii.gz and labels.seg.nrrd (3D Slicer); a DICOM input with
     its image series also gets seg.dcm, and an RTSTRUCT input rtstruct.dcm.
     """
-    with _ctrl_c_after():
+    with ctrl_c_after():
         from .reconstruct import run_case
 
     config = _reconstruct_config(locals())
-    with _StageProgress(enabled=not quiet) as progress:
+    with StageProgress(enabled=not quiet) as progress:
         summary = run_case(input, outdir, config, ground_truth=gt, progress=progress)
     if not quiet:
-        _print_summary(summary, outdir)
+        print_run_summary(summary, outdir)
 
 
 def _reconstruct_config(options: dict[str, Any]) -> Any:
@@ -270,80 +249,6 @@ def _reconstruct_config(options: dict[str, Any]) -> Any:
         if name in names:
             values[name] = str(value) if isinstance(value, Path) else value
     return ReconstructConfig(**values)
-
-
-class _StageProgress:
-    """Stage progress on stderr, shown only once a run has taken about two seconds.
-
-    Called with each stage name. A timer starts a rich spinner after
-    :attr:`DELAY_S` seconds naming the current stage, so quick runs print
-    nothing and long ones show where they are.
-    """
-
-    DELAY_S = 2.0
-
-    def __init__(self, *, enabled: bool) -> None:
-        import threading
-
-        self._enabled = enabled
-        self._lock = threading.Lock()
-        self._status: Any = None
-        self._stage = "reading"
-        self._timer = threading.Timer(self.DELAY_S, self._show)
-        self._timer.daemon = True
-
-    def __enter__(self) -> _StageProgress:
-        if self._enabled:
-            self._timer.start()
-        return self
-
-    def _show(self) -> None:
-        from rich.console import Console
-
-        with self._lock:
-            self._status = Console(stderr=True).status(self._stage)
-            self._status.start()
-
-    def __call__(self, stage: str) -> None:
-        with self._lock:
-            self._stage = stage
-            if self._status is not None:
-                self._status.update(stage)
-
-    def __exit__(self, *exc: object) -> None:
-        self._timer.cancel()
-        with self._lock:
-            if self._status is not None:
-                self._status.stop()
-
-
-def _print_summary(summary: dict[str, Any], outdir: Path) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    console = Console()
-    console.print(
-        f"[bold]{summary['parts']}[/] part(s) from [bold]{summary['planes']}[/] planes -> "
-        f"{summary['mesh']} (watertight: {summary['watertight']})"
-    )
-    structures = summary.get("structures") or []
-    if len(structures) > 1:
-        listing = Table("value", "name", "status", "planes", "volume (mm³)", "mesh",
-                        title="structures")
-        for record in structures:
-            listing.add_row(str(record["value"]), record["name"], record["status"],
-                            str(record["planes"]), f"{record['volume_mm3']:.6g}",
-                            str(record.get("mesh", "")))
-        console.print(listing)
-    metrics = summary.get("metrics")
-    if metrics:
-        table = Table("metric", "value", title="quality vs ground truth")
-        for key, value in metrics.items():
-            table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
-        console.print(table)
-    times = ", ".join(f"{k} {v:.2f}s" for k, v in summary["timings_s"].items())
-    console.print(f"time: {times}")
-    console.print(f"outputs in {outdir}")
 
 
 # --------------------------------------------------------------------------- batch
@@ -405,7 +310,7 @@ def batch(
         TimeElapsedColumn,
     )
 
-    with _ctrl_c_after():
+    with ctrl_c_after():
         from pipelines.batch import run_batch
 
 
@@ -539,7 +444,7 @@ def evaluate_dataset(
     """
     from rich.console import Console
 
-    with _ctrl_c_after():
+    with ctrl_c_after():
         from pipelines.evaluate import evaluate_dataset as run_dataset
 
     options = dict(locals())
@@ -764,46 +669,16 @@ def _exit_code(exc: BaseException) -> int | None:
     return int(code) if name == "Exit" and code is not None else None
 
 
-def _keep_freed_memory() -> None:
-    """Let this process reuse the memory it frees instead of mapping fresh pages.
-
-    glibc serves every allocation over 32 MiB (any large array) from a fresh
-    ``mmap`` and unmaps it when freed, so each such array costs a page fault
-    per 4 KiB on first touch: on virtual machines that was a fifth of a
-    clinical-size run (``docs/results.md``, speed). Serving them from the heap
-    and keeping freed memory (``mallopt``: no mmap, no trimming, 256 MiB of top
-    padding) lets later arrays reuse pages already touched; the peak memory
-    does not grow (it fell slightly in the measurements). Only the console
-    script does this, for its own short-lived process; elsewhere (another libc)
-    nothing happens.
-    """
-    import ctypes
-    import ctypes.util
-
-    name = ctypes.util.find_library("c")
-    if not sys.platform.startswith("linux") or not name:
-        return
-    try:
-        libc = ctypes.CDLL(name)
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):  # not glibc
-        return
-    m_trim_threshold, m_top_pad, m_mmap_max = -1, -2, -4
-    mallopt(m_mmap_max, 0)
-    mallopt(m_trim_threshold, 2**31 - 1)
-    mallopt(m_top_pad, 256 * 2**20)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``slicerecon`` console script.
 
     Exit codes: 0 success; 2 bad input or usage error (one ``error:`` line on
     stderr); 1 a batch finished with failed cases; 130 interrupted (Ctrl-C).
     Called without ``argv`` (the console script itself), it first tunes the
-    process's allocator (:func:`_keep_freed_memory`).
+    process's allocator (:func:`slicerecon.console.keep_freed_memory`).
     """
     if argv is None:
-        _keep_freed_memory()
+        keep_freed_memory()
     usage_errors = _click_exceptions()
     args = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in args[: next((i for i, a in enumerate(args) if not a.startswith("-")),

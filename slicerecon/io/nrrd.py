@@ -50,7 +50,6 @@ from ..errors import (
     GeometryError,
     InputError,
     LabelError,
-    OptionError,
 )
 from ..sections import Volume, check_affine
 from .labelmap import LabelMap, Structure
@@ -60,10 +59,13 @@ from .selection import choose_structure, parse_selector
 __all__ = [
     "NrrdInfo",
     "NrrdSegment",
+    "PALETTE",
+    "labels_dtype",
+    "label_values",
     "nrrd_info",
+    "pynrrd_module",
     "read_nrrd",
     "read_nrrd_label_map",
-    "write_seg_nrrd",
 ]
 
 logger = logging.getLogger(__name__)
@@ -106,7 +108,7 @@ _SEGMENT_KEY = re.compile(r"^Segment(\d+)_(.+)$")
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 _LAS_TO_RAS = np.diag([-1.0, 1.0, 1.0, 1.0])
 
-_PALETTE: tuple[tuple[int, int, int], ...] = (
+PALETTE: tuple[tuple[int, int, int], ...] = (
     (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
     (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
 )
@@ -115,7 +117,7 @@ _PALETTE: tuple[tuple[int, int, int], ...] = (
 _COMPRESSED = {"gzip": "gzip", "gz": "gzip", "bzip2": "bzip2", "bz2": "bzip2"}
 
 
-def _pynrrd() -> Any:
+def pynrrd_module() -> Any:
     try:
         import nrrd
     except ImportError as exc:  # pragma: no cover - pynrrd is a dependency
@@ -230,7 +232,7 @@ def _read_header(p: Path, fh: IO[bytes]) -> dict[str, Any]:
     if magic != _MAGIC:
         raise FormatError(f"{p} is not a NRRD file: it does not start with 'NRRD000'")
     fh.seek(0)
-    header: dict[str, Any] = dict(_pynrrd().read_header(fh))
+    header: dict[str, Any] = dict(pynrrd_module().read_header(fh))
     if header.get("data file", header.get("datafile")) is not None:
         raise FormatError(
             f"{p} keeps its voxels in a separate file (data file: "
@@ -530,7 +532,7 @@ def _voxels(p: Path, header: Mapping[str, Any], info: NrrdInfo, fh: IO[bytes]) -
             )
         flat = np.frombuffer(raw, dtype=info.dtype, count=count, offset=byte_skip)
     else:
-        flat = _pynrrd().read_data(dict(header), fh, str(p), index_order="C").ravel()
+        flat = pynrrd_module().read_data(dict(header), fh, str(p), index_order="C").ravel()
     data = flat.reshape(sizes[::-1]).T  # NRRD's first axis varies fastest
     if info.layer_axis is None:
         return data[np.newaxis]
@@ -553,14 +555,14 @@ def _integer_values(p: Path, data: NDArray[Any]) -> NDArray[np.integer]:
     return data.astype(np.result_type(np.min_scalar_type(lo), np.min_scalar_type(hi)))
 
 
-def _labels_dtype(values: Sequence[int]) -> np.dtype[Any]:
+def labels_dtype(values: Sequence[int]) -> np.dtype[Any]:
     lo, hi = min(values, default=0), max(values, default=0)
     if lo >= 0:
         return np.dtype(np.uint8 if hi < 2**8 else np.uint16 if hi < 2**16 else np.uint32)
     return np.dtype(np.int16 if -(2**15) <= lo and hi < 2**15 else np.int32)
 
 
-def _present(layer: NDArray[np.integer]) -> set[int]:
+def label_values(layer: NDArray[np.integer]) -> set[int]:
     """The values a label layer holds (0 when any voxel is background)."""
     foreground = layer[layer != 0]  # label maps are mostly background: count only the rest
     found = {0} if foreground.size < layer.size else set()
@@ -589,12 +591,12 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
             ", ".join(f"{s.name or s.index} (layer {s.layer}, value {s.label_value}) -> "
                       f"{out_value[s.index]}" for s in kept),
         )
-    labels = np.zeros(info.shape, dtype=_labels_dtype(list(out_value.values())))
+    labels = np.zeros(info.shape, dtype=labels_dtype(list(out_value.values())))
     overlap = 0
     for layer in range(info.layers):
         own = [s for s in kept if s.layer == layer]
         claimed = {s.label_value for s in info.segments if s.layer == layer}
-        stray = sorted(_present(data[layer]) - claimed - {0})
+        stray = sorted(label_values(data[layer]) - claimed - {0})
         if stray:
             listed = ", ".join(str(v) for v in stray[:10])
             logger.warning("%s: layer %d holds values no segment claims (%s%s); they are "
@@ -608,7 +610,7 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
     if overlap:
         logger.warning("%s: segments of different layers overlap on %d voxels; each goes to "
                        "the segment of the later layer", p, overlap)
-    present = _present(labels)
+    present = label_values(labels)
     structures = []
     for segment in sorted(kept, key=lambda s: out_value[s.index]):
         value = out_value[segment.index]
@@ -686,7 +688,7 @@ def read_nrrd_label_map(
         result = _flatten(p, info, data)
     else:
         labels = data[0]
-        values = sorted(_present(labels) - {0})
+        values = sorted(label_values(labels) - {0})
         result = LabelMap(labels, info.affine, tuple(Structure(v) for v in values),
                           info.coordinates)
     logger.info("read %s: %s, %d structure(s), %s", p, "x".join(map(str, info.shape)),
@@ -737,126 +739,3 @@ def read_nrrd(
     names = {s.value: s.name for s in label_map.structures}
     kind = "segment" if any(names.values()) else "label"
     return label_map.mask(choose_structure(names, selector, kind=kind, source=Path(path)))
-
-
-# --------------------------------------------------------------------------- writing
-
-
-def _extent_text(mask: NDArray[np.bool_]) -> str:
-    if not mask.any():
-        return "0 -1 0 -1 0 -1"
-    bounds = []
-    for axis in range(3):
-        other = tuple(a for a in range(3) if a != axis)
-        hits = np.flatnonzero(mask.any(axis=other))
-        bounds += [int(hits[0]), int(hits[-1])]
-    return " ".join(str(b) for b in bounds)
-
-
-def write_seg_nrrd(
-    labels: NDArray[np.integer],
-    affine: NDArray[np.float64],
-    structures: Sequence[Structure],
-    path: str | os.PathLike[str],
-    *,
-    coordinates: str = "RAS",
-) -> Path:
-    """Write a label map as a 3D Slicer segmentation (``.seg.nrrd``), atomically.
-
-    One layer, gzip-compressed, in the layout Slicer's own
-    ``vtkMRMLSegmentationStorageNode`` writes: ``space: left-posterior-superior``
-    (an RAS affine is converted), ``Segmentation_MasterRepresentation`` and
-    ``Segmentation_ContainedRepresentationNames`` (``Binary labelmap``),
-    ``Segmentation_ReferenceImageExtentOffset`` ``0 0 0``, and for each
-    structure ``Segment<i>_ID`` (``Segment_<value>``), ``_Name``, ``_Color``
-    (RGB 0-1), ``_ColorAutoGenerated``, ``_NameAutoGenerated``,
-    ``_LabelValue`` (its value), ``_Layer`` (0), ``_Extent`` (its voxels'
-    index box, ``0 -1 0 -1 0 -1`` when it has none) and ``_Tags``.
-
-    Parameters
-    ----------
-    labels : ndarray of shape (I, J, K), integer
-        Label values, 0 for background.
-    affine : ndarray of shape (4, 4)
-        Voxel index → world mm in ``coordinates``.
-    structures : sequence of Structure
-        The structures to name, in segment order. A non-zero value of
-        ``labels`` without a structure gets an unnamed one (with a warning); a
-        structure without voxels is written as an empty segment. An unnamed
-        structure is called ``Segment_<value>`` (as Slicer calls it) and one
-        without a colour gets one from a fixed palette.
-    path : path-like
-        The file, ending in ``.nrrd`` (``.seg.nrrd`` by convention).
-    coordinates : {"RAS", "LPS"}
-        The frame of ``affine``.
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    OptionError
-        A suffix other than ``.nrrd``, an unknown ``coordinates``, non-integer
-        or non-3-D labels, two structures with one value, the value 0.
-    GeometryError
-        An affine that is not a valid voxel→world matrix.
-    """
-    from .atomic import atomic_path
-
-    target = Path(path)
-    if not target.name.lower().endswith(".nrrd"):
-        raise OptionError(f"a segmentation is written as .seg.nrrd (got {target.name!r})")
-    if coordinates not in ("RAS", "LPS"):
-        raise OptionError(f"coordinates must be 'RAS' or 'LPS' (got {coordinates!r})")
-    values = np.asarray(labels)
-    if values.ndim != 3 or values.dtype.kind not in "iub":
-        raise OptionError(f"labels must be a 3-D integer array (got {values.dtype} of shape "
-                          f"{values.shape})")
-    aff = np.array(check_affine(affine))
-    if coordinates == "RAS":
-        aff = _LPS_TO_RAS @ aff  # the flip is its own inverse: RAS → LPS
-    chosen = list(structures)
-    numbers = [int(s.value) for s in chosen]
-    if len(set(numbers)) != len(numbers) or 0 in numbers:
-        raise OptionError(f"structures need distinct non-zero values (got {numbers})")
-    present = sorted(_present(values) - {0})
-    for value in present:
-        if value not in numbers:
-            logger.warning("%s: label value %d has no structure; it is written unnamed",
-                           target, value)
-            chosen.append(Structure(value))
-            numbers.append(value)
-    out_dtype = _labels_dtype(numbers + [0])
-    data = values.astype(out_dtype, copy=False)
-    header: dict[str, Any] = {  # pynrrd adds type, dimension, sizes and endian
-        "space": "left-posterior-superior",
-        "space directions": aff[:3, :3].T,
-        "kinds": ["domain", "domain", "domain"],
-        "encoding": "gzip",
-        "space origin": aff[:3, 3],
-        "Segmentation_ContainedRepresentationNames": "Binary labelmap|",
-        "Segmentation_MasterRepresentation": "Binary labelmap",
-        "Segmentation_ReferenceImageExtentOffset": "0 0 0",
-    }
-    for n, structure in enumerate(chosen):
-        value = int(structure.value)
-        name = structure.name.strip() if structure.name else ""
-        colour = structure.colour or _PALETTE[n % len(_PALETTE)]
-        prefix = f"Segment{n}_"
-        header[prefix + "Color"] = " ".join(f"{c / 255:.6g}" for c in colour)
-        header[prefix + "ColorAutoGenerated"] = "0" if structure.colour else "1"
-        header[prefix + "Extent"] = _extent_text(data == value)
-        header[prefix + "ID"] = f"Segment_{value}"
-        header[prefix + "LabelValue"] = str(value)
-        header[prefix + "Layer"] = "0"
-        header[prefix + "Name"] = name or f"Segment_{value}"
-        header[prefix + "NameAutoGenerated"] = "0" if name else "1"
-        header[prefix + "Tags"] = ""
-    nrrd = _pynrrd()
-    with atomic_path(target) as tmp:
-        # gzip level 1: label maps compress almost as well as at 9, several times faster
-        nrrd.write(str(tmp), data, header, index_order="F", compression_level=1)
-    logger.info("wrote %s (%s, %d segments)", target, "x".join(map(str, data.shape)),
-                len(chosen))
-    return target

@@ -5,7 +5,7 @@ input's grid with the input's label values:
 
 * ``labels.nii.gz`` (NIfTI, RAS: :func:`slicerecon.io.labelmap.write_label_map`);
 * ``labels.seg.nrrd`` (a 3D Slicer segmentation with the structures' names and
-  colours: :func:`slicerecon.io.nrrd.write_seg_nrrd`).
+  colours: :func:`slicerecon.io.nrrd_writer.write_seg_nrrd`).
 
 When the input comes with its DICOM image series (a DICOM mask series, an
 RTSTRUCT beside its series, or any input given ``image_dir``) it also writes
@@ -139,7 +139,7 @@ def write_label_outputs(
         outputs that cannot be made are skipped with a warning instead.
     """
     from .labelmap import write_label_map
-    from .nrrd import write_seg_nrrd
+    from .nrrd_writer import write_seg_nrrd
 
     out = Path(outdir)
     result = LabelOutputs()

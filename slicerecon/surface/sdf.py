@@ -51,6 +51,7 @@ from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Box, CrossSections, Volume
 from .extension import LayerMap, check_hull, extension_maps, interpolate_maps
 from .marching import march_field
+from .silhouettes import carve_field
 
 __all__ = [
     "INTERPOLATIONS",
@@ -516,7 +517,8 @@ def sdf_parts_mesh(
     carve : ndarray of shape sections.grid_shape, bool, optional
         A visual hull to intersect the union with *implicitly*: at every
         sample outside the hull the field is raised to at least
-        ``HULL_LEVEL`` of a voxel (positive, outside), so one marching cubes
+        :data:`~slicerecon.surface.silhouettes.HULL_LEVEL` of a voxel (positive,
+        outside), so one marching cubes
         gives the carved surface, with no mesh Boolean. Samples inside the
         hull keep their values, so where the surface already stops at the
         hull (the end caps) it is not moved; where the hull cuts, the cut lies
@@ -575,7 +577,7 @@ def _parts_union(
             raise EmptyMaskError("no part's box holds any section foreground")
         union = np.ascontiguousarray(np.moveaxis(_mirror_pad(part), 0, axis))
         del part
-        return _carve_union(sections, union, lo, hi, upsample, carve, cover), lo, hi
+        return carve_field(sections, union, lo, hi, upsample, carve, cover=cover), lo, hi
     inner: NDArray[np.float32] | None = None
     covered = np.zeros(shape, dtype=bool)
     padding = np.full(shape, -1.0, dtype=np.float32)
@@ -602,79 +604,7 @@ def _parts_union(
     union = np.where(covered, inner, np.where(padding >= 0, padding, far))
     del inner, padding, covered
     logger.debug("merged %d SDF parts on a %s grid", len(regions), tuple(shape))
-    return _carve_union(sections, union, lo, hi, upsample, carve, cover), lo, hi
-
-
-def _carve_union(
-    sections: CrossSections,
-    union: NDArray[np.float32],
-    lo: tuple[int, int, int],
-    hi: tuple[int, int, int],
-    upsample: int,
-    carve: NDArray[np.bool_] | None,
-    cover: bool = False,
-) -> NDArray[np.float32]:
-    """The implicit carve (and, with ``cover``, the silhouette cover) of the union, in place."""
-    if carve is not None:
-        check_hull(carve, sections.grid_shape)
-        inside = _hull_inside(sections, carve, lo, hi, upsample)
-        level = np.float32(HULL_LEVEL * float(np.min(sections.spacing)))
-        np.maximum(union, level, out=union, where=~inside)
-        if cover:
-            core = (slice(1, -1),) * 3  # the padding stays positive: the surface stays closed
-            _cover_silhouettes(union[core], inside[core], sections.axis, level,
-                               np.float32(COVER_DEPTH * float(np.min(sections.spacing))))
-        del inside
-        if not union.min() < 0:
-            raise EmptyMaskError(
-                "the reconstruction lies entirely outside the projections' visual hull"
-            )
-    return union
-
-
-COVER_DEPTH = 0.5
-"""How far above its ray's deepest hull sample a sample may lie and still be
-added by the silhouette cover, in units of the smallest voxel size (chosen on the
-real-anatomy development half from 0.1, 0.25, 0.5 and 1: 0.5 and 1 tied,
-``docs/method.md``, section 7)."""
-
-
-def _cover_silhouettes(
-    union: NDArray[np.float32],
-    inside: NDArray[np.bool_],
-    axis: int,
-    level: np.float32,
-    depth: np.float32,
-) -> None:
-    """Make every silhouette ray that lies in a section plane meet the shape, in place.
-
-    The carve removes what the silhouettes rule out; this adds what they
-    require. A ray of a view whose viewing axis lies in the section planes
-    (the two views other than the one along ``axis``) crosses one layer of
-    samples; its silhouette pixel is set when the hull (``inside``) holds a
-    sample on it. Where such a ray holds no inside sample, the interpolation
-    missed the shape there (the shape reaches that far between two planes,
-    which neither plane shows). The ray's samples inside the hull whose field
-    is within ``depth`` of its lowest one (the places the interpolation found
-    nearest to inside) are set to ``-level``, so the surface passes around
-    them. Rays along ``axis`` are left alone: they cross every interpolated
-    layer, so the missing voxel has no good place along them.
-
-    ``union`` and ``inside`` share their shape (samples in grid axis order).
-    """
-    shape_inside = union < 0
-    for ray_axis in (ax for ax in range(3) if ax != axis):
-        missed = np.any(inside, axis=ray_axis) & ~np.any(shape_inside, axis=ray_axis)
-        lines = np.nonzero(missed)  # each missed ray by its indices on the other two axes
-        if lines[0].size == 0:
-            continue
-        values = np.moveaxis(union, ray_axis, -1)  # views: writes reach ``union``
-        held = np.moveaxis(inside, ray_axis, -1)[lines]  # (rays, samples along the ray)
-        rays = np.where(held, values[lines], np.inf)
-        near = held & (rays <= rays.min(axis=1, keepdims=True) + depth)
-        ray, along = np.nonzero(near)
-        values[lines[0][ray], lines[1][ray], along] = -level
-        np.moveaxis(shape_inside, ray_axis, -1)[lines[0][ray], lines[1][ray], along] = True
+    return carve_field(sections, union, lo, hi, upsample, carve, cover=cover), lo, hi
 
 
 class SdfField(NamedTuple):
@@ -758,39 +688,6 @@ def sdf_parts_surface(
         affine = sections.affine @ _to_index(sections, lo, upsample, pad=1)
         field = SdfField(union, affine, lo, upsample, sections.axis)
     return SdfSurface(mesh, occupancy, field)
-
-
-HULL_LEVEL = 0.49
-"""Where the implicit carve puts the hull's surface between an inside and an
-outside voxel centre: 0.49 of the way from the outside one, keeping 1 % of a
-voxel more than the hull (the level of :data:`slicerecon.surface.carve.HULL_LEVEL`)."""
-
-
-def _hull_inside(
-    sections: CrossSections,
-    hull: NDArray[np.bool_],
-    lo: tuple[int, ...],
-    hi: tuple[int, ...],
-    upsample: int,
-) -> NDArray[np.bool_]:
-    """The hull on the padded samples of the box ``[lo, hi)``; beyond the grid is outside.
-
-    Along the section axis each voxel's value is repeated ``upsample`` times.
-    """
-    axis = sections.axis
-    grid = sections.grid_shape
-    padded_lo = [max(v - 1, 0) for v in lo]
-    padded_hi = [min(v + 1, n) for v, n in zip(hi, grid, strict=True)]
-    crop = hull[tuple(slice(a, b) for a, b in zip(padded_lo, padded_hi, strict=True))]
-    inside = np.zeros([h - low + 2 for low, h in zip(lo, hi, strict=True)], dtype=bool)
-    start = [a - (low - 1) for a, low in zip(padded_lo, lo, strict=True)]
-    inside[tuple(slice(s0, s0 + n) for s0, n in zip(start, crop.shape, strict=True))] = crop
-    if upsample > 1:
-        core = np.repeat(np.take(inside, range(1, inside.shape[axis] - 1), axis=axis),
-                         upsample, axis=axis)
-        edge = [np.take(inside, [0], axis=axis), np.take(inside, [-1], axis=axis)]
-        inside = np.concatenate([edge[0], core, edge[1]], axis=axis)
-    return inside
 
 
 def _mirror_pad(field: NDArray[np.float32]) -> NDArray[np.float32]:
