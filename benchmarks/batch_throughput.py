@@ -53,8 +53,12 @@ def cluster_overhead(workers: int) -> float:
     from distributed import Client, LocalCluster
 
     start = time.perf_counter()
-    with LocalCluster(n_workers=workers, processes=True, threads_per_worker=1,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
+    with (
+        LocalCluster(
+            n_workers=workers, processes=True, threads_per_worker=1, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,
+    ):
         client.wait_for_workers(workers)
     return time.perf_counter() - start
 
@@ -76,24 +80,32 @@ def main() -> None:
         for workers in settings:
             overhead = cluster_overhead(workers) if workers > 0 else 0.0
             start = time.perf_counter()
-            result = run_batch(indir, Path(tmp) / f"out{workers}", config, workers=workers,
-                               report=False)
+            result = run_batch(
+                indir, Path(tmp) / f"out{workers}", config, workers=workers, report=False
+            )
             wall = time.perf_counter() - start
             compute = max(wall - overhead, 1e-9)
-            rows.append({
-                "workers": workers,
-                "ok": result.n_ok,
-                "failed": result.n_failed,
-                "wall": wall,
-                "overhead": overhead,
-                "per_min": 60.0 * len(result.cases) / wall,
-                "per_min_net": 60.0 * len(result.cases) / compute,
-                "case_s": sum(c.seconds for c in result.cases) / len(result.cases),
-                "failures": [(c.case, c.error_type, c.error) for c in result.cases
-                             if c.status == "failed"],
-            })
-            print(f"workers={workers}: {wall:.1f} s, {rows[-1]['per_min']:.1f} cases/min "
-                  f"({result.n_ok} ok, {result.n_failed} failed)")
+            rows.append(
+                {
+                    "workers": workers,
+                    "ok": result.n_ok,
+                    "failed": result.n_failed,
+                    "wall": wall,
+                    "overhead": overhead,
+                    "per_min": 60.0 * len(result.cases) / wall,
+                    "per_min_net": 60.0 * len(result.cases) / compute,
+                    "case_s": sum(c.seconds for c in result.cases) / len(result.cases),
+                    "failures": [
+                        (c.case, c.error_type, c.error)
+                        for c in result.cases
+                        if c.status == "failed"
+                    ],
+                }
+            )
+            print(
+                f"workers={workers}: {wall:.1f} s, {rows[-1]['per_min']:.1f} cases/min "
+                f"({result.n_ok} ok, {result.n_failed} failed)"
+            )
     load_after = os.getloadavg()
 
     lines = [
@@ -121,8 +133,11 @@ def main() -> None:
         )
     failures = {case: (kind, error) for r in rows for case, kind, error in r["failures"]}
     if failures:
-        lines += ["", "Cases that failed (counted in the throughput; the batch recorded them "
-                  "and went on):", ""]
+        lines += [
+            "",
+            "Cases that failed (counted in the throughput; the batch recorded them and went on):",
+            "",
+        ]
         lines += [f"* `{case}`: {kind}: {error}" for case, (kind, error) in failures.items()]
     cpus = os.cpu_count() or 1
     if min(load_before[0], load_after[0]) >= cpus:
@@ -135,7 +150,7 @@ def main() -> None:
         ]
     lines += [
         "",
-        "\"cases/min without start-up\" subtracts the separately measured cluster start "
+        '"cases/min without start-up" subtracts the separately measured cluster start '
         "and stop from the wall time. The first case on each new worker process also pays "
         "for importing slicerecon and its dependencies, which is part of the per-case "
         "seconds.",

@@ -61,7 +61,7 @@ def _place(mask: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:
     from slicerecon.sections import Volume
 
     lo, hi = Volume(mask).bounding_box_vox()
-    crop = mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+    crop = mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]]
     out = np.zeros(shape, dtype=np.uint8)
     start = [(n - c) // 2 for n, c in zip(shape, crop.shape, strict=True)]
     out[tuple(slice(s, s + c) for s, c in zip(start, crop.shape, strict=True))] = crop
@@ -73,7 +73,7 @@ def _liver() -> tuple[np.ndarray, np.ndarray]:
 
     liver = frog_tissue("liver")
     lo, hi = liver.bounding_box_vox()
-    return liver.mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]], liver.spacing
+    return liver.mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]], liver.spacing
 
 
 def make_cases(root: Path) -> dict[str, Path]:
@@ -126,8 +126,13 @@ def in_process(path: str, planes: list[int], repeat: int) -> dict[str, Any]:
             total = time.perf_counter() - start
             if total < best_ours:
                 best_ours, stages = total, dict(result.timings)
-        out[str(n)] = {"plain_s": best_plain, "ours_s": best_ours, "stages": stages,
-                       "grid": list(truth.shape), "parts": len(result.plan.parts)}
+        out[str(n)] = {
+            "plain_s": best_plain,
+            "ours_s": best_ours,
+            "stages": stages,
+            "grid": list(truth.shape),
+            "parts": len(result.plan.parts),
+        }
     return out
 
 
@@ -135,8 +140,9 @@ def _child(args: list[str]) -> dict[str, Any]:
     """Run this script's ``--child`` mode in a fresh interpreter; return its result."""
     import json
 
-    proc = subprocess.run([sys.executable, __file__, "--child", *args], capture_output=True,
-                          text=True, check=True)
+    proc = subprocess.run(
+        [sys.executable, __file__, "--child", *args], capture_output=True, text=True, check=True
+    )
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
@@ -170,8 +176,7 @@ def peak_memory(path: Path, n: int, tmp: Path) -> float:
         f"main(['run', {str(path)!r}, '--slices', '{n}', '-o', {str(tmp / 'mem')!r}, '-q'])\n"
         "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          check=True)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return float(proc.stdout.strip().splitlines()[-1])
 
 
@@ -182,8 +187,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--planes", default="12,24")
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--cases", help="comma-separated case names (default: all)")
-    parser.add_argument("--child", nargs=3, metavar=("PATH", "PLANES", "REPEAT"),
-                        help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--child", nargs=3, metavar=("PATH", "PLANES", "REPEAT"), help=argparse.SUPPRESS
+    )
     args = parser.parse_args(argv)
     if args.child:
         import json
@@ -208,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append((name, n, inner[str(n)], e2e, mem))
     lines = [
         "Measured by `python benchmarks/bench_clinical.py"
-        + (f" --out {args.out}" if args.out else "") + "` "
+        + (f" --out {args.out}" if args.out else "")
+        + "` "
         f"({platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}); "
         f"best of {args.repeat}; defaults of `slicerecon run`.",
         "",
@@ -229,8 +236,10 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if args.out:
         args.out.write_text(text)
-    print(shlex.join(["python", "benchmarks/bench_clinical.py", *(argv or sys.argv[1:])]),
-          file=sys.stderr)
+    print(
+        shlex.join(["python", "benchmarks/bench_clinical.py", *(argv or sys.argv[1:])]),
+        file=sys.stderr,
+    )
     return 0
 
 

@@ -42,8 +42,14 @@ def cases() -> dict[str, Volume]:
     return {
         "sphere r=126": make_shape("sphere", radius=126.0, margin=2),  # a 256³ mask
         "chair x2.5": make_shape(
-            "chair", seat_width=100.0, seat_depth=100.0, seat_thickness=12.5, leg_height=100.0,
-            leg_width=12.5, back_height=112.5, back_thickness=12.5,
+            "chair",
+            seat_width=100.0,
+            seat_depth=100.0,
+            seat_thickness=12.5,
+            leg_height=100.0,
+            leg_width=12.5,
+            back_height=112.5,
+            back_thickness=12.5,
         ),
         "y_branch x2": make_shape("y_branch", spacing=0.5),
     }
@@ -115,7 +121,8 @@ def main() -> None:
             mc_total = sum(mc_t.values())
             cells = [f"{run_t.get(s, 0.0):.2f}" for s in stages]
             lines.append(
-                f"| {name} | {'x'.join(map(str, volume.shape))} | " + " | ".join(cells)
+                f"| {name} | {'x'.join(map(str, volume.shape))} | "
+                + " | ".join(cells)
                 + f" | {total:.2f} | {core:.2f} | {mc_total:.2f} | {total / mc_total:.2f} "
                 f"| {core / mc_total:.2f} "
                 f"| {run_mem:.0f} | {mc_mem:.0f} |"

@@ -72,8 +72,21 @@ _PROJECTION_TEXT = {
 }
 
 FIELDS = (
-    "shape", "setting", "planes", "variant", "method", "planner", "volume_iou", "surface_iou",
-    "chamfer_l1_mm", "hd95_mm", "volume_error", "watertight", "parts", "seconds", "error",
+    "shape",
+    "setting",
+    "planes",
+    "variant",
+    "method",
+    "planner",
+    "volume_iou",
+    "surface_iou",
+    "chamfer_l1_mm",
+    "hd95_mm",
+    "volume_error",
+    "watertight",
+    "parts",
+    "seconds",
+    "error",
 )
 
 
@@ -101,8 +114,12 @@ def _available_variants(variants: tuple[Variant, ...]) -> list[Variant]:
     for variant in variants:
         try:
             reconstruct(
-                sections, projections, planner=variant.planner, method=variant.method,
-                carve=variant.carve, cover=variant.cover,
+                sections,
+                projections,
+                planner=variant.planner,
+                method=variant.method,
+                carve=variant.carve,
+                cover=variant.cover,
             )
         except DependencyError as exc:
             logging.warning("skipping %s: %s", variant.label, exc)
@@ -120,22 +137,30 @@ def _fmt(value: object, digits: int = 3) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--shapes", default="sphere,torus,y_branch,chair,two_spheres,mni152_brain",
+        "--shapes",
+        default="sphere,torus,y_branch,chair,two_spheres,mni152_brain",
         help="comma-separated shape names (procedural, or real: slicerecon.realshapes)",
     )
     parser.add_argument("--slices", default="12", help="comma-separated sparse plane counts")
     parser.add_argument("--axis", default="z", help="section axis: x, y or z")
     parser.add_argument(
-        "--projections", default="gt", choices=("gt", "sections"),
+        "--projections",
+        default="gt",
+        choices=("gt", "sections"),
         help="silhouettes from the dense mask (the paper's prior) or derived from the sections "
         "(what a user with contours only has)",
     )
     parser.add_argument(
-        "--methods", default=",".join(v.label for v in VARIANTS),
+        "--methods",
+        default=",".join(v.label for v in VARIANTS),
         help="comma-separated variants (labels as in the table)",
     )
-    parser.add_argument("--real-resolution", type=int, default=96,
-                        help="real shapes downsampled to at most this many voxels a side")
+    parser.add_argument(
+        "--real-resolution",
+        type=int,
+        default=96,
+        help="real shapes downsampled to at most this many voxels a side",
+    )
     parser.add_argument("--n-points", type=int, default=20_000, help="surface samples per mesh")
     parser.add_argument("--out", type=Path, default=Path("docs/results_methods.md"))
     args = parser.parse_args(argv)
@@ -161,8 +186,9 @@ def main(argv: list[str] | None = None) -> int:
         for n in sparse_counts:
             for setting, count in (("sparse", n), ("dense", dense_count(n))):
                 if count > available:
-                    logging.warning("%s: %d planes asked, %d available; using all",
-                                    shape_name, count, available)
+                    logging.warning(
+                        "%s: %d planes asked, %d available; using all", shape_name, count, available
+                    )
                     count = available
                 sections, projections, truth = prepare_inputs(
                     volume, slices=count, axis=axis, projections=args.projections
@@ -170,16 +196,24 @@ def main(argv: list[str] | None = None) -> int:
                 assert truth is not None
                 for variant in variants:
                     row: dict[str, Any] = {
-                        "shape": shape_name, "setting": setting, "planes": sections.n_planes,
-                        "variant": variant.label, "method": variant.method,
+                        "shape": shape_name,
+                        "setting": setting,
+                        "planes": sections.n_planes,
+                        "variant": variant.label,
+                        "method": variant.method,
                         "planner": variant.planner
-                        if variant.method in ("hybrid", "loft", "sdf") else "-",
+                        if variant.method in ("hybrid", "loft", "sdf")
+                        else "-",
                     }
                     start = time.perf_counter()
                     try:
                         result = reconstruct(
-                            sections, projections, planner=variant.planner, method=variant.method,
-                            carve=variant.carve, cover=variant.cover,
+                            sections,
+                            projections,
+                            planner=variant.planner,
+                            method=variant.method,
+                            carve=variant.carve,
+                            cover=variant.cover,
                         )
                         row["seconds"] = time.perf_counter() - start
                         metrics = evaluate(result.mesh, truth, n_points=args.n_points, seed=0)
@@ -187,15 +221,21 @@ def main(argv: list[str] | None = None) -> int:
                         row["seconds"] = time.perf_counter() - start
                         row["error"] = str(exc)
                         rows.append(row)
-                        print(f"{shape_name:14s} {setting:6s} {variant.label:18s} ERROR {exc}",
-                              file=sys.stderr, flush=True)
+                        print(
+                            f"{shape_name:14s} {setting:6s} {variant.label:18s} ERROR {exc}",
+                            file=sys.stderr,
+                            flush=True,
+                        )
                         continue
                     row.update(
-                        volume_iou=metrics.volume_iou, surface_iou=metrics.surface_iou,
-                        chamfer_l1_mm=metrics.chamfer_l1_mm, hd95_mm=metrics.hd95_mm,
+                        volume_iou=metrics.volume_iou,
+                        surface_iou=metrics.surface_iou,
+                        chamfer_l1_mm=metrics.chamfer_l1_mm,
+                        hd95_mm=metrics.hd95_mm,
                         volume_error=metrics.volume_error,
                         watertight=bool(result.mesh.is_watertight),
-                        parts=len(result.plan.parts), error="",
+                        parts=len(result.plan.parts),
+                        error="",
                     )
                     rows.append(row)
                     print(
@@ -203,7 +243,8 @@ def main(argv: list[str] | None = None) -> int:
                         f"{variant.label:18s} IoU {metrics.volume_iou:.3f} "
                         f"sIoU {metrics.surface_iou:.3f} CD {metrics.chamfer_l1_mm:.3f} mm "
                         f"HD95 {metrics.hd95_mm:.2f} mm {row['seconds']:.2f} s",
-                        file=sys.stderr, flush=True,
+                        file=sys.stderr,
+                        flush=True,
                     )
     command = shlex.join(["python", "benchmarks/compare_methods.py", *(argv or sys.argv[1:])])
     _write(args.out, rows, command, [v.label for v in variants], args)
@@ -211,7 +252,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _write(
-    out: Path, rows: list[dict[str, Any]], command: str, labels: list[str],
+    out: Path,
+    rows: list[dict[str, Any]],
+    command: str,
+    labels: list[str],
     args: argparse.Namespace,
 ) -> None:
     csv_path = out.with_suffix(".csv")
@@ -253,8 +297,12 @@ def _write(
     for group in groups.values():
         ok = [r for r in group if not r.get("error")]
         best = {}
-        for key, pick in (("volume_iou", max), ("surface_iou", max),
-                          ("chamfer_l1_mm", min), ("hd95_mm", min)):
+        for key, pick in (
+            ("volume_iou", max),
+            ("surface_iou", max),
+            ("chamfer_l1_mm", min),
+            ("hd95_mm", min),
+        ):
             if ok:
                 best[key] = pick(float(r[key]) for r in ok)
         for r in group:
@@ -265,8 +313,12 @@ def _write(
                 )
                 continue
             cells = []
-            for key, digits in (("volume_iou", 3), ("surface_iou", 3),
-                                ("chamfer_l1_mm", 3), ("hd95_mm", 2)):
+            for key, digits in (
+                ("volume_iou", 3),
+                ("surface_iou", 3),
+                ("chamfer_l1_mm", 3),
+                ("hd95_mm", 2),
+            ):
                 text = _fmt(float(r[key]), digits)
                 cells.append(f"**{text}**" if float(r[key]) == best[key] else text)
             lines.append(
@@ -313,7 +365,8 @@ def _summary(rows: list[dict[str, Any]], labels: list[str]) -> list[str]:
         wins_iou = sum(float(d["volume_iou"]) > float(o["volume_iou"]) for d, o in pairs)
         wins_cd = sum(float(d["chamfer_l1_mm"]) < float(o["chamfer_l1_mm"]) for d, o in pairs)
         losses = [
-            f"{d['shape']} {d['setting']}" for d, o in pairs
+            f"{d['shape']} {d['setting']}"
+            for d, o in pairs
             if float(o["volume_iou"]) > float(d["volume_iou"]) + 1e-3
         ]
         lost = f" It loses by more than 0.001 IoU on: {', '.join(losses)}." if losses else ""

@@ -29,10 +29,27 @@ from slicerecon.policy.env import CutEnv
 from slicerecon.shapes import shape_names
 
 
-def measure(pool: ShapePool, *, n_envs: int, device: str, resolution: int, seconds: float,
-            surface: str = "exact", warmup: float = 0.0, seed: int = 0) -> tuple[float, int]:
-    env = CutEnv(pool, n_envs=n_envs, resolution=resolution, max_corners=16, max_steps=7,
-                 reward_surface=surface, device=device, seed=seed)
+def measure(
+    pool: ShapePool,
+    *,
+    n_envs: int,
+    device: str,
+    resolution: int,
+    seconds: float,
+    surface: str = "exact",
+    warmup: float = 0.0,
+    seed: int = 0,
+) -> tuple[float, int]:
+    env = CutEnv(
+        pool,
+        n_envs=n_envs,
+        resolution=resolution,
+        max_corners=16,
+        max_steps=7,
+        reward_surface=surface,
+        device=device,
+        seed=seed,
+    )
     env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     start = time.perf_counter()
@@ -58,27 +75,41 @@ def main() -> None:
     parser.add_argument("--resolution", type=int, default=64)
     parser.add_argument("--seconds", type=float, default=10.0, help="per measurement")
     parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--warmup", type=float, default=5.0,
-                        help="seconds stepped before each measurement (fills the caches)")
+    parser.add_argument(
+        "--warmup",
+        type=float,
+        default=5.0,
+        help="seconds stepped before each measurement (fills the caches)",
+    )
     parser.add_argument("--batches", default="1,64,256")
-    parser.add_argument("--surfaces", default="exact,surrogate",
-                        help="reward surfaces to measure, comma-separated (exact, surrogate)")
+    parser.add_argument(
+        "--surfaces",
+        default="exact,surrogate",
+        help="reward surfaces to measure, comma-separated (exact, surrogate)",
+    )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     pool = ShapePool.build(shape_names(), range(4), grid=args.grid)
     surfaces = args.surfaces.split(",")
     runs = [("cpu", int(b), s) for s in surfaces for b in args.batches.split(",")]
     if torch.cuda.is_available():
-        runs += [("cuda", int(b), s) for s in surfaces for b in args.batches.split(",")
-                 if int(b) > 1]
+        runs += [
+            ("cuda", int(b), s) for s in surfaces for b in args.batches.split(",") if int(b) > 1
+        ]
     rows = []
     load_before = os.getloadavg()[0]
     for device, b, surface in runs:
-        rate, steps = measure(pool, n_envs=b, device=device, resolution=args.resolution,
-                              seconds=args.seconds, surface=surface, warmup=args.warmup)
+        rate, steps = measure(
+            pool,
+            n_envs=b,
+            device=device,
+            resolution=args.resolution,
+            seconds=args.seconds,
+            surface=surface,
+            warmup=args.warmup,
+        )
         rows.append((device, b, surface, steps, rate))
-        print(f"{device:5s} B={b:4d} {surface:9s}: {rate:8.1f} env steps/s "
-              f"({steps} batched steps)")
+        print(f"{device:5s} B={b:4d} {surface:9s}: {rate:8.1f} env steps/s ({steps} batched steps)")
     lines = [
         "# Cut environment throughput",
         "",

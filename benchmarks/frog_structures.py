@@ -44,8 +44,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path)
     args = parser.parse_args(argv)
 
-    label_map = read_label_map(frog_tissues_path()).select(list(range(1, 16)),
-                                                           source="frog_tissues.vti")
+    label_map = read_label_map(frog_tissues_path()).select(
+        list(range(1, 16)), source="frog_tissues.vti"
+    )
     start = time.perf_counter()
     joint = reconstruct_structures(label_map, slices=args.planes)
     joint_seconds = time.perf_counter() - start
@@ -56,8 +57,13 @@ def main(argv: list[str] | None = None) -> int:
     for item in joint.results:
         value = item.structure.value
         truth = joint.truth_mask(value)
-        own = CrossSections(np.moveaxis(truth.mask, 2, 0)[planes], sections.indices, 2,
-                            sections.affine, sections.grid_shape)
+        own = CrossSections(
+            np.moveaxis(truth.mask, 2, 0)[planes],
+            sections.indices,
+            2,
+            sections.affine,
+            sections.grid_shape,
+        )
         if item.mesh is None or not own.masks.any():
             rows.append((value, item.status, None, None, None))
             continue
@@ -66,14 +72,17 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         reconstruct(sub, projections)
         single_seconds += time.perf_counter() - t0
-        plain = reconstruct(sub, projections, method="sdf", planner="none", carve=False,
-                            interpolation="linear")
+        plain = reconstruct(
+            sub, projections, method="sdf", planner="none", carve=False, interpolation="linear"
+        )
         crop = Volume(truth.mask, sections.affine)
         plain_score = evaluate(plain.mesh, crop, n_points=20_000)
-        rows.append((value, item.status, score.volume_iou, plain_score.volume_iou,
-                     score.hd95_mm))
-        print(f"{NAMES[value]}: IoU {score.volume_iou:.3f} (plain {plain_score.volume_iou:.3f})",
-              file=sys.stderr, flush=True)
+        rows.append((value, item.status, score.volume_iou, plain_score.volume_iou, score.hd95_mm))
+        print(
+            f"{NAMES[value]}: IoU {score.volume_iou:.3f} (plain {plain_score.volume_iou:.3f})",
+            file=sys.stderr,
+            flush=True,
+        )
 
     lines = [
         f"Measured by `python benchmarks/frog_structures.py {shlex.join(argv or sys.argv[1:])}`: "
@@ -88,8 +97,10 @@ def main(argv: list[str] | None = None) -> int:
         if iou is None:
             lines.append(f"| {value} | {NAMES[value]} | {status} | - | - | - | - |")
             continue
-        lines.append(f"| {value} | {NAMES[value]} | {status} | {iou:.3f} | {plain:.3f} | "
-                     f"{iou - plain:+.3f} | {hd95:.2f} |")
+        lines.append(
+            f"| {value} | {NAMES[value]} | {status} | {iou:.3f} | {plain:.3f} | "
+            f"{iou - plain:+.3f} | {hd95:.2f} |"
+        )
     lines += [
         f"| | **mean** | | **{np.mean([r[2] for r in done]):.3f}** | "
         f"**{np.mean([r[3] for r in done]):.3f}** | "

@@ -51,12 +51,20 @@ def _save(outcome: fuzz_runner.Outcome, directory: Path) -> Path:
     else:
         shutil.copyfile(mutant.path, target / mutant.path.name)
     record = {
-        "index": mutant.index, "format": mutant.format, "seed": mutant.seed,
-        "input": mutant.path.name, "mutations": list(mutant.mutations),
-        "method": mutant.method, "pixel_spacing": mutant.pixel_spacing,
-        "kind": outcome.kind, "error": outcome.error, "message": outcome.message,
-        "where": outcome.where, "raised_at": outcome.raised_at,
-        "traceback": outcome.traceback, "seconds": round(outcome.seconds, 3),
+        "index": mutant.index,
+        "format": mutant.format,
+        "seed": mutant.seed,
+        "input": mutant.path.name,
+        "mutations": list(mutant.mutations),
+        "method": mutant.method,
+        "pixel_spacing": mutant.pixel_spacing,
+        "kind": outcome.kind,
+        "error": outcome.error,
+        "message": outcome.message,
+        "where": outcome.where,
+        "raised_at": outcome.raised_at,
+        "traceback": outcome.traceback,
+        "seconds": round(outcome.seconds, 3),
     }
     (target / "case.json").write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
     return target
@@ -68,10 +76,18 @@ def _revision() -> str:
 
     root = Path(slicerecon.__file__).resolve().parents[1]
     try:
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-                                capture_output=True, text=True, check=True).stdout.strip()
-        changed = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "slicerecon"],
-                                 capture_output=True, text=True, check=True).stdout.strip()
+        commit = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        changed = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "slicerecon"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "(not a git checkout)"
     return commit + ("+modified" if changed else "")
@@ -81,22 +97,46 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, default=5000, help="number of mutants (default 5000)")
     parser.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
-    parser.add_argument("--only", type=int, nargs="+", metavar="INDEX",
-                        help="run only these mutant indices (to reproduce a failure)")
-    parser.add_argument("--edge-fraction", type=float, default=fuzz_mutations.EDGE_FRACTION,
-                        help="share of mutants made from valid but awkward inputs")
-    parser.add_argument("--default-method-fraction", type=float,
-                        default=fuzz_mutations.DEFAULT_METHOD_FRACTION,
-                        help="share of mutants reconstructed with the default method "
-                        "(the rest: method='sdf', planner='none', carve=False)")
+    parser.add_argument(
+        "--only",
+        type=int,
+        nargs="+",
+        metavar="INDEX",
+        help="run only these mutant indices (to reproduce a failure)",
+    )
+    parser.add_argument(
+        "--edge-fraction",
+        type=float,
+        default=fuzz_mutations.EDGE_FRACTION,
+        help="share of mutants made from valid but awkward inputs",
+    )
+    parser.add_argument(
+        "--default-method-fraction",
+        type=float,
+        default=fuzz_mutations.DEFAULT_METHOD_FRACTION,
+        help="share of mutants reconstructed with the default method "
+        "(the rest: method='sdf', planner='none', carve=False)",
+    )
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds per case")
-    parser.add_argument("--memory-gib", type=float, default=2.0,
-                        help="address-space limit of each worker, GiB (default 2)")
-    parser.add_argument("--budget-gib", type=float, default=0.125,
-                        help="memory_budget_gb given to the library (default 0.125)")
-    parser.add_argument("--save-failures", type=Path, metavar="DIR",
-                        help="copy every failing input here, with case.json")
+    parser.add_argument(
+        "--memory-gib",
+        type=float,
+        default=2.0,
+        help="address-space limit of each worker, GiB (default 2)",
+    )
+    parser.add_argument(
+        "--budget-gib",
+        type=float,
+        default=0.125,
+        help="memory_budget_gb given to the library (default 0.125)",
+    )
+    parser.add_argument(
+        "--save-failures",
+        type=Path,
+        metavar="DIR",
+        help="copy every failing input here, with case.json",
+    )
     parser.add_argument("--workdir", type=Path, help="where mutants are written (default: temp)")
     parser.add_argument("--markdown", type=Path, help="also write the markdown snippet here")
     args = parser.parse_args(argv)
@@ -109,20 +149,31 @@ def main(argv: list[str] | None = None) -> int:
         yield from fuzz_mutations.seed_cases(seeds)
         for index in indices:
             yield fuzz_mutations.make_mutant(
-                seeds, index, seed=args.seed, directory=workdir / "mutants",
+                seeds,
+                index,
+                seed=args.seed,
+                directory=workdir / "mutants",
                 edge_fraction=args.edge_fraction,
-                default_method_fraction=args.default_method_fraction)
+                default_method_fraction=args.default_method_fraction,
+            )
 
     outcomes: list[fuzz_runner.Outcome] = []
     start = time.perf_counter()
     for outcome in fuzz_runner.run_mutants(
-        cases(), workers=args.workers, timeout=args.timeout,
-        memory=int(args.memory_gib * 2**30), budget_gb=args.budget_gib, log_dir=workdir / "logs",
+        cases(),
+        workers=args.workers,
+        timeout=args.timeout,
+        memory=int(args.memory_gib * 2**30),
+        budget_gb=args.budget_gib,
+        log_dir=workdir / "logs",
     ):
         if outcome.mutant.index < 0:
             if outcome.kind != "ok":
-                print(f"seed {outcome.mutant.format}/{outcome.mutant.seed} not read: "
-                      f"{outcome.kind} {outcome.error}: {outcome.message}", file=sys.stderr)
+                print(
+                    f"seed {outcome.mutant.format}/{outcome.mutant.seed} not read: "
+                    f"{outcome.kind} {outcome.error}: {outcome.message}",
+                    file=sys.stderr,
+                )
             continue
         outcomes.append(outcome)
         if outcome.failed and args.save_failures is not None:
@@ -131,8 +182,10 @@ def main(argv: list[str] | None = None) -> int:
             shutil.rmtree(outcome.mutant.path.parent, ignore_errors=True)
         if len(outcomes) % 500 == 0:
             failed = sum(o.failed for o in outcomes)
-            print(f"{len(outcomes)} cases, {failed} failures, "
-                  f"{time.perf_counter() - start:.0f} s", file=sys.stderr)
+            print(
+                f"{len(outcomes)} cases, {failed} failures, {time.perf_counter() - start:.0f} s",
+                file=sys.stderr,
+            )
     wall = time.perf_counter() - start
 
     print(fuzz_runner.failure_report(outcomes, fuzz_seeds.FORMATS))
@@ -142,8 +195,12 @@ def main(argv: list[str] | None = None) -> int:
         for cause, count in causes.most_common():
             print(f"{count:5d}  {cause}")
     slow = sorted(outcomes, key=lambda o: -o.seconds)[:5]
-    print("\nslowest cases: " + ", ".join(
-        f"{o.mutant.index} ({o.mutant.format}, {o.kind}, {o.seconds:.1f} s)" for o in slow))
+    print(
+        "\nslowest cases: "
+        + ", ".join(
+            f"{o.mutant.index} ({o.mutant.format}, {o.kind}, {o.seconds:.1f} s)" for o in slow
+        )
+    )
 
     options = [f"--n {len(outcomes)}", f"--seed {args.seed}"]
     for name in ("edge_fraction", "default_method_fraction", "timeout", "memory_gib", "budget_gib"):

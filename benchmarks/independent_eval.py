@@ -129,8 +129,9 @@ def _winding_along(
         w1 = (c_u - ru) * (a_v - rv) - (a_u - ru) * (c_v - rv)
         w2 = (a_u - ru) * (b_v - rv) - (b_u - ru) * (a_v - rv)
         ar = area[tri_i]
-        inside = np.where(ar > 0, (w0 >= 0) & (w1 >= 0) & (w2 >= 0),
-                          (w0 <= 0) & (w1 <= 0) & (w2 <= 0))
+        inside = np.where(
+            ar > 0, (w0 >= 0) & (w1 >= 0) & (w2 >= 0), (w0 <= 0) & (w1 <= 0) & (w2 <= 0)
+        )
         tri_i, ru, rv = tri_i[inside], ru[inside], rv[inside]
         w0, w1, w2, ar = w0[inside], w1[inside], w2[inside], ar[inside]
         depth = (w0 * pw[tri_i, 0] + w1 * pw[tri_i, 1] + w2 * pw[tri_i, 2]) / ar
@@ -196,7 +197,9 @@ def boundary_surface(
 
 
 def sample_surface(
-    vertices: NDArray[np.floating], faces: NDArray[np.integer], n: int,
+    vertices: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    n: int,
     rng: np.random.Generator,
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """``n`` points uniformly distributed by area on a triangle mesh.
@@ -218,7 +221,9 @@ def sample_surface(
 
 
 def _point_triangle_distance(
-    p: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64],
+    p: NDArray[np.float64],
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
     c: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Distance from points to triangles, row by row (Ericson's closest-point regions)."""
@@ -227,8 +232,14 @@ def _point_triangle_distance(
         return np.einsum("...i,...i->...", x, y)
 
     ab, ac, ap, bp, cp = b - a, c - a, p - a, p - b, p - c
-    d1, d2, d3, d4, d5, d6 = dot(ab, ap), dot(ac, ap), dot(ab, bp), dot(ac, bp), dot(ab, cp), \
-        dot(ac, cp)
+    d1, d2, d3, d4, d5, d6 = (
+        dot(ab, ap),
+        dot(ac, ap),
+        dot(ab, bp),
+        dot(ac, bp),
+        dot(ab, cp),
+        dot(ac, cp),
+    )
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
     with np.errstate(divide="ignore", invalid="ignore"):  # degenerate cases are never picked
         denom = va + vb + vc
@@ -237,7 +248,11 @@ def _point_triangle_distance(
         t_ac = d2 / (d2 - d6)
         t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
         choices = [
-            a, b, a + t_ab[..., None] * ab, c, a + t_ac[..., None] * ac,
+            a,
+            b,
+            a + t_ab[..., None] * ab,
+            c,
+            a + t_ac[..., None] * ac,
             b + t_bc[..., None] * (c - b),
         ]
         closest = a + v_in[..., None] * ab + w_in[..., None] * ac  # inside the face
@@ -296,8 +311,13 @@ class Truth:
     """
 
     def __init__(
-        self, mask: NDArray[np.bool_], affine: NDArray[np.floating], *, seed: int = 0,
-        n_query: int = 30_000, n_reference: int = 100_000,
+        self,
+        mask: NDArray[np.bool_],
+        affine: NDArray[np.floating],
+        *,
+        seed: int = 0,
+        n_query: int = 30_000,
+        n_reference: int = 100_000,
     ):
         self.mask = np.asarray(mask, dtype=bool)
         self.affine = np.asarray(affine, dtype=np.float64)
@@ -309,7 +329,9 @@ class Truth:
 
 
 def surface_distances(
-    pred: tuple[NDArray, NDArray], truth: Truth, rng: np.random.Generator,
+    pred: tuple[NDArray, NDArray],
+    truth: Truth,
+    rng: np.random.Generator,
 ) -> tuple[float, float]:
     """Chamfer-L1 and HD95 between a triangle surface and the truth's boundary, mm.
 
@@ -337,8 +359,11 @@ def surface_distances(
 
 
 def score_mesh(
-    vertices_mm: NDArray[np.floating], faces: NDArray[np.integer], truth: Truth,
-    *, seed: int | np.random.Generator = 0,
+    vertices_mm: NDArray[np.floating],
+    faces: NDArray[np.integer],
+    truth: Truth,
+    *,
+    seed: int | np.random.Generator = 0,
 ) -> Scores:
     """All the scores of one mesh against a ground truth.
 

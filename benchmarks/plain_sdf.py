@@ -49,8 +49,11 @@ def plain_sdf_field(mask: np.ndarray, spacing: np.ndarray, planes: np.ndarray) -
         outside = ndimage.distance_transform_edt(~plane, sampling=sampling)
         distances.append((outside - inside)[1:-1, 1:-1].astype(np.float32))
     field = np.full((x1 - x0, y1 - y0, mask.shape[2]), np.float32(1e3), dtype=np.float32)
-    for (k0, d0), (k1, d1) in zip(zip(planes[:-1], distances[:-1], strict=True),
-                                  zip(planes[1:], distances[1:], strict=True), strict=True):
+    for (k0, d0), (k1, d1) in zip(
+        zip(planes[:-1], distances[:-1], strict=True),
+        zip(planes[1:], distances[1:], strict=True),
+        strict=True,
+    ):
         for k in range(k0, k1 + 1):
             t = np.float32((k - k0) / (k1 - k0))
             field[:, :, k] = (1 - t) * d0 + t * d1

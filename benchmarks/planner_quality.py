@@ -55,7 +55,10 @@ def main() -> None:
                 parts = 0
                 for planner in ("none", "heuristic"):
                     result = reconstruct(
-                        sections, projections, planner=planner, method=args.method,
+                        sections,
+                        projections,
+                        planner=planner,
+                        method=args.method,
                         carve=not args.no_carve,
                     )
                     scores[planner] = evaluate(result.mesh, truth, n_points=args.n_points, seed=0)
@@ -65,8 +68,10 @@ def main() -> None:
                     (none.volume_iou, heur.volume_iou, none.chamfer_l1, heur.chamfer_l1)
                 )
                 win = heur.volume_iou > none.volume_iou and heur.chamfer_l1 < none.chamfer_l1
-                tie = (abs(heur.volume_iou - none.volume_iou) < 1e-4
-                       and abs(heur.chamfer_l1 - none.chamfer_l1) < 1e-7)
+                tie = (
+                    abs(heur.volume_iou - none.volume_iou) < 1e-4
+                    and abs(heur.chamfer_l1 - none.chamfer_l1) < 1e-7
+                )
                 verdict = "yes" if win else "tie" if tie else "no"
                 wins += win
                 ties += tie

@@ -67,8 +67,11 @@ def run_case(task: tuple[str, int, int, int, str]) -> dict[str, Any]:
         result = reconstruct(sections, projections, **kwargs)
         row["seconds"] = time.perf_counter() - start
         metrics = evaluate(result.mesh, truth, n_points=20_000, seed=0)
-        row.update(volume_iou=metrics.volume_iou, chamfer_mm=metrics.chamfer_l1_mm,
-                   parts=len(result.plan.parts))
+        row.update(
+            volume_iou=metrics.volume_iou,
+            chamfer_mm=metrics.chamfer_l1_mm,
+            parts=len(result.plan.parts),
+        )
     except SlicereconError as exc:
         row["error"] = f"{type(exc).__name__}: {exc}"
     return row
@@ -84,17 +87,31 @@ def _fmt(v: float, digits: int = 3) -> str:
 
 
 def table(rows: list[dict[str, Any]], families: list[str]) -> list[str]:
-    lines = ["| family | " + " | ".join(f"{p} IoU" for p in PLANNERS) + " | "
-             + " | ".join(f"{p} CD" for p in PLANNERS) + " |",
-             "|---|" + "---:|" * (2 * len(PLANNERS))]
+    lines = [
+        "| family | "
+        + " | ".join(f"{p} IoU" for p in PLANNERS)
+        + " | "
+        + " | ".join(f"{p} CD" for p in PLANNERS)
+        + " |",
+        "|---|" + "---:|" * (2 * len(PLANNERS)),
+    ]
     for fam in [*families, "**mean**"]:
         sel = rows if fam == "**mean**" else [r for r in rows if r["family"] == fam]
-        ious = [_mean([r.get("volume_iou", math.nan) for r in sel if r["planner"] == p])
-                for p in PLANNERS]
-        cds = [_mean([r.get("chamfer_mm", math.nan) for r in sel if r["planner"] == p])
-               for p in PLANNERS]
-        lines.append(f"| {fam} | " + " | ".join(_fmt(v) for v in ious) + " | "
-                     + " | ".join(_fmt(v, 2) for v in cds) + " |")
+        ious = [
+            _mean([r.get("volume_iou", math.nan) for r in sel if r["planner"] == p])
+            for p in PLANNERS
+        ]
+        cds = [
+            _mean([r.get("chamfer_mm", math.nan) for r in sel if r["planner"] == p])
+            for p in PLANNERS
+        ]
+        lines.append(
+            f"| {fam} | "
+            + " | ".join(_fmt(v) for v in ious)
+            + " | "
+            + " | ".join(_fmt(v, 2) for v in cds)
+            + " |"
+        )
     return lines
 
 
@@ -125,8 +142,16 @@ def figure_contours(rows: list[dict[str, Any]], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     for p in PLANNERS:
         counts = sorted({r["slices"] for r in rows if r["planner"] == p})
-        means = [_mean([r.get("volume_iou", math.nan) for r in rows
-                        if r["planner"] == p and r["slices"] == c]) for c in counts]
+        means = [
+            _mean(
+                [
+                    r.get("volume_iou", math.nan)
+                    for r in rows
+                    if r["planner"] == p and r["slices"] == c
+                ]
+            )
+            for c in counts
+        ]
         ax.plot(counts, means, marker="o", label=p)
     ax.set_xlabel("number of contours (planes)")
     ax.set_ylabel("mean volume IoU")
@@ -147,8 +172,11 @@ def figure_training(logs: dict[str, Path], heuristic: float | None, path: Path) 
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     for name, log in logs.items():
         with open(log, newline="") as fh:
-            pts = [(int(r["update"]), float(r["eval_iou"])) for r in csv.DictReader(fh)
-                   if r.get("eval_iou")]
+            pts = [
+                (int(r["update"]), float(r["eval_iou"]))
+                for r in csv.DictReader(fh)
+                if r.get("eval_iou")
+            ]
         if pts:
             ax.plot(*zip(*pts, strict=True), marker=".", label=name)
     if heuristic is not None:
@@ -171,8 +199,11 @@ def main() -> None:
     parser.add_argument("--voxels", type=int, default=44, help="longest side of a shape")
     parser.add_argument("--slices", type=int, default=12)
     parser.add_argument("--contours", default="6,12,20")
-    parser.add_argument("--contour-families", default="",
-                        help="default: every family with enough z planes for all counts")
+    parser.add_argument(
+        "--contour-families",
+        default="",
+        help="default: every family with enough z planes for all counts",
+    )
     parser.add_argument("--families", default="", help="comma-separated (default: all)")
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args()
@@ -181,15 +212,25 @@ def main() -> None:
     from slicerecon.shapes import shape_names
 
     families = [f for f in args.families.split(",") if f] or shape_names()
-    tasks = [(f, HOLDOUT_SEED + i, args.voxels, args.slices, p)
-             for f in families for i in range(args.seeds) for p in PLANNERS]
+    tasks = [
+        (f, HOLDOUT_SEED + i, args.voxels, args.slices, p)
+        for f in families
+        for i in range(args.seeds)
+        for p in PLANNERS
+    ]
     counts = [int(c) for c in args.contours.split(",")]
     sweep_fams = [f for f in args.contour_families.split(",") if f in families] or [
-        f for f in families
+        f
+        for f in families
         if make_volume(f, HOLDOUT_SEED, args.voxels).occupied_planes(2).size >= max(counts)
     ]
-    sweep = [(f, HOLDOUT_SEED, args.voxels, c, p)
-             for f in sweep_fams for c in counts if c != args.slices for p in PLANNERS]
+    sweep = [
+        (f, HOLDOUT_SEED, args.voxels, c, p)
+        for f in sweep_fams
+        for c in counts
+        if c != args.slices
+        for p in PLANNERS
+    ]
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         rows = list(pool.map(run_case, tasks))
@@ -202,12 +243,14 @@ def main() -> None:
     manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
     args.figures.mkdir(parents=True, exist_ok=True)
     fig1 = args.figures / "policy_iou_vs_contours.png"
-    sweep_all = sweep_rows + [r for r in rows if r["family"] in sweep_fams
-                              and r["seed"] == HOLDOUT_SEED]
+    sweep_all = sweep_rows + [
+        r for r in rows if r["family"] in sweep_fams and r["seed"] == HOLDOUT_SEED
+    ]
     figure_contours(sweep_all, fig1)
     fig2 = args.figures / "policy_iou_vs_training.png"
-    logs = {n: WEIGHTS_DIR / f"{n}_log.csv" for n in LEARNED
-            if (WEIGHTS_DIR / f"{n}_log.csv").is_file()}
+    logs = {
+        n: WEIGHTS_DIR / f"{n}_log.csv" for n in LEARNED if (WEIGHTS_DIR / f"{n}_log.csv").is_file()
+    }
     figure_training(logs, manifest.get("heuristic_eval_iou"), fig2)
 
     errors = [r for r in rows + sweep_rows if "error" in r]
@@ -244,10 +287,12 @@ def main() -> None:
         "Failed: the case raised an error (listed at the end); it is left out of the means",
         "and of wins / ties / losses.",
     ]
-    parts = {p: _mean([r.get("parts", math.nan) for r in rows if r["planner"] == p])
-             for p in PLANNERS}
-    secs = {p: _mean([r.get("seconds", math.nan) for r in rows if r["planner"] == p])
-            for p in PLANNERS}
+    parts = {
+        p: _mean([r.get("parts", math.nan) for r in rows if r["planner"] == p]) for p in PLANNERS
+    }
+    secs = {
+        p: _mean([r.get("seconds", math.nan) for r in rows if r["planner"] == p]) for p in PLANNERS
+    }
     lines += [
         "",
         "| planner | mean parts | mean reconstruct s |",
@@ -262,8 +307,16 @@ def main() -> None:
         "|---:|" + "---:|" * len(PLANNERS),
     ]
     for c in sorted({r["slices"] for r in sweep_all}):
-        vals = [_mean([r.get("volume_iou", math.nan) for r in sweep_all
-                       if r["planner"] == p and r["slices"] == c]) for p in PLANNERS]
+        vals = [
+            _mean(
+                [
+                    r.get("volume_iou", math.nan)
+                    for r in sweep_all
+                    if r["planner"] == p and r["slices"] == c
+                ]
+            )
+            for p in PLANNERS
+        ]
         lines.append(f"| {c} | " + " | ".join(_fmt(v) for v in vals) + " |")
     lines += [
         "",
@@ -278,10 +331,15 @@ def main() -> None:
         "",
     ]
     if errors:
-        lines += ["## Failed cases", ""] + [
-            f"- {r['family']} seed {r['seed']} {r['planner']} ({r['slices']} planes): "
-            f"{r['error']}" for r in errors
-        ] + [""]
+        lines += (
+            ["## Failed cases", ""]
+            + [
+                f"- {r['family']} seed {r['seed']} {r['planner']} ({r['slices']} planes): "
+                f"{r['error']}"
+                for r in errors
+            ]
+            + [""]
+        )
     with atomic_path(args.out) as tmp:
         tmp.write_text("\n".join(lines))
     print("\n".join(lines))

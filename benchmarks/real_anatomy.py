@@ -61,8 +61,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "sdf-heuristic": {"method": "sdf", "planner": "heuristic"},
     "hybrid-none": {"method": "hybrid", "planner": "none", "carve": False},
     "sdf-pchip-none": {"method": "sdf", "planner": "none", "interpolation": "pchip"},
-    "hybrid-linear-heuristic": {"method": "hybrid", "planner": "heuristic",
-                                "interpolation": "linear"},
+    "hybrid-linear-heuristic": {
+        "method": "hybrid",
+        "planner": "heuristic",
+        "interpolation": "linear",
+    },
     "sdf-carve-only": {"method": "sdf", "planner": "heuristic", "cover": False},
     "sdf-cover-none": {"method": "sdf", "planner": "none"},
 }
@@ -99,9 +102,25 @@ MESH_LOADERS = ("pymeshlab_mesh", "fsaverage5_surface", "mne_fsaverage_surface")
 """Loaders of :mod:`slicerecon.realshapes` that voxelize a mesh (they take ``mesh_resolution``)."""
 
 FIELDS = (
-    "half", "stratum", "case", "axis", "planes", "variant", "volume_iou", "chamfer_l1_mm",
-    "hd95_mm", "d_iou", "d_chamfer_mm", "d_hd95_mm", "vs_baseline", "watertight",
-    "volume_ratio", "parts", "grid", "spacing_mm", "error",
+    "half",
+    "stratum",
+    "case",
+    "axis",
+    "planes",
+    "variant",
+    "volume_iou",
+    "chamfer_l1_mm",
+    "hd95_mm",
+    "d_iou",
+    "d_chamfer_mm",
+    "d_hd95_mm",
+    "vs_baseline",
+    "watertight",
+    "volume_ratio",
+    "parts",
+    "grid",
+    "spacing_mm",
+    "error",
 )
 
 log = logging.getLogger("real_anatomy")
@@ -125,7 +144,8 @@ def load_case(name: str, protocol: dict[str, Any]) -> Volume:
         options["resolution"] = int(protocol["mesh_resolution"])
     return normalise(
         real_shape(name, **options),
-        min_extent=int(protocol["min_extent"]), max_extent=int(protocol["max_extent"]),
+        min_extent=int(protocol["min_extent"]),
+        max_extent=int(protocol["max_extent"]),
     )
 
 
@@ -151,8 +171,12 @@ def _warm_up(variants: Iterable[str]) -> None:
 
 
 def run_case(
-    name: str, info: dict[str, str], protocol: dict[str, Any], axes: list[str],
-    planes: list[int], variants: list[str],
+    name: str,
+    info: dict[str, str],
+    protocol: dict[str, Any],
+    axes: list[str],
+    planes: list[int],
+    variants: list[str],
 ) -> list[dict[str, Any]]:
     """Every (axis, planes, variant) row of one case."""
     from slicerecon.reconstruct import prepare_inputs, reconstruct
@@ -170,8 +194,10 @@ def run_case(
                     volume, slices=n, axis=axis, projections="gt"
                 )
             except SlicereconError as exc:
-                rows += [{**base, "axis": axis, "planes": n, "variant": v, "error": str(exc)}
-                         for v in variants]
+                rows += [
+                    {**base, "axis": axis, "planes": n, "variant": v, "error": str(exc)}
+                    for v in variants
+                ]
                 continue
             assert truth is not None
             key = (truth.shape, truth.affine.tobytes())
@@ -180,7 +206,10 @@ def run_case(
             reference = truths[key]
             for variant in variants:
                 row: dict[str, Any] = {
-                    **base, "axis": axis, "planes": sections.n_planes, "variant": variant,
+                    **base,
+                    "axis": axis,
+                    "planes": sections.n_planes,
+                    "variant": variant,
                     "grid": "x".join(str(s) for s in truth.shape),
                     "spacing_mm": "x".join(f"{s:.3g}" for s in truth.spacing),
                 }
@@ -193,13 +222,19 @@ def run_case(
                     continue
                 row["seconds"] = time.perf_counter() - start
                 scores = score_mesh(
-                    np.asarray(result.mesh.vertices), np.asarray(result.mesh.faces), reference,
+                    np.asarray(result.mesh.vertices),
+                    np.asarray(result.mesh.faces),
+                    reference,
                     seed=_seed(protocol["seed"], name, axis, n, variant),
                 )
                 row.update(
-                    volume_iou=scores.volume_iou, chamfer_l1_mm=scores.chamfer_l1_mm,
-                    hd95_mm=scores.hd95_mm, watertight=scores.watertight,
-                    volume_ratio=scores.volume_ratio, parts=len(result.plan.parts), error="",
+                    volume_iou=scores.volume_iou,
+                    chamfer_l1_mm=scores.chamfer_l1_mm,
+                    hd95_mm=scores.hd95_mm,
+                    watertight=scores.watertight,
+                    volume_ratio=scores.volume_ratio,
+                    parts=len(result.plan.parts),
+                    error="",
                 )
                 rows.append(row)
     return rows
@@ -209,7 +244,8 @@ def run_case(
 def _compare(rows: list[dict[str, Any]]) -> None:
     """Fill the differences to the baseline and the win / tie / loss of every row."""
     base = {
-        (r["case"], r["axis"], r["planes"]): r for r in rows
+        (r["case"], r["axis"], r["planes"]): r
+        for r in rows
         if r["variant"] == BASELINE and not r.get("error")
     }
     for r in rows:
@@ -278,8 +314,9 @@ def _summary_lines(rows: list[dict[str, Any]], variants: list[str]) -> list[str]
             if variant == BASELINE:
                 record, d_iou = "—", "—"
             else:
-                count = {k: sum(r.get("vs_baseline") == k for r in mine)
-                         for k in ("win", "tie", "loss")}
+                count = {
+                    k: sum(r.get("vs_baseline") == k for r in mine) for k in ("win", "tie", "loss")
+                }
                 record = f"{count['win']} / {count['tie']} / {count['loss']}"
                 d_iou = _fmt(_mean(ok, "d_iou"), signed=True)
             tight = sum(bool(r.get("watertight")) for r in mine if not r.get("error"))
@@ -296,7 +333,8 @@ def _stratum_lines(rows: list[dict[str, Any]], variants: list[str]) -> list[str]
     others = [v for v in variants if v != BASELINE]
     out = [
         "| half | axis | planes | stratum | cases | "
-        + " | ".join(f"`{v}` ΔIoU" for v in others) + " |",
+        + " | ".join(f"`{v}` ΔIoU" for v in others)
+        + " |",
         "|---|---|---|---|---|" + "---|" * len(others),
     ]
     for half, axis, n in _settings(rows):
@@ -305,10 +343,13 @@ def _stratum_lines(rows: list[dict[str, Any]], variants: list[str]) -> list[str]
         for stratum in sorted({r["stratum"] for r in group}):
             mine = [r for r in group if r["stratum"] == stratum and r["case"] in common]
             cases = {r["case"] for r in mine}
-            cells = [_fmt(_mean([r for r in mine if r["variant"] == v], "d_iou"), signed=True)
-                     for v in others]
-            out.append(f"| {half} | {axis} | {n} | {stratum} | {len(cases)} | "
-                       + " | ".join(cells) + " |")
+            cells = [
+                _fmt(_mean([r for r in mine if r["variant"] == v], "d_iou"), signed=True)
+                for v in others
+            ]
+            out.append(
+                f"| {half} | {axis} | {n} | {stratum} | {len(cases)} | " + " | ".join(cells) + " |"
+            )
     return out
 
 
@@ -318,10 +359,16 @@ def _worst_lines(rows: list[dict[str, Any]], variants: list[str], k: int = 5) ->
         for variant in variants:
             if variant == BASELINE:
                 continue
-            mine = [r for r in rows if (r["half"], r["axis"], int(r["planes"]), r["variant"])
-                    == (half, axis, n, variant) and r.get("d_iou") not in (None, "")]
-            losses = sorted((r for r in mine if r["vs_baseline"] == "loss"),
-                            key=lambda r: r["d_iou"])[:k]
+            mine = [
+                r
+                for r in rows
+                if (r["half"], r["axis"], int(r["planes"]), r["variant"])
+                == (half, axis, n, variant)
+                and r.get("d_iou") not in (None, "")
+            ]
+            losses = sorted(
+                (r for r in mine if r["vs_baseline"] == "loss"), key=lambda r: r["d_iou"]
+            )[:k]
             if losses:
                 listed = ", ".join(f"{r['case']} ({r['d_iou']:+.3f})" for r in losses)
                 out.append(f"* {half}, {axis}, {n} planes, `{variant}`: {listed}")
@@ -338,8 +385,11 @@ def _case_tables(rows: list[dict[str, Any]], variants: list[str]) -> list[str]:
             by_case.setdefault(r["case"], {})[r["variant"]] = r
         cases = sorted(by_case, key=lambda c: (next(iter(by_case[c].values()))["stratum"], c))
         out += [
-            "", f"### {half}: {n} planes along {axis}", "",
-            "Volume IoU (Δ to `sdf-plain`; a win/loss beyond ±0.005 is marked ▲/▼):", "",
+            "",
+            f"### {half}: {n} planes along {axis}",
+            "",
+            "Volume IoU (Δ to `sdf-plain`; a win/loss beyond ±0.005 is marked ▲/▼):",
+            "",
             "| case | stratum | grid | " + " | ".join(variants) + " |",
             "|---|---|---|" + "---|" * len(variants),
         ]
@@ -357,10 +407,15 @@ def _case_tables(rows: list[dict[str, Any]], variants: list[str]) -> list[str]:
                     mark = {"win": " ▲", "loss": " ▼"}.get(r["vs_baseline"], "")
                     cells.append(f"{r['volume_iou']:.3f} ({r['d_iou']:+.3f}){mark}")
             first = next(iter(by_case[case].values()))
-            out.append(f"| {case} | {first['stratum']} | {first.get('grid', '')} | "
-                       + " | ".join(cells) + " |")
+            out.append(
+                f"| {case} | {first['stratum']} | {first.get('grid', '')} | "
+                + " | ".join(cells)
+                + " |"
+            )
         out += [
-            "", "Chamfer-L1 / HD95, mm (watertight unless marked *open*):", "",
+            "",
+            "Chamfer-L1 / HD95, mm (watertight unless marked *open*):",
+            "",
             "| case | " + " | ".join(variants) + " |",
             "|---|" + "---|" * len(variants),
         ]
@@ -382,8 +437,13 @@ def _case_tables(rows: list[dict[str, Any]], variants: list[str]) -> list[str]:
 
 
 def write_report(
-    out: Path, rows: list[dict[str, Any]], command: str, variants: list[str],
-    skipped: dict[str, str], timings: bool, library: str = "",
+    out: Path,
+    rows: list[dict[str, Any]],
+    command: str,
+    variants: list[str],
+    skipped: dict[str, str],
+    timings: bool,
+    library: str = "",
 ) -> None:
     """Write the markdown report ``out`` and the CSV next to it."""
     csv_path = out.with_suffix(".csv")
@@ -392,8 +452,14 @@ def write_report(
     writer = csv.DictWriter(buffer, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
     for r in rows:
-        writer.writerow({k: _fmt(r.get(k), 6) if isinstance(r.get(k), float) else
-                         ("" if r.get(k) is None else r.get(k)) for k in fields})
+        writer.writerow(
+            {
+                k: _fmt(r.get(k), 6)
+                if isinstance(r.get(k), float)
+                else ("" if r.get(k) is None else r.get(k))
+                for k in fields
+            }
+        )
     _write_atomic(csv_path, buffer.getvalue())
 
     legend = [f"| `{v}` | {_kwargs(v)} | {VARIANT_NOTES.get(v, '')} |" for v in variants]
@@ -440,11 +506,18 @@ def library_state() -> str:
 
     root = Path(slicerecon.__file__).resolve().parent.parent
     try:
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"],
-                                capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--",
-                                "slicerecon"], capture_output=True, text=True,
-                               check=True).stdout.split("\n")
+        commit = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--", "slicerecon"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.split("\n")
     except (OSError, subprocess.CalledProcessError):
         return f"slicerecon {getattr(slicerecon, '__version__', '?')} (not a git checkout)"
     changed = sorted(line[3:] for line in dirty if line.strip())
@@ -482,15 +555,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--half", choices=("dev", "val", "both"), default="dev")
     parser.add_argument("--planes", default="12", help="comma-separated plane counts")
     parser.add_argument("--axes", default="x,y,z", help="comma-separated section axes")
-    parser.add_argument("--variants", default=",".join(DEFAULT_VARIANTS),
-                        help=f"comma-separated, from: {', '.join(VARIANTS)}; "
-                        f"{BASELINE} is always added")
-    parser.add_argument("--cases", default="",
-                        help="comma-separated subset of the half's cases (default: all)")
+    parser.add_argument(
+        "--variants",
+        default=",".join(DEFAULT_VARIANTS),
+        help=f"comma-separated, from: {', '.join(VARIANTS)}; {BASELINE} is always added",
+    )
+    parser.add_argument(
+        "--cases", default="", help="comma-separated subset of the half's cases (default: all)"
+    )
     parser.add_argument("--split", type=Path, default=SPLIT_FILE)
     parser.add_argument("--jobs", type=int, default=1, help="worker processes (cases in parallel)")
-    parser.add_argument("--timings", action="store_true",
-                        help="add a seconds column to the CSV (not reproducible)")
+    parser.add_argument(
+        "--timings", action="store_true", help="add a seconds column to the CSV (not reproducible)"
+    )
     parser.add_argument("--out", type=Path, default=Path("docs/results_real.md"))
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
@@ -522,8 +599,9 @@ def main(argv: list[str] | None = None) -> int:
     absent = [n for n in names if n not in present]
     for n in absent:
         log.warning("skipping %s: its source package is not installed (docs/realshapes.md)", n)
-    names = sorted((n for n in names if n in present),
-                   key=lambda n: (cases[n]["half"], cases[n]["stratum"], n))
+    names = sorted(
+        (n for n in names if n in present), key=lambda n: (cases[n]["half"], cases[n]["stratum"], n)
+    )
 
     variants, skipped = _available(variants)
     if BASELINE not in variants:
@@ -539,12 +617,26 @@ def main(argv: list[str] | None = None) -> int:
         nonlocal done
         done += 1
         for r in case_rows:
-            text = (f"IoU {r['volume_iou']:.3f} CD {r['chamfer_l1_mm']:.3f} "
-                    f"HD95 {r['hd95_mm']:.2f} {r['seconds']:.1f}s") if not r.get("error") \
+            text = (
+                (
+                    f"IoU {r['volume_iou']:.3f} CD {r['chamfer_l1_mm']:.3f} "
+                    f"HD95 {r['hd95_mm']:.2f} {r['seconds']:.1f}s"
+                )
+                if not r.get("error")
                 else f"ERROR {r['error']}"
-            log.info("[%d/%d %5.0fs] %-4s %-26s %s %2s %-15s %s", done, len(names),
-                     time.perf_counter() - start, r["half"], r["case"], r["axis"],
-                     r["planes"], r["variant"], text)
+            )
+            log.info(
+                "[%d/%d %5.0fs] %-4s %-26s %s %2s %-15s %s",
+                done,
+                len(names),
+                time.perf_counter() - start,
+                r["half"],
+                r["case"],
+                r["axis"],
+                r["planes"],
+                r["variant"],
+                text,
+            )
         rows.extend(case_rows)
 
     task_args = [(n, cases[n], protocol, axes, planes, variants) for n in names]
@@ -560,15 +652,22 @@ def main(argv: list[str] | None = None) -> int:
     rank = {v: i for i, v in enumerate(variants)}
     rows.sort(key=lambda r: (order[r["case"]], r["axis"], int(r["planes"]), rank[r["variant"]]))
     _compare(rows)
-    command = shlex.join(["python", "benchmarks/real_anatomy.py",
-                          *(sys.argv[1:] if argv is None else argv)])
+    command = shlex.join(
+        ["python", "benchmarks/real_anatomy.py", *(sys.argv[1:] if argv is None else argv)]
+    )
     write_report(args.out, rows, command, variants, skipped, args.timings, library_state())
     total = time.perf_counter() - start
     for v in variants:
         secs = [r["seconds"] for r in rows if r["variant"] == v and "seconds" in r]
         log.info("%-15s reconstruct() total %.0f s over %d runs", v, sum(secs), len(secs))
-    log.info("wrote %s and %s in %.0f s (%d cases, %d jobs)", args.out,
-             args.out.with_suffix(".csv"), total, len(names), args.jobs)
+    log.info(
+        "wrote %s and %s in %.0f s (%d cases, %d jobs)",
+        args.out,
+        args.out.with_suffix(".csv"),
+        total,
+        len(names),
+        args.jobs,
+    )
     return 0
 
 

@@ -117,16 +117,22 @@ def run(pool: ShapePool, *, episodes: int, max_steps: int, seed: int) -> Agreeme
     for name in METHODS:
         for what, data in (("IoU(S_i, W_i)", ious), ("R_i", rewards), ("episode IoU", finals)):
             ref, got = np.asarray(data["exact"]), np.asarray(data[name])
-            rows.append({
-                "reconstruction": name, "quantity": what, "n": len(ref),
-                "pearson": float(stats.pearsonr(ref, got)[0]),
-                "spearman": float(stats.spearmanr(ref, got)[0]),
-                "mean_abs": float(np.mean(np.abs(ref - got))),
-                "max_abs": float(np.max(np.abs(ref - got))),
-                "mean": float(np.mean(got)), "mean_exact": float(np.mean(ref)),
-            })
-    return Agreement(rows, n_parts, len(finals["exact"]),
-                     {k: 1e3 * v / n_parts for k, v in seconds.items()})
+            rows.append(
+                {
+                    "reconstruction": name,
+                    "quantity": what,
+                    "n": len(ref),
+                    "pearson": float(stats.pearsonr(ref, got)[0]),
+                    "spearman": float(stats.spearmanr(ref, got)[0]),
+                    "mean_abs": float(np.mean(np.abs(ref - got))),
+                    "max_abs": float(np.max(np.abs(ref - got))),
+                    "mean": float(np.mean(got)),
+                    "mean_exact": float(np.mean(ref)),
+                }
+            )
+    return Agreement(
+        rows, n_parts, len(finals["exact"]), {k: 1e3 * v / n_parts for k, v in seconds.items()}
+    )
 
 
 def main() -> None:
@@ -159,8 +165,12 @@ def main() -> None:
             f"{r['mean']:.3f} ({r['mean_exact']:.3f}) |"
         )
     ms = result.ms_per_part
-    lines += ["", f"One part at a time on the CPU: exact {ms['exact']:.1f} ms, "
-              f"surrogate {ms['surrogate']:.1f} ms per part (the env batches the surrogate).", ""]
+    lines += [
+        "",
+        f"One part at a time on the CPU: exact {ms['exact']:.1f} ms, "
+        f"surrogate {ms['surrogate']:.1f} ms per part (the env batches the surrogate).",
+        "",
+    ]
     text = "\n".join(lines)
     print(text)
     if args.out is not None:

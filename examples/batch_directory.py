@@ -53,8 +53,10 @@ def main(workdir: Path, *, workers: int = 2) -> int:
         print(f"[{done}/{total}] {result.case:12s} {result.status}")
 
     batch = run_batch(indir, outdir, config, workers=workers, progress=progress)
-    print(f"{batch.n_ok} ok, {batch.n_failed} failed, {batch.n_skipped} skipped "
-          f"in {batch.seconds:.1f} s; table: {batch.summary_csv}")
+    print(
+        f"{batch.n_ok} ok, {batch.n_failed} failed, {batch.n_skipped} skipped "
+        f"in {batch.seconds:.1f} s; table: {batch.summary_csv}"
+    )
     for case in batch.cases:
         if case.status == "failed":
             print(f"  {case.case}: {case.error_type}: {case.error}")

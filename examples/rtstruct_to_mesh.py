@@ -83,13 +83,20 @@ def main(outdir: Path) -> dict:
     mesh_path = write_mesh(result.mesh, outdir / "lesion.stl")
     h = float(PLANES_MM[-1])
     slab = math.pi * (RADIUS_MM**2 * 2 * h - 2 * h**3 / 3)  # the ball between the end planes
-    print(f"{rt_path.name}: ROI 'Lesion', {sections.n_planes} planes, "
-          f"gap {sections.gaps.min():.1f} mm")
-    print(f"{len(result.plan.parts)} part(s) -> {mesh_path} "
-          f"(watertight: {result.mesh.is_watertight})")
+    print(
+        f"{rt_path.name}: ROI 'Lesion', {sections.n_planes} planes, "
+        f"gap {sections.gaps.min():.1f} mm"
+    )
+    print(
+        f"{len(result.plan.parts)} part(s) -> {mesh_path} (watertight: {result.mesh.is_watertight})"
+    )
     print(f"mesh volume {result.mesh.volume:.0f} mm³; ball between the end planes {slab:.0f} mm³")
-    return {"mesh": mesh_path, "watertight": bool(result.mesh.is_watertight),
-            "volume_mm3": float(result.mesh.volume), "reference_mm3": slab}
+    return {
+        "mesh": mesh_path,
+        "watertight": bool(result.mesh.is_watertight),
+        "volume_mm3": float(result.mesh.volume),
+        "reference_mm3": slab,
+    }
 
 
 if __name__ == "__main__":

@@ -25,14 +25,15 @@ from slicerecon.shapes import make_shape
 
 def main(outdir: Path) -> dict:
     """Write the mask, reconstruct it into ``outdir`` and return the run summary."""
-    mask = make_shape("y_branch", trunk_length=20.0, branch_length=20.0, spread=14.0,
-                      radius=5.0)
+    mask = make_shape("y_branch", trunk_length=20.0, branch_length=20.0, spread=14.0, radius=5.0)
     mask_path = write_nifti(mask, outdir / "mask.nii.gz")
     config = ReconstructConfig(slices=10, planner="heuristic", method="loft", n_points=20_000)
     summary = run_case(mask_path, outdir, config)
     print(f"input: {mask_path.name}, {mask.shape} voxels of {mask.spacing.tolist()} mm")
-    print(f"{summary['parts']} part(s) from {summary['planes']} planes -> {summary['mesh']}"
-          f" (watertight: {summary['watertight']})")
+    print(
+        f"{summary['parts']} part(s) from {summary['planes']} planes -> {summary['mesh']}"
+        f" (watertight: {summary['watertight']})"
+    )
     for name in ("volume_iou", "dice", "surface_iou", "chamfer_l1_mm", "hd95_mm"):
         print(f"  {name:15s} {summary['metrics'][name]:.3f}")
     return summary

@@ -182,8 +182,12 @@ def _write_report(outdir: Path) -> tuple[Path | None, str]:
 
         written = write_report(outdir)
     except Exception as exc:  # noqa: BLE001 - the report is optional; the batch stands
-        logger.warning("the HTML report failed (%s: %s); summary.csv is complete",
-                       type(exc).__name__, exc, exc_info=True)
+        logger.warning(
+            "the HTML report failed (%s: %s); summary.csv is complete",
+            type(exc).__name__,
+            exc,
+            exc_info=True,
+        )
         return None, f"{type(exc).__name__}: {exc}"
     return (Path(written) if isinstance(written, str | os.PathLike) else None), ""
 
@@ -197,16 +201,21 @@ def _named_configs(
     if isinstance(config, ReconstructConfig):
         return {None: config}
     if not isinstance(config, Mapping) or not config:
-        raise OptionError("config must be a ReconstructConfig or a non-empty mapping of names "
-                          f"to ReconstructConfig (got {type(config).__name__})")
+        raise OptionError(
+            "config must be a ReconstructConfig or a non-empty mapping of names "
+            f"to ReconstructConfig (got {type(config).__name__})"
+        )
     named: dict[str | None, ReconstructConfig] = {}
     for name, value in config.items():
         if not isinstance(value, ReconstructConfig):
-            raise OptionError(f"config {name!r} must be a ReconstructConfig "
-                              f"(got {type(value).__name__})")
+            raise OptionError(
+                f"config {name!r} must be a ReconstructConfig (got {type(value).__name__})"
+            )
         if not isinstance(name, str) or safe_case_name(name) != name:
-            raise OptionError(f"configuration names become folder names: use letters, digits, "
-                              f"'-' and '_' only (got {name!r})")
+            raise OptionError(
+                f"configuration names become folder names: use letters, digits, "
+                f"'-' and '_' only (got {name!r})"
+            )
         named[name] = value
     return named
 
@@ -278,8 +287,11 @@ def run_cases(
     out = Path(outdir).resolve()
     out.mkdir(parents=True, exist_ok=True)
     layout = ResultsLayout(out)
-    jobs = [Job(case, case.name if name is None else f"{case.name}/{name}", value)
-            for case in cases for name, value in configs.items()]
+    jobs = [
+        Job(case, case.name if name is None else f"{case.name}/{name}", value)
+        for case in cases
+        for name, value in configs.items()
+    ]
     total = len(jobs)
     results: dict[str, CaseResult] = {}
 
@@ -307,8 +319,9 @@ def run_cases(
             finish(job, previous)
         else:
             todo.append(job)
-    logger.info("%d case(s): %d to compute, %d finished before", total, len(todo),
-                total - len(todo))
+    logger.info(
+        "%d case(s): %d to compute, %d finished before", total, len(todo), total - len(todo)
+    )
 
     def clear(pending: Sequence[Job]) -> None:
         for job in pending:
@@ -321,11 +334,13 @@ def run_cases(
                 finish(job, process_case(job.case, out, job.config, job.key, folder=job.folder))
         elif todo:
             n_workers = workers if workers is not None else min(os.cpu_count() or 1, len(todo))
-            run_on_dask(todo, out, workers=n_workers, scheduler=scheduler, retries=retries,
-                        on_done=finish)
+            run_on_dask(
+                todo, out, workers=n_workers, scheduler=scheduler, retries=retries, on_done=finish
+            )
     except KeyboardInterrupt:
-        logger.info("interrupted: %d of %d case(s) done; summary.csv not rewritten",
-                    len(results), total)
+        logger.info(
+            "interrupted: %d of %d case(s) done; summary.csv not rewritten", len(results), total
+        )
         if scheduler is None:  # the local workers are gone: nothing writes to OUTDIR now
             with sigint_deferred():
                 clear(todo)
@@ -335,10 +350,16 @@ def run_cases(
     ordered = tuple(results[job.folder] for job in jobs)
     summary = write_summary(ordered, layout.summary_csv)
     report_path, report_error = _write_report(out) if report else (None, "")
-    result = BatchResult(out, ordered, summary, report_path, report_error,
-                         time.perf_counter() - start)
-    logger.info("batch done: %d ok, %d failed, %d skipped in %.1f s",
-                result.n_ok, result.n_failed, result.n_skipped, result.seconds)
+    result = BatchResult(
+        out, ordered, summary, report_path, report_error, time.perf_counter() - start
+    )
+    logger.info(
+        "batch done: %d ok, %d failed, %d skipped in %.1f s",
+        result.n_ok,
+        result.n_failed,
+        result.n_skipped,
+        result.seconds,
+    )
     return result
 
 
@@ -420,6 +441,15 @@ def run_batch(
             f"no cases found in {src}: expected NIfTI masks (.nii/.nii.gz), contour files "
             "(.json/.csv), DICOM series folders, DICOM SEG or RTSTRUCT files"
         )
-    result = run_cases(cases, out, config, workers=workers, scheduler=scheduler, force=force,
-                       progress=progress, retries=retries, report=report)
+    result = run_cases(
+        cases,
+        out,
+        config,
+        workers=workers,
+        scheduler=scheduler,
+        force=force,
+        progress=progress,
+        retries=retries,
+        report=report,
+    )
     return replace(result, seconds=time.perf_counter() - start)

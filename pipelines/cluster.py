@@ -82,8 +82,10 @@ def _stop_workers_now(cluster: Any, grace_s: float = 1.0) -> None:
 
     async def stop() -> None:
         await asyncio.gather(
-            *(nanny.close(timeout=grace_s, reason="slicerecon-batch-interrupted")
-              for nanny in list(cluster.workers.values())),
+            *(
+                nanny.close(timeout=grace_s, reason="slicerecon-batch-interrupted")
+                for nanny in list(cluster.workers.values())
+            ),
             return_exceptions=True,
         )
 
@@ -193,8 +195,6 @@ def _close_local(client: Any, cluster: Any, *, interrupted: bool) -> None:
             logger.debug("shutting the local cluster down after a Ctrl-C", exc_info=True)
 
 
-
-
 def run_on_dask(
     todo: Sequence[Job],
     outdir: Path,
@@ -274,10 +274,13 @@ def run_on_dask(
                     exc = RuntimeError(f"Dask task ended as {future.status}")
                 result = failure_result(job, exc)
                 if isinstance(exc, KilledWorker):
-                    result = replace(result, error=(
-                        "every worker process that ran this case died (out of memory, "
-                        f"killed or crashed): {exc}"
-                    ))
+                    result = replace(
+                        result,
+                        error=(
+                            "every worker process that ran this case died (out of memory, "
+                            f"killed or crashed): {exc}"
+                        ),
+                    )
                 logger.warning("case %s failed on Dask: %s", job.folder, result.error)
                 record_failed_job(outdir, job, result, "".join(traceback.format_exception(exc)))
             future.release()

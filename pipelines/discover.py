@@ -75,7 +75,13 @@ __all__ = ["CASE_KINDS", "RESERVED_NAMES", "Case", "discover_cases", "safe_case_
 logger = logging.getLogger(__name__)
 
 CASE_KINDS = (
-    "nifti", "contours", "dicom-series", "dicom-seg", "rtstruct", "dicom-unreadable", "symlink"
+    "nifti",
+    "contours",
+    "dicom-series",
+    "dicom-seg",
+    "rtstruct",
+    "dicom-unreadable",
+    "symlink",
 )
 """The kinds of case :func:`discover_cases` reports (``symlink``: a link that is not
 followed; see :attr:`Case.error`)."""
@@ -171,9 +177,7 @@ def safe_case_name(relpath: str | os.PathLike[str]) -> str:
         raw = raw.strip().strip("/\\")
         if raw in ("", ".", ".."):
             continue
-        ascii_text = (
-            unicodedata.normalize("NFKD", raw).encode("ascii", "ignore").decode("ascii")
-        )
+        ascii_text = unicodedata.normalize("NFKD", raw).encode("ascii", "ignore").decode("ascii")
         part = _UNSAFE.sub("_", ascii_text)
         part = re.sub(r"_{2,}", "_", part).strip("_-")
         if not part:
@@ -243,9 +247,7 @@ def _folder_cases(
     reference = tuple(sorted(images + dicom.get("unreadable", []))) if images else ()
     for f in dicom.get("rtstruct", []):
         rel = _relpath(f, root)
-        case = Case(
-            "", f, "rtstruct", rel, (f, *reference), folder, folder if images else None
-        )
+        case = Case("", f, "rtstruct", rel, (f, *reference), folder, folder if images else None)
         found.append((_strip_suffix(rel), case))
     return found
 
@@ -344,8 +346,10 @@ def _link_cases(folder: _Folder, root: Path) -> tuple[list[tuple[str, Case]], bo
         lower = link.path.name.lower()
         hint = FOLLOW_HINT
         if link.kind == "folder":
-            why = (f"{rel} is a symbolic link to a folder outside INDIR ({link.target}); "
-                   "it was not searched")
+            why = (
+                f"{rel} is a symbolic link to a folder outside INDIR ({link.target}); "
+                "it was not searched"
+            )
         elif link.kind == "broken":
             if not lower.endswith(NIFTI_SUFFIXES + CONTOUR_SUFFIXES + DICOM_SUFFIXES):
                 logger.info("ignoring %s: a broken symbolic link to %s", link.path, link.target)
@@ -355,8 +359,9 @@ def _link_cases(folder: _Folder, root: Path) -> tuple[list[tuple[str, Case]], bo
         elif lower.endswith(MESH_SUFFIXES):
             continue  # never a case
         elif lower.endswith(NIFTI_SUFFIXES + CONTOUR_SUFFIXES):
-            why = (f"{rel} is a symbolic link to a file outside INDIR ({link.target}); "
-                   "it was not read")
+            why = (
+                f"{rel} is a symbolic link to a file outside INDIR ({link.target}); it was not read"
+            )
         else:
             grouped.append(link)
             continue
@@ -373,8 +378,7 @@ def _link_cases(folder: _Folder, root: Path) -> tuple[list[tuple[str, Case]], bo
             "they were not read, and the DICOM files of this folder were not used"
         )
         logger.info("not reading %s", why)
-        case = Case("", folder.path, "symlink", rel, (), folder.path,
-                    error=f"{why}; {FOLLOW_HINT}")
+        case = Case("", folder.path, "symlink", rel, (), folder.path, error=f"{why}; {FOLLOW_HINT}")
         found.append((rel, case))
     return found, bool(grouped)
 

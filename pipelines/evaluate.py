@@ -70,8 +70,11 @@ def dataset_cases(
     if not root.is_dir():
         raise InputError(f"dataset directory not found: {root}")
     check_dirs(root, out)
-    cases = [c for c in discover_cases(root, exclude=[out.resolve()],
-                                       follow_symlinks=follow_symlinks) if _is_mask(c)]
+    cases = [
+        c
+        for c in discover_cases(root, exclude=[out.resolve()], follow_symlinks=follow_symlinks)
+        if _is_mask(c)
+    ]
     if not cases:
         inside = root.resolve() in out.resolve().parents
         where = " outside the output directory" if inside else ""
@@ -172,6 +175,7 @@ def evaluate_dataset(
 
     configs = method_configs(methods, config if config is not None else ReconstructConfig())
     cases = dataset_cases(dataset_dir, outdir, follow_symlinks=follow_symlinks)
-    run_cases(cases, outdir, configs, workers=workers, force=not resume, progress=progress,
-              report=False)
+    run_cases(
+        cases, outdir, configs, workers=workers, force=not resume, progress=progress, report=False
+    )
     return write_report(Path(outdir), title=title, renders=renders)

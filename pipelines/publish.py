@@ -25,8 +25,14 @@ from typing import Any
 from slicerecon.io.atomic import atomic_path
 from slicerecon.results import FailureRecord
 
-__all__ = ["clear_stale", "publish", "record_failure", "sigint_deferred", "staging_dir",
-           "write_json"]
+__all__ = [
+    "clear_stale",
+    "publish",
+    "record_failure",
+    "sigint_deferred",
+    "staging_dir",
+    "write_json",
+]
 
 logger = logging.getLogger(__name__)
 

@@ -36,8 +36,14 @@ from .publish import clear_stale, publish, record_failure, staging_dir, write_js
 if TYPE_CHECKING:  # imported where used: the worker processes preload this package
     from slicerecon.reconstruct import ReconstructConfig
 
-__all__ = ["Job", "case_key", "failure_result", "finished_result", "process_case",
-           "record_failed_job"]
+__all__ = [
+    "Job",
+    "case_key",
+    "failure_result",
+    "finished_result",
+    "process_case",
+    "record_failed_job",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -218,8 +224,9 @@ def process_case(
                 parts=int(summary["parts"]),
                 planes=int(summary["planes"]),
                 watertight=bool(summary["watertight"]),
-                metrics=None if metrics is None else {k: v for k, v in metrics.items()
-                                                       if isinstance(v, int | float)},
+                metrics=None
+                if metrics is None
+                else {k: v for k, v in metrics.items() if isinstance(v, int | float)},
                 seconds=round(time.perf_counter() - start, 3),
                 method=config.method,
                 planner=config.planner,

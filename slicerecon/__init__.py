@@ -23,8 +23,7 @@ from .errors import (
 
 __version__ = "0.1.0"
 
-_SECTIONS = ("AXIS_NAMES", "Box", "Contour", "CrossSections", "Projection", "Projections",
-             "Volume")
+_SECTIONS = ("AXIS_NAMES", "Box", "Contour", "CrossSections", "Projection", "Projections", "Volume")
 
 
 def __getattr__(name: str) -> object:
@@ -34,6 +33,7 @@ def __getattr__(name: str) -> object:
 
         return getattr(sections, name)
     raise AttributeError(f"module 'slicerecon' has no attribute {name!r}")
+
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
 

@@ -87,7 +87,9 @@ def info(
     from .io.describe import describe_input
 
     details = describe_input(
-        input, label=label if label is not None else roi, allow_irregular=allow_irregular,
+        input,
+        label=label if label is not None else roi,
+        allow_irregular=allow_irregular,
         memory_budget_gb=max_memory,
     )
     if as_json:
@@ -162,14 +164,17 @@ CarveOpt = Annotated[
 ]
 CoverOpt = Annotated[
     bool,
-    typer.Option("--cover/--no-cover",
-                 help="With --carve (sdf): also fill the silhouettes whose rays lie in the "
-                 "section planes."),
+    typer.Option(
+        "--cover/--no-cover",
+        help="With --carve (sdf): also fill the silhouettes whose rays lie in the section planes.",
+    ),
 ]
 LabelOpt = Annotated[
     str | None,
-    typer.Option(help="Structures to reconstruct (default: all): label values, SEG segments or "
-                 "an RTSTRUCT ROI, by number or name, comma-separated."),
+    typer.Option(
+        help="Structures to reconstruct (default: all): label values, SEG segments or "
+        "an RTSTRUCT ROI, by number or name, comma-separated."
+    ),
 ]
 UnionOpt = Annotated[
     bool, typer.Option("--union", help="Every structure together as one (every non-zero voxel).")
@@ -272,9 +277,11 @@ def batch(
     ] = False,
     follow_symlinks: Annotated[
         bool,
-        typer.Option("--follow-symlinks",
-                     help="Read symbolic links that point outside INDIR (default: each is a "
-                     "failed case, never opened)."),
+        typer.Option(
+            "--follow-symlinks",
+            help="Read symbolic links that point outside INDIR (default: each is a "
+            "failed case, never opened).",
+        ),
     ] = False,
     slices: SlicesOpt = None,
     every: EveryOpt = None,
@@ -313,7 +320,6 @@ def batch(
     with ctrl_c_after():
         from pipelines.batch import run_batch
 
-
     config = _reconstruct_config(locals())
     if not logging.getLogger().handlers:
         logging.getLogger("distributed").setLevel(logging.ERROR)  # keep the bar readable
@@ -330,8 +336,12 @@ def batch(
 
         def advance(result: Any, done: int, total: int) -> None:
             colour = {"ok": "green", "failed": "red", "skipped": "dim"}[result.status]
-            bar.update(task, total=total, completed=done,
-                       last=f"[{colour}]{result.status}[/] {result.case}")
+            bar.update(
+                task,
+                total=total,
+                completed=done,
+                last=f"[{colour}]{result.status}[/] {result.case}",
+            )
 
         outcome = run_batch(
             indir,
@@ -346,8 +356,12 @@ def batch(
             follow_symlinks=follow_symlinks,
         )
     for failed in (c for c in outcome.cases if c.status == "failed"):
-        console.print(f"[red]failed[/] {failed.case}: {failed.error_type}: {failed.error}",
-                      markup=True, highlight=False, soft_wrap=True)
+        console.print(
+            f"[red]failed[/] {failed.case}: {failed.error_type}: {failed.error}",
+            markup=True,
+            highlight=False,
+            soft_wrap=True,
+        )
     if outcome.report_error:
         console.print(f"[yellow]report not written[/]: {outcome.report_error}")
     typer.echo(
@@ -380,7 +394,8 @@ def evaluate(
     metrics = evaluate_metrics(
         load_ground_truth(prediction, memory_budget_gb=max_memory),
         load_ground_truth(ground_truth, label=label, memory_budget_gb=max_memory),
-        n_points=n_points, seed=seed,
+        n_points=n_points,
+        seed=seed,
     )
     typer.echo(json.dumps(metrics.to_dict(), indent=2))
 
@@ -426,14 +441,18 @@ def evaluate_dataset(
     ] = False,
     workers: Annotated[
         int | None,
-        typer.Option(help="Local worker processes; 0 (default) runs the cases one after "
-                     "the other in this process."),
+        typer.Option(
+            help="Local worker processes; 0 (default) runs the cases one after "
+            "the other in this process."
+        ),
     ] = 0,
     follow_symlinks: Annotated[
         bool,
-        typer.Option("--follow-symlinks",
-                     help="Read symbolic links that point outside DATASET_DIR (default: each "
-                     "is a failed case, never opened)."),
+        typer.Option(
+            "--follow-symlinks",
+            help="Read symbolic links that point outside DATASET_DIR (default: each "
+            "is a failed case, never opened).",
+        ),
     ] = False,
 ) -> None:
     """Run every mask of DATASET_DIR with each method into OUTDIR/<case>/<method>/; report.
@@ -518,15 +537,20 @@ def train(
     cfg = load_config(config, total_updates=steps, seed=seed)
     outdir = out if out is not None else Path("runs") / cfg.name
     columns = (
-        TextColumn(f"[bold]{cfg.name}"), BarColumn(), MofNCompleteColumn(),
-        TextColumn("{task.fields[info]}"), TimeElapsedColumn(), TimeRemainingColumn(),
+        TextColumn(f"[bold]{cfg.name}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[info]}"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
     )
     with Progress(*columns, console=Console(stderr=True)) as bar:
         task = bar.add_task("train", total=cfg.total_updates, info="")
 
         def progress(done: int, total: int, metrics: dict[str, float]) -> None:
             info = " ".join(
-                f"{k}={v:.3g}" for k, v in metrics.items()
+                f"{k}={v:.3g}"
+                for k, v in metrics.items()
                 if k in ("critic_loss", "bc_loss", "eval_iou") and v == v
             )
             bar.update(task, completed=done, total=total, info=info)
@@ -573,14 +597,13 @@ def dataset_make(
     outdir: Annotated[Path, typer.Argument(help="Output directory (new, empty or a dataset).")],
     shapes: Annotated[
         str | None,
-        typer.Option(help="Comma-separated shapes, families or real shapes (default: all "
-                     "procedural shapes)."),
+        typer.Option(
+            help="Comma-separated shapes, families or real shapes (default: all procedural shapes)."
+        ),
     ] = None,
     per_shape: Annotated[int, typer.Option(help="Seeded variants per procedural shape.")] = 1,
     seed: Annotated[int, typer.Option(help="Dataset seed.")] = 0,
-    size: Annotated[
-        int | None, typer.Option(help="Largest extent of each shape, voxels.")
-    ] = None,
+    size: Annotated[int | None, typer.Option(help="Largest extent of each shape, voxels.")] = None,
     spacing: Annotated[str, typer.Option(help="Voxel size in mm: s or sx,sy,sz.")] = "1",
     margin: Annotated[int, typer.Option(help="Background voxels around each shape.")] = 3,
     overwrite: Annotated[
@@ -681,8 +704,10 @@ def main(argv: list[str] | None = None) -> int:
         keep_freed_memory()
     usage_errors = _click_exceptions()
     args = sys.argv[1:] if argv is None else list(argv)
-    debug = "--debug" in args[: next((i for i, a in enumerate(args) if not a.startswith("-")),
-                                       len(args))]
+    debug = (
+        "--debug"
+        in args[: next((i for i, a in enumerate(args) if not a.startswith("-")), len(args))]
+    )
     try:
         result = app(args=argv, prog_name="slicerecon", standalone_mode=False)
     except SlicereconError as exc:

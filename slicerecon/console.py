@@ -95,12 +95,18 @@ def print_run_summary(summary: dict[str, Any], outdir: Path) -> None:
     )
     structures = summary.get("structures") or []
     if len(structures) > 1:
-        listing = Table("value", "name", "status", "planes", "volume (mm³)", "mesh",
-                        title="structures")
+        listing = Table(
+            "value", "name", "status", "planes", "volume (mm³)", "mesh", title="structures"
+        )
         for record in structures:
-            listing.add_row(str(record["value"]), record["name"], record["status"],
-                            str(record["planes"]), f"{record['volume_mm3']:.6g}",
-                            str(record.get("mesh", "")))
+            listing.add_row(
+                str(record["value"]),
+                record["name"],
+                record["status"],
+                str(record["planes"]),
+                f"{record['volume_mm3']:.6g}",
+                str(record.get("mesh", "")),
+            )
         console.print(listing)
     metrics = summary.get("metrics")
     if metrics:

@@ -87,8 +87,14 @@ def _corner_peaks(
     from scipy.spatial import cKDTree
     from skimage.feature.peak import peak_local_max
 
-    coords = peak_local_max(response, min_distance=min_distance, threshold_abs=threshold_abs,
-                            threshold_rel=None, exclude_border=False, num_peaks=np.inf)
+    coords = peak_local_max(
+        response,
+        min_distance=min_distance,
+        threshold_abs=threshold_abs,
+        threshold_rel=None,
+        exclude_border=False,
+        num_peaks=np.inf,
+    )
     if len(coords):
         tree = cKDTree(coords)
         rejected: set[int] = set()

@@ -36,8 +36,14 @@ import numpy as np
 from .errors import FormatError, InputError, OptionError
 from .io.atomic import atomic_path
 
-__all__ = ["MANIFEST", "DATASET_FORMAT", "case_seed", "load_manifest", "make_dataset",
-           "resolve_shapes"]
+__all__ = [
+    "MANIFEST",
+    "DATASET_FORMAT",
+    "case_seed",
+    "load_manifest",
+    "make_dataset",
+    "resolve_shapes",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -158,16 +164,20 @@ def load_manifest(directory: str | os.PathLike[str]) -> dict[str, Any]:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise FormatError(f"{path} is not valid JSON ({exc}); re-make the dataset") from exc
     if not isinstance(manifest, dict) or manifest.get("format") != DATASET_FORMAT:
-        raise FormatError(f"{path} is not a slicerecon dataset manifest (no format "
-                          f"{DATASET_FORMAT!r})")
+        raise FormatError(
+            f"{path} is not a slicerecon dataset manifest (no format {DATASET_FORMAT!r})"
+        )
     if not isinstance(manifest.get("cases"), list):
         raise FormatError(f"{path} has no list of cases")
     return manifest
 
 
 def _check_int(value: object, name: str, low: int, high: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low or (
-        high is not None and value > high
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or value < low
+        or (high is not None and value > high)
     ):
         upper = "" if high is None else f" and <= {high}"
         raise OptionError(f"{name} must be a whole number >= {low}{upper} (got {value!r})")
@@ -291,28 +301,30 @@ def make_dataset(
             volume = real_shape(name, **options)
             family, params, exact = "real", options, None
         else:
-            volume = make_shape(name, seed=case_seed_, spacing=tuple(spacing_list),
-                                margin=margin, resolution=size)
+            volume = make_shape(
+                name, seed=case_seed_, spacing=tuple(spacing_list), margin=margin, resolution=size
+            )
             family = family_of(name)
             params = shape_params(name, seed=case_seed_)
             exact = analytic_volume(name, **params)
         file = f"{case}.nii.gz"
         write_nifti(volume, folder / file)
-        cases.append({
-            "case": case,
-            "file": file,
-            "shape": name,
-            "family": family,
-            "seed": case_seed_,
-            "params": _jsonable(params),
-            "grid": [int(n) for n in volume.shape],
-            "spacing_mm": [round(float(s), 9) for s in volume.spacing],
-            "voxels": int(np.count_nonzero(volume.mask)),
-            "volume_mm3": round(float(volume.volume_mm3), 6),
-            "analytic_volume_mm3": None if exact is None else round(float(exact), 6),
-        })
-        logger.info("case %d/%d: %s (%s)", done, len(plan), case, "x".join(map(str,
-                                                                              volume.shape)))
+        cases.append(
+            {
+                "case": case,
+                "file": file,
+                "shape": name,
+                "family": family,
+                "seed": case_seed_,
+                "params": _jsonable(params),
+                "grid": [int(n) for n in volume.shape],
+                "spacing_mm": [round(float(s), 9) for s in volume.spacing],
+                "voxels": int(np.count_nonzero(volume.mask)),
+                "volume_mm3": round(float(volume.volume_mm3), 6),
+                "analytic_volume_mm3": None if exact is None else round(float(exact), 6),
+            }
+        )
+        logger.info("case %d/%d: %s (%s)", done, len(plan), case, "x".join(map(str, volume.shape)))
         if progress is not None:
             progress(done, len(plan), case)
 

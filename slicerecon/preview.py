@@ -31,10 +31,21 @@ __all__ = ["MAX_PANEL_PX", "write_preview"]
 MAX_PANEL_PX = 320
 """Largest panel side, pixels: bigger grids are rasterised at a coarser step."""
 
-_PALETTE = np.array([  # the ten "tab10" colours
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
-], dtype=np.uint8)
+_PALETTE = np.array(
+    [  # the ten "tab10" colours
+        (31, 119, 180),
+        (255, 127, 14),
+        (44, 160, 44),
+        (214, 39, 40),
+        (148, 103, 189),
+        (140, 86, 75),
+        (227, 119, 194),
+        (127, 127, 127),
+        (188, 189, 34),
+        (23, 190, 207),
+    ],
+    dtype=np.uint8,
+)
 _PLANE = np.array((214, 39, 40), dtype=np.uint8)
 _TITLE_PX = 16
 _GAP_PX = 8
@@ -45,14 +56,16 @@ def _step(grid_shape: tuple[int, int, int]) -> int:
     return max(1, math.ceil(max(grid_shape) / MAX_PANEL_PX))
 
 
-def _on_grid(volume: Volume, affine: NDArray[np.float64],
-             shape: tuple[int, int, int]) -> NDArray[np.bool_]:
+def _on_grid(
+    volume: Volume, affine: NDArray[np.float64], shape: tuple[int, int, int]
+) -> NDArray[np.bool_]:
     """A sub-grid mask (same voxel axes as ``affine``) placed on the whole grid."""
     offset = np.rint(np.linalg.solve(affine[:3, :3], volume.affine[:3, 3] - affine[:3, 3]))
     lo = offset.astype(np.int64)
     out = np.zeros(shape, dtype=bool)
-    region = tuple(slice(max(a, 0), min(a + n, m))
-                   for a, n, m in zip(lo, volume.shape, shape, strict=True))
+    region = tuple(
+        slice(max(a, 0), min(a + n, m)) for a, n, m in zip(lo, volume.shape, shape, strict=True)
+    )
     source = tuple(slice(r.start - a, r.stop - a) for r, a in zip(region, lo, strict=True))
     out[region] = volume.mask[source]
     return out
@@ -70,8 +83,9 @@ def _panel(image: NDArray[np.uint8], zoom: int) -> NDArray[np.uint8]:
     return np.repeat(np.repeat(shown, zoom, axis=0), zoom, axis=1)
 
 
-def _outline(image: NDArray[np.uint8], lo: tuple[int, int], hi: tuple[int, int],
-             colour: NDArray[np.uint8]) -> None:
+def _outline(
+    image: NDArray[np.uint8], lo: tuple[int, int], hi: tuple[int, int], colour: NDArray[np.uint8]
+) -> None:
     """Draw a one-pixel rectangle ``[lo, hi)`` (rows, columns) on ``image`` in place."""
     r0, c0 = max(lo[0], 0), max(lo[1], 0)
     r1, c1 = min(hi[0], image.shape[0]) - 1, min(hi[1], image.shape[1]) - 1
@@ -135,10 +149,13 @@ def write_preview(
         recon = mesh_to_mask(mesh, affine, coarse_shape)  # type: ignore[arg-type]
     owner = np.full(coarse_shape, -1, dtype=np.int16)
     for i, box in reversed(list(enumerate(boxes))):
-        owner[tuple(slice(lo // step, -(-hi // step)) for lo, hi in zip(box.lo, box.hi,
-                                                                         strict=True))] = i
-    same_grid = isinstance(truth, Volume) and truth.shape == tuple(grid) and np.allclose(
-        truth.affine, sections.affine
+        owner[
+            tuple(slice(lo // step, -(-hi // step)) for lo, hi in zip(box.lo, box.hi, strict=True))
+        ] = i
+    same_grid = (
+        isinstance(truth, Volume)
+        and truth.shape == tuple(grid)
+        and np.allclose(truth.affine, sections.affine)
     )
     zoom = _scale_px(coarse_shape)
     coarse_truth = pool_any(truth.mask, step) if same_grid and truth is not None else None
@@ -164,9 +181,12 @@ def write_preview(
                 else:
                     image[:, idx] = (image[:, idx] // 2 + _PLANE // 2).astype(np.uint8)
         for i, box in enumerate(boxes):
-            _outline(image, (box.lo[rows] // step, box.lo[cols] // step),
-                     (-(-box.hi[rows] // step), -(-box.hi[cols] // step)),
-                     _PALETTE[i % len(_PALETTE)])
+            _outline(
+                image,
+                (box.lo[rows] // step, box.lo[cols] // step),
+                (-(-box.hi[rows] // step), -(-box.hi[cols] // step)),
+                _PALETTE[i % len(_PALETTE)],
+            )
         panels[0].append(_panel(image, zoom))
         titles[0].append(f"{label} along {AXIS_NAMES[ax_id]}")
 
@@ -179,15 +199,21 @@ def write_preview(
         panels[1].append(_panel(image, zoom))
         titles[1].append(f"result ({len(boxes)} parts) along {AXIS_NAMES[ax_id]}")
 
-    widths = [max(max(p[i].shape[1] for p in panels), 7 * max(len(t[i]) for t in titles))
-              for i in range(3)]
+    widths = [
+        max(max(p[i].shape[1] for p in panels), 7 * max(len(t[i]) for t in titles))
+        for i in range(3)
+    ]
     heights = [max(p.shape[0] for p in row) for row in panels]
     width = sum(widths) + _GAP_PX * 4
     height = sum(heights) + (_TITLE_PX + _GAP_PX) * 2 + _TITLE_PX + _GAP_PX
     canvas = Image.new("RGB", (max(width, 480), height), "white")
     draw = ImageDraw.Draw(canvas)
-    draw.text((_GAP_PX, 2), f"{sections.n_planes} planes along {AXIS_NAMES[sections.axis]} "
-              f"(red lines); planner: {planner}", fill=(0, 0, 0))
+    draw.text(
+        (_GAP_PX, 2),
+        f"{sections.n_planes} planes along {AXIS_NAMES[sections.axis]} "
+        f"(red lines); planner: {planner}",
+        fill=(0, 0, 0),
+    )
     y = _TITLE_PX + _GAP_PX
     for r in range(2):
         x = _GAP_PX

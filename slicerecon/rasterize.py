@@ -140,7 +140,10 @@ def mesh_to_mask(
     mask = _fill_between_crossings(cols, depths, n_i * n_j, n_k)
     logger.debug(
         "rasterized %d faces on a %s grid: %d crossings, %d voxels inside",
-        len(faces), dims, len(depths), int(np.count_nonzero(mask)),
+        len(faces),
+        dims,
+        len(depths),
+        int(np.count_nonzero(mask)),
     )
     return mask.reshape(n_i, n_j, n_k)
 

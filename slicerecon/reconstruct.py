@@ -282,9 +282,11 @@ def prepare_inputs(
     from .sampling import projections_from_sections, projections_from_volume, sample_sections
 
     if isinstance(projections, str):
-        files = [] if projections in PROJECTION_SOURCES else [
-            f.strip() for f in projections.split(",") if f.strip()
-        ]
+        files = (
+            []
+            if projections in PROJECTION_SOURCES
+            else [f.strip() for f in projections.split(",") if f.strip()]
+        )
     else:
         files = [os.fspath(f) for f in projections]
     if not files and projections not in PROJECTION_SOURCES:
@@ -293,8 +295,7 @@ def prepare_inputs(
     truth: Volume | None = None
     if isinstance(data, Volume):
         volume = data.crop(pad=3)
-        check_grid(volume.shape, what="the reconstruction grid",
-                   memory_budget_gb=memory_budget_gb)
+        check_grid(volume.shape, what="the reconstruction grid", memory_budget_gb=memory_budget_gb)
         if looks_sparse(volume, ax):
             logger.info("the mask annotates only some planes: using them as sections")
             sections = _sparse_volume_to_sections(volume, ax)
@@ -308,8 +309,11 @@ def prepare_inputs(
                     f"spans along {AXIS_NAMES[ax]}; ask for at most {spanned}"
                 )
             if spanned == 1:  # a structure on one plane: that plane, a one-slice slab
-                logger.warning("the structure lies on one plane along %s: the reconstruction "
-                               "is a slab one slice thick", AXIS_NAMES[ax])
+                logger.warning(
+                    "the structure lies on one plane along %s: the reconstruction "
+                    "is a slab one slice thick",
+                    AXIS_NAMES[ax],
+                )
                 slices, every = None, 1
             sections = sample_sections(volume, n=slices, every=every, axis=ax)
             truth = volume
@@ -476,17 +480,28 @@ def reconstruct(
         # term (it is what training optimises), so parts are not reconstructed
         # twice: the plan's rewards hold IoU(W_i, O) only.
         plan = plan_partition(
-            occupancy, planner=planner, reconstruct=None, max_parts=max_parts, weights=weights,
+            occupancy,
+            planner=planner,
+            reconstruct=None,
+            max_parts=max_parts,
+            weights=weights,
             max_grid=PLANNING_MAX_GRID,
         )
     implicit_carve = carve and entry.implicit_carve and not smooth
     with _timed(timings, "surface"):
         boxes = [part.box for part in plan.parts]
         surface = reconstruct_surface(
-            sections, boxes, method=method, smooth=smooth, extend_to_box=planner != "none",
-            hull=guide, interpolation=interpolation, carve=hull if implicit_carve else None,
+            sections,
+            boxes,
+            method=method,
+            smooth=smooth,
+            extend_to_box=planner != "none",
+            hull=guide,
+            interpolation=interpolation,
+            carve=hull if implicit_carve else None,
             upsample=(upsample or axis_upsample(sections)) if entry.implicit_carve else 1,
-            keep_field=keep_field, cover=cover and implicit_carve,
+            keep_field=keep_field,
+            cover=cover and implicit_carve,
         )
         mesh, occupancy = surface.mesh, surface.occupancy
     if carve and entry.carved and not implicit_carve:
@@ -560,9 +575,14 @@ def run_case(
     value, name = 1, ""
     described = None
     with _timed(timings, "read"):
-        label_map = None if config.union or ground_truth is not None else read_label_map(
-            input_path, allow_irregular=config.allow_irregular,
-            memory_budget_gb=config.max_memory_gb,
+        label_map = (
+            None
+            if config.union or ground_truth is not None
+            else read_label_map(
+                input_path,
+                allow_irregular=config.allow_irregular,
+                memory_budget_gb=config.max_memory_gb,
+            )
         )
     kind = detect_kind(input_path)
     if kind.kind == "rtstruct" and ground_truth is None:
@@ -570,8 +590,16 @@ def run_case(
         if several is not None:
             from .structures import run_structures_case
 
-            return run_structures_case(several, input_path, out, config, progress=progress,
-                                       timings=timings, coordinates="LPS", image_dir=image_dir)
+            return run_structures_case(
+                several,
+                input_path,
+                out,
+                config,
+                progress=progress,
+                timings=timings,
+                coordinates="LPS",
+                image_dir=image_dir,
+            )
         if single is not None:
             config = replace(config, label=str(single.value), roi=None)
             value, name = single.value, single.name
@@ -582,8 +610,15 @@ def run_case(
         if len(label_map.structures) > 1:
             from .structures import run_structures_case
 
-            return run_structures_case(label_map, input_path, out, config, progress=progress,
-                                       timings=timings, image_dir=image_dir)
+            return run_structures_case(
+                label_map,
+                input_path,
+                out,
+                config,
+                progress=progress,
+                timings=timings,
+                image_dir=image_dir,
+            )
         only = label_map.structures[0]
         value, name = only.value, only.name
         described = only
@@ -612,7 +647,9 @@ def run_case(
     if ground_truth is not None:
         with _timed(timings, "read"):
             truth = load_ground_truth(
-                ground_truth, label=config.label, allow_irregular=config.allow_irregular,
+                ground_truth,
+                label=config.label,
+                allow_irregular=config.allow_irregular,
                 memory_budget_gb=config.max_memory_gb,
             )
     say("reconstruct")
@@ -633,8 +670,13 @@ def run_case(
     if truth is not None:
         say("evaluate")
         with _timed(timings, "metrics"):
-            metrics = evaluate(result.mesh, truth, n_points=config.n_points, seed=config.seed,
-                               pred_occupancy=result.occupancy)
+            metrics = evaluate(
+                result.mesh,
+                truth,
+                n_points=config.n_points,
+                seed=config.seed,
+                pred_occupancy=result.occupancy,
+            )
     say("write")
     with _timed(timings, "write"):
         mesh_path = write_mesh(result.mesh, out / f"mesh.{config.mesh_format}")
@@ -660,23 +702,46 @@ def run_case(
 
         structure = described if described is not None else Structure(value, name)
         outputs = write_label_outputs(
-            out, labels, labels_affine, [structure], coordinates=frame,
-            series=dicom_image_series(kind.kind, input_path,
-                                      image_dir if image_dir is not None else kind.image_dir),
+            out,
+            labels,
+            labels_affine,
+            [structure],
+            coordinates=frame,
+            series=dicom_image_series(
+                kind.kind, input_path, image_dir if image_dir is not None else kind.image_dir
+            ),
             rtstruct=kind.path if kind.kind == "rtstruct" else None,
             allow_irregular=config.allow_irregular,
         )
-        _write_json(out / "structures.json", {"structures": [{
-            **structure.to_dict(), "status": "reconstructed",
-            "planes": int(np.count_nonzero(sections.masks.any(axis=(1, 2)))),
-            "volume_mm3": round(float(np.count_nonzero(labels))
-                                * abs(float(np.linalg.det(labels_affine[:3, :3]))), 3),
-            "parts": len(result.plan.parts), "mesh": mesh_path.name,
-        }], "outputs": outputs.to_dict()})
+        _write_json(
+            out / "structures.json",
+            {
+                "structures": [
+                    {
+                        **structure.to_dict(),
+                        "status": "reconstructed",
+                        "planes": int(np.count_nonzero(sections.masks.any(axis=(1, 2)))),
+                        "volume_mm3": round(
+                            float(np.count_nonzero(labels))
+                            * abs(float(np.linalg.det(labels_affine[:3, :3]))),
+                            3,
+                        ),
+                        "parts": len(result.plan.parts),
+                        "mesh": mesh_path.name,
+                    }
+                ],
+                "outputs": outputs.to_dict(),
+            },
+        )
         write_preview(
-            out / "preview.png", mesh=result.mesh, boxes=result.plan.boxes,
-            planner=result.plan.planner, sections=sections, projections=projections,
-            occupancy=result.occupancy, truth=truth,
+            out / "preview.png",
+            mesh=result.mesh,
+            boxes=result.plan.boxes,
+            planner=result.plan.planner,
+            sections=sections,
+            projections=projections,
+            occupancy=result.occupancy,
+            truth=truth,
         )
     summary: dict[str, Any] = {
         "input": str(input_path),
@@ -701,7 +766,9 @@ def _rtstruct_rois(kind: Any, config: ReconstructConfig, image_dir: Any) -> tupl
     if len(config.selectors) == 1:
         return None, None
     structures, sections, union = read_rtstruct_structures(
-        kind.path, rois=config.selectors, allow_irregular=config.allow_irregular,
+        kind.path,
+        rois=config.selectors,
+        allow_irregular=config.allow_irregular,
         image_dir=image_dir if image_dir is not None else kind.image_dir,
         memory_budget_gb=config.max_memory_gb,
     )
@@ -730,10 +797,13 @@ def _label_grid(
         offset = np.linalg.solve(affine[:3, :3], occupancy.affine[:3, 3] - affine[:3, 3])
         lo = np.rint(offset).astype(np.int64)
         if np.allclose(offset, lo, atol=1e-6):
-            region = tuple(slice(max(int(a), 0), min(int(a) + n, m))
-                           for a, n, m in zip(lo, occupancy.shape, shape, strict=True))
-            source = tuple(slice(r.start - int(a), r.stop - int(a))
-                           for r, a in zip(region, lo, strict=True))
+            region = tuple(
+                slice(max(int(a), 0), min(int(a) + n, m))
+                for a, n, m in zip(lo, occupancy.shape, shape, strict=True)
+            )
+            source = tuple(
+                slice(r.start - int(a), r.stop - int(a)) for r, a in zip(region, lo, strict=True)
+            )
             labels[region][occupancy.mask[source]] = value
             return labels, affine
     labels[mesh_to_mask(result.mesh, affine, shape)] = value

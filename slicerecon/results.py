@@ -629,23 +629,34 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
         try:
             raw = _read_json(files.metrics)
             if isinstance(raw.get("structures"), dict):  # several structures and their mean
-                per_structure = {str(k): _numbers(v) for k, v in raw["structures"].items()
-                                 if isinstance(v, dict)}
+                per_structure = {
+                    str(k): _numbers(v) for k, v in raw["structures"].items() if isinstance(v, dict)
+                }
                 raw = raw.get("mean") or {}
             metrics = _numbers(raw)
         except (OSError, ValueError) as exc:
             record = FailureRecord.from_json(
-                {"input": plan.get("input"), "config": config,
-                 "error": f"unreadable metrics.json ({exc})"}, case=case)
+                {
+                    "input": plan.get("input"),
+                    "config": config,
+                    "error": f"unreadable metrics.json ({exc})",
+                },
+                case=case,
+            )
             return _failed(case, folder, record)
-    timings = {str(k): float(v) for k, v in _sub(plan, "timings_s").items()
-               if _as_float(v) is not None}
+    timings = {
+        str(k): float(v) for k, v in _sub(plan, "timings_s").items() if _as_float(v) is not None
+    }
     done = _done_record(files)
     recorded_input = _str_or_none(plan.get("input"))
     parts = plan.get("parts")
     if not isinstance(parts, list) and isinstance(plan.get("structures"), list):
-        parts = [p for item in plan["structures"] if isinstance(item, dict)
-                 for p in ((item.get("plan") or {}).get("parts") or [])]
+        parts = [
+            p
+            for item in plan["structures"]
+            if isinstance(item, dict)
+            for p in ((item.get("plan") or {}).get("parts") or [])
+        ]
     watertight = done.get("watertight")
     return CaseResult(
         case=case,
@@ -693,8 +704,10 @@ def collect_results(results_dir: str | os.PathLike[str]) -> list[CaseResult]:
     if not root.exists():
         raise InputError(f"results directory not found: {root}")
     if not root.is_dir():
-        raise InputError(f"{root} is not a directory; pass the directory `slicerecon run/batch` "
-                         "wrote its case folders into")
+        raise InputError(
+            f"{root} is not a directory; pass the directory `slicerecon run/batch` "
+            "wrote its case folders into"
+        )
     layout = ResultsLayout(root)
     cases = [read_case(folder, name=layout.case_name(folder)) for folder in layout.case_folders()]
     cases.sort(key=lambda c: c.case)
@@ -727,4 +740,3 @@ def write_summary(results: Iterable[CaseResult], path: str | os.PathLike[str]) -
             for result in results:
                 writer.writerow(result.to_row())
     return target
-

@@ -201,12 +201,20 @@ def sample_sections(
         if indices.size == 1 and last > first:
             logger.warning(
                 "every=%d keeps only plane %d: the shape spans planes %d..%d along %s",
-                step, first, first, last, AXIS_NAMES[ax],
+                step,
+                first,
+                first,
+                last,
+                AXIS_NAMES[ax],
             )
     masks = np.moveaxis(volume.mask, ax, 0)[indices]
     logger.debug(
         "kept %d of planes %d..%d along %s: %s",
-        indices.size, first, last, AXIS_NAMES[ax], indices.tolist(),
+        indices.size,
+        first,
+        last,
+        AXIS_NAMES[ax],
+        indices.tolist(),
     )
     return CrossSections(masks, indices.astype(np.float64), ax, volume.affine, volume.shape)
 
@@ -406,7 +414,7 @@ def pool_any(mask: NDArray[np.bool_], factor: int) -> NDArray[np.bool_]:
         extra = (-out.shape[axis]) % factor
         if extra:
             out = np.pad(out, [(0, extra) if a == axis else (0, 0) for a in range(out.ndim)])
-        shape = out.shape[:axis] + (out.shape[axis] // factor, factor) + out.shape[axis + 1:]
+        shape = out.shape[:axis] + (out.shape[axis] // factor, factor) + out.shape[axis + 1 :]
         out = out.reshape(shape).any(axis=axis + 1)
     return out
 

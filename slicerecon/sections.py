@@ -213,9 +213,11 @@ class Volume:
     def bounding_box_mm(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """World-axis-aligned bounds ``(min, max)`` of the foreground voxel centres, mm."""
         lo, hi = self.bounding_box_vox()
-        corners = np.array(
-            [[c[0], c[1], c[2]] for c in np.ndindex(2, 2, 2)], dtype=np.float64
-        ) * (hi - 1 - lo) + lo
+        corners = (
+            np.array([[c[0], c[1], c[2]] for c in np.ndindex(2, 2, 2)], dtype=np.float64)
+            * (hi - 1 - lo)
+            + lo
+        )
         world = self.index_to_world(corners)
         return world.min(axis=0), world.max(axis=0)
 

@@ -87,9 +87,13 @@ class StructureResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready record (``structures.json``)."""
-        return {**self.structure.to_dict(), "status": self.status, "planes": self.planes,
-                "volume_mm3": round(self.volume_mm3, 3),
-                "parts": None if self.plan is None else len(self.plan.parts)}
+        return {
+            **self.structure.to_dict(),
+            "status": self.status,
+            "planes": self.planes,
+            "volume_mm3": round(self.volume_mm3, 3),
+            "parts": None if self.plan is None else len(self.plan.parts),
+        }
 
 
 @dataclass
@@ -129,8 +133,7 @@ class StructuresReconstruction:
         if self.truth is None:
             raise OptionError("contour inputs have no ground truth")
         shape = self.sections.grid_shape
-        region = tuple(slice(int(a), int(a) + n) for a, n in zip(self.crop_lo, shape,
-                                                                 strict=True))
+        region = tuple(slice(int(a), int(a) + n) for a, n in zip(self.crop_lo, shape, strict=True))
         return Volume(self.truth.labels[region] == value, self.sections.affine)
 
 
@@ -190,16 +193,24 @@ def reconstruct_structures(
     timings: dict[str, float] = {}
     start = time.perf_counter()
     union = label_map.union()
-    sections, _, cropped = prepare_inputs(union, slices=slices, every=every, axis=axis,
-                                          projections="auto", memory_budget_gb=memory_budget_gb)
+    sections, _, cropped = prepare_inputs(
+        union,
+        slices=slices,
+        every=every,
+        axis=axis,
+        projections="auto",
+        memory_budget_gb=memory_budget_gb,
+    )
     # A sparse union (the structures annotate only some planes) has no ground
     # truth: each structure's silhouettes are derived from its own sections.
     dense = cropped is not None
-    crop_lo = np.rint(np.linalg.solve(label_map.affine[:3, :3],
-                                      sections.affine[:3, 3] - label_map.affine[:3, 3]))
+    crop_lo = np.rint(
+        np.linalg.solve(label_map.affine[:3, :3], sections.affine[:3, 3] - label_map.affine[:3, 3])
+    )
     crop_lo = crop_lo.astype(np.int64)
-    region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, sections.grid_shape,
-                                                             strict=True))
+    region = tuple(
+        slice(int(a), int(a) + n) for a, n in zip(crop_lo, sections.grid_shape, strict=True)
+    )
     labels_crop = label_map.labels[region]
     plane_index = np.rint(sections.indices).astype(np.int64)
     timings["sections"] = time.perf_counter() - start
@@ -210,20 +221,36 @@ def reconstruct_structures(
         planes = np.moveaxis(mask, sections.axis, 0)[plane_index]
         own = None
         if planes.any():
-            own = CrossSections(planes, sections.indices, sections.axis, sections.affine,
-                                sections.grid_shape)
+            own = CrossSections(
+                planes, sections.indices, sections.axis, sections.affine, sections.grid_shape
+            )
         items.append((structure, own, mask if dense else None))
     results, joint = _reconstruct_jointly(
-        items, sections, timings, planner=planner, method=method,
-        interpolation=interpolation, carve=carve, cover=cover, max_parts=max_parts,
+        items,
+        sections,
+        timings,
+        planner=planner,
+        method=method,
+        interpolation=interpolation,
+        carve=carve,
+        cover=cover,
+        max_parts=max_parts,
         weights=weights,
     )
     values = np.array([s.structure.value for s in results], dtype=np.int64)
     labels = np.zeros(label_map.shape, dtype=np.result_type(label_map.labels.dtype, np.uint8))
     won = joint.labels >= 0
     labels[region][won] = values[joint.labels[won]]
-    return StructuresReconstruction(results, labels, sections, label_map if dense else None,
-                                    crop_lo, timings, label_map.affine, label_map.coordinates)
+    return StructuresReconstruction(
+        results,
+        labels,
+        sections,
+        label_map if dense else None,
+        crop_lo,
+        timings,
+        label_map.affine,
+        label_map.coordinates,
+    )
 
 
 def reconstruct_sparse_structures(
@@ -270,8 +297,16 @@ def reconstruct_sparse_structures(
     timings: dict[str, float] = {}
     items = [(structure, own, None) for structure, own in zip(structures, sections, strict=True)]
     results, joint = _reconstruct_jointly(
-        items, union, timings, planner=planner, method=method, interpolation=interpolation,
-        carve=carve, cover=cover, max_parts=max_parts, weights=weights,
+        items,
+        union,
+        timings,
+        planner=planner,
+        method=method,
+        interpolation=interpolation,
+        carve=carve,
+        cover=cover,
+        max_parts=max_parts,
+        weights=weights,
     )
     for item, own in zip(results, sections, strict=True):
         if own is None:
@@ -281,8 +316,9 @@ def reconstruct_sparse_structures(
     labels = np.zeros(union.grid_shape, dtype=dtype)
     won = joint.labels >= 0
     labels[won] = values[joint.labels[won]]
-    return StructuresReconstruction(results, labels, union, None, np.zeros(3, np.int64),
-                                    timings, union.affine, coordinates)
+    return StructuresReconstruction(
+        results, labels, union, None, np.zeros(3, np.int64), timings, union.affine, coordinates
+    )
 
 
 def _reconstruct_jointly(
@@ -309,8 +345,9 @@ def _reconstruct_jointly(
     fields = []
     for structure, own, mask in items:
         if own is None or not own.masks.any():
-            logger.warning("structure %s lies between the kept planes: not reconstructed",
-                           structure.label)
+            logger.warning(
+                "structure %s lies between the kept planes: not reconstructed", structure.label
+            )
             results.append(StructureResult(structure, NO_PLANE))
             fields.append(None)
             continue
@@ -319,11 +356,13 @@ def _reconstruct_jointly(
         sub, projections, offset = crop_to_structure(own, mask)
         result = reconstruct(sub, projections, keep_field=True, upsample=upsample, **options)
         timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
-        results.append(StructureResult(structure, "reconstructed", planes=crossed,
-                                       plan=result.plan))
+        results.append(
+            StructureResult(structure, "reconstructed", planes=crossed, plan=result.plan)
+        )
         field = result.field
-        fields.append(field._replace(lo=tuple(int(a + b) for a, b in zip(field.lo, offset,
-                                                                          strict=True))))
+        fields.append(
+            field._replace(lo=tuple(int(a + b) for a, b in zip(field.lo, offset, strict=True)))
+        )
     start = time.perf_counter()
     joint = resolve(fields, shared.grid_shape)
     for i, item in enumerate(results):
@@ -336,8 +375,9 @@ def _reconstruct_jointly(
             continue
         item.occupancy = Volume(inside, shared.affine)
     timings["resolve"] = time.perf_counter() - start
-    logger.info("%d structures: %d reconstructed", len(results),
-                sum(r.mesh is not None for r in results))
+    logger.info(
+        "%d structures: %d reconstructed", len(results), sum(r.mesh is not None for r in results)
+    )
     return results, joint
 
 
@@ -371,10 +411,15 @@ def crop_to_structure(
     keep = np.flatnonzero((own.indices >= lo[axis] - 0.5) & (own.indices <= hi[axis] - 0.5))
     affine = own.affine.copy()
     affine[:3, 3] = own.affine[:3, :3] @ lo.astype(np.float64) + own.affine[:3, 3]
-    sub = CrossSections(own.masks[keep][:, lo[a]:hi[a], lo[b]:hi[b]], own.indices[keep] - lo[axis],
-                        axis, affine, tuple(int(v) for v in hi - lo))
+    sub = CrossSections(
+        own.masks[keep][:, lo[a] : hi[a], lo[b] : hi[b]],
+        own.indices[keep] - lo[axis],
+        axis,
+        affine,
+        tuple(int(v) for v in hi - lo),
+    )
     if mask is not None:
-        crop = mask[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+        crop = mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]]
         projections = projections_from_volume(Volume(crop, affine))
     else:
         projections = projections_from_sections(sub)
@@ -383,8 +428,11 @@ def crop_to_structure(
 
 def _mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, float]:
     """The mean of each numeric metric over the structures."""
-    keys = [k for k, v in next(iter(per_structure.values())).items()
-            if isinstance(v, int | float) and not isinstance(v, bool)]
+    keys = [
+        k
+        for k, v in next(iter(per_structure.values())).items()
+        if isinstance(v, int | float) and not isinstance(v, bool)
+    ]
     return {k: float(np.mean([m[k] for m in per_structure.values()])) for k in keys}
 
 
@@ -438,13 +486,23 @@ def run_structures_case(
     outdir = Path(out)
     times = dict(timings or {})
     say("reconstruct")
-    options = {"planner": config.planner, "method": config.method,
-               "interpolation": config.interpolation, "carve": config.carve, "cover": config.cover,
-               "max_parts": config.max_parts, "weights": config.weights}
+    options = {
+        "planner": config.planner,
+        "method": config.method,
+        "interpolation": config.interpolation,
+        "carve": config.carve,
+        "cover": config.cover,
+        "max_parts": config.max_parts,
+        "weights": config.weights,
+    }
     if isinstance(source, LabelMap):
         result = reconstruct_structures(
-            source, slices=config.slices, every=config.every, axis=config.axis,
-            memory_budget_gb=config.max_memory_gb, **options,
+            source,
+            slices=config.slices,
+            every=config.every,
+            axis=config.axis,
+            memory_budget_gb=config.max_memory_gb,
+            **options,
         )
     else:
         if config.slices is not None or config.every is not None:
@@ -459,7 +517,10 @@ def run_structures_case(
             continue
         truth = result.truth_mask(item.structure.value)
         metrics[item.structure.label] = evaluate(
-            item.mesh, truth, n_points=config.n_points, seed=config.seed,
+            item.mesh,
+            truth,
+            n_points=config.n_points,
+            seed=config.seed,
             pred_occupancy=item.occupancy,
         ).to_dict()
     times["metrics"] = time.perf_counter() - start
@@ -469,45 +530,64 @@ def run_structures_case(
     for item in result.results:
         record = item.to_dict()
         if item.mesh is not None:
-            path = write_mesh(item.mesh, outdir / "meshes" / f"{item.structure.label}."
-                              f"{config.mesh_format}")
+            path = write_mesh(
+                item.mesh, outdir / "meshes" / f"{item.structure.label}.{config.mesh_format}"
+            )
             record["mesh"] = f"meshes/{path.name}"
         records.append(record)
     kind = detect_kind(input_path)
     outputs = write_label_outputs(
-        outdir, result.labels, result.affine, [item.structure for item in result.results],
+        outdir,
+        result.labels,
+        result.affine,
+        [item.structure for item in result.results],
         coordinates=result.coordinates,
-        series=dicom_image_series(kind.kind, input_path,
-                                  image_dir if image_dir is not None else kind.image_dir),
+        series=dicom_image_series(
+            kind.kind, input_path, image_dir if image_dir is not None else kind.image_dir
+        ),
         rtstruct=kind.path if kind.kind == "rtstruct" else None,
         allow_irregular=config.allow_irregular,
     )
-    _write_json(outdir / "structures.json", {"structures": records,
-                                              "outputs": outputs.to_dict()})
+    _write_json(outdir / "structures.json", {"structures": records, "outputs": outputs.to_dict()})
     mean = _mean_metrics(metrics) if metrics else None
     if metrics:
         _write_json(outdir / "metrics.json", {"structures": metrics, "mean": mean})
     sections = result.sections
-    _write_json(outdir / "plan.json", {
-        "structures": [
-            {**item.structure.to_dict(),
-             "plan": None if item.plan is None else item.plan.to_dict(affine=sections.affine)}
-            for item in result.results
-        ],
-        "sections": {"axis": "xyz"[sections.axis], "n_planes": sections.n_planes,
-                     "plane_indices": sections.indices.tolist(),
-                     "positions_mm": sections.positions.tolist()},
-        "input": str(input_path),
-        "config": _config_dict(config),
-        "timings_s": {k: round(v, 4) for k, v in times.items()},
-    })
+    _write_json(
+        outdir / "plan.json",
+        {
+            "structures": [
+                {
+                    **item.structure.to_dict(),
+                    "plan": None
+                    if item.plan is None
+                    else item.plan.to_dict(affine=sections.affine),
+                }
+                for item in result.results
+            ],
+            "sections": {
+                "axis": "xyz"[sections.axis],
+                "n_planes": sections.n_planes,
+                "plane_indices": sections.indices.tolist(),
+                "positions_mm": sections.positions.tolist(),
+            },
+            "input": str(input_path),
+            "config": _config_dict(config),
+            "timings_s": {k: round(v, 4) for k, v in times.items()},
+        },
+    )
     meshes = [item.mesh for item in result.results if item.mesh is not None]
     union = Volume(result.labels != 0, result.affine)
-    write_preview(outdir / "preview.png", mesh=trimesh.util.concatenate(meshes), boxes=[],
-                  planner=f"{config.planner}, {len(meshes)} structures", sections=sections,
-                  projections=_union_projections(result), occupancy=_crop(union, result),
-                  truth=None if result.truth is None else Volume(_truth_union(result),
-                                                                 sections.affine))
+    write_preview(
+        outdir / "preview.png",
+        mesh=trimesh.util.concatenate(meshes),
+        boxes=[],
+        planner=f"{config.planner}, {len(meshes)} structures",
+        sections=sections,
+        projections=_union_projections(result),
+        occupancy=_crop(union, result),
+        truth=None if result.truth is None else Volume(_truth_union(result), sections.affine),
+    )
     times["write"] = time.perf_counter() - start
     return {
         "input": str(input_path),

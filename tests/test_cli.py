@@ -64,8 +64,22 @@ def test_run_writes_all_outputs_in_world_mm(
 
 def test_run_every_k_and_other_format(chair_nii: Path, tmp_path: Path) -> None:
     out = tmp_path / "ply"
-    code = main(["run", str(chair_nii), "-o", str(out), "--every", "8", "--format", "ply",
-                 "--planner", "none", "--axis", "z"])
+    code = main(
+        [
+            "run",
+            str(chair_nii),
+            "-o",
+            str(out),
+            "--every",
+            "8",
+            "--format",
+            "ply",
+            "--planner",
+            "none",
+            "--axis",
+            "z",
+        ]
+    )
     assert code == 0
     assert trimesh.load(out / "mesh.ply").is_watertight
     plan = json.loads((out / "plan.json").read_text())
@@ -129,10 +143,16 @@ def test_non_parallel_contours(tmp_path: Path, capsys: pytest.CaptureFixture[str
     flat = [[x, y, 0.0] for x, y in square]
     tilted = [[x, y, 10.0 + 0.5 * x] for x, y in square]
     path = tmp_path / "tilted.json"
-    path.write_text(json.dumps({
-        "format": "slicerecon-contours", "version": 1, "units": "mm",
-        "planes": [{"polygons": [flat]}, {"polygons": [tilted]}],
-    }))
+    path.write_text(
+        json.dumps(
+            {
+                "format": "slicerecon-contours",
+                "version": 1,
+                "units": "mm",
+                "planes": [{"polygons": [flat]}, {"polygons": [tilted]}],
+            }
+        )
+    )
     assert main(["run", str(path), "-o", str(tmp_path / "o")]) == 2
     assert "parallel" in _one_error_line(capsys)
 
@@ -159,7 +179,8 @@ def test_console_script_exit_code_and_debug_traceback(tmp_path: Path) -> None:
     assert plain.stderr.strip().count("\n") == 0 and "Traceback" not in plain.stderr
     debug = subprocess.run(
         [sys.executable, "-m", "slicerecon.cli", "--debug", "info", missing],
-        capture_output=True, text=True,
+        capture_output=True,
+        text=True,
     )
     assert debug.returncode != 0 and "Traceback" in debug.stderr
 

@@ -23,8 +23,23 @@ from slicerecon.shapes import FAMILIES, SHAPES, make_shape
 
 def test_make_via_cli_writes_masks_and_manifest(tmp_path: Path) -> None:
     out = tmp_path / "ds"
-    code = main(["dataset", "make", str(out), "--shapes", "holes,chair", "--per-shape", "2",
-                 "--size", "24", "--seed", "7", "--margin", "2"])
+    code = main(
+        [
+            "dataset",
+            "make",
+            str(out),
+            "--shapes",
+            "holes,chair",
+            "--per-shape",
+            "2",
+            "--size",
+            "24",
+            "--seed",
+            "7",
+            "--margin",
+            "2",
+        ]
+    )
     assert code == 0
     manifest = load_manifest(out)
     assert manifest["options"]["shapes"] == ["torus", "genus2", "plate_with_holes", "chair"]
@@ -74,8 +89,10 @@ def test_refuses_a_foreign_directory(tmp_path: Path, capsys: pytest.CaptureFixtu
     err = capsys.readouterr().err
     assert "not a slicerecon dataset" in err and "--overwrite" in err
     assert len(err.strip().splitlines()) == 1
-    assert main(["dataset", "make", str(out), "--shapes", "sphere", "--size", "16",
-                 "--overwrite"]) == 0
+    assert (
+        main(["dataset", "make", str(out), "--shapes", "sphere", "--size", "16", "--overwrite"])
+        == 0
+    )
     assert (out / "notes.txt").read_text() == "keep me"
     assert (out / "sphere_000.nii.gz").is_file()
     assert main(["dataset", "make", str(tmp_path / "x"), "--shapes", "teapot"]) == 2
@@ -84,8 +101,22 @@ def test_refuses_a_foreign_directory(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 def test_anisotropic_spacing_and_real_shapes(tmp_path: Path) -> None:
     out = tmp_path / "ds"
-    assert main(["dataset", "make", str(out), "--shapes", "car,pymeshlab_cow", "--size", "24",
-                 "--spacing", "0.8,0.8,2"]) == 0
+    assert (
+        main(
+            [
+                "dataset",
+                "make",
+                str(out),
+                "--shapes",
+                "car,pymeshlab_cow",
+                "--size",
+                "24",
+                "--spacing",
+                "0.8,0.8,2",
+            ]
+        )
+        == 0
+    )
     cases = {c["shape"]: c for c in load_manifest(out)["cases"]}
     car = cases["car"]["spacing_mm"]
     assert car[2] / car[0] == pytest.approx(2.5)
@@ -107,8 +138,12 @@ def test_list_command(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_resolve_and_manifest_errors(tmp_path: Path) -> None:
     assert resolve_shapes(None) == sorted(SHAPES)
-    assert resolve_shapes("holes, torus ,sphere") == ["torus", "genus2", "plate_with_holes",
-                                                      "sphere"]
+    assert resolve_shapes("holes, torus ,sphere") == [
+        "torus",
+        "genus2",
+        "plate_with_holes",
+        "sphere",
+    ]
     with pytest.raises(OptionError, match="no shape selected"):
         resolve_shapes(" , ")
     with pytest.raises(OptionError, match="per_shape"):

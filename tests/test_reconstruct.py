@@ -11,8 +11,14 @@ from slicerecon.sections import Volume
 from slicerecon.shapes import analytic_volume, make_shape
 
 
-def _run(volume: Volume, *, slices: int = 16, axis: str = "z", planner: str = "heuristic",
-         method: str = "loft"):  # type: ignore[no-untyped-def]
+def _run(
+    volume: Volume,
+    *,
+    slices: int = 16,
+    axis: str = "z",
+    planner: str = "heuristic",
+    method: str = "loft",
+):  # type: ignore[no-untyped-def]
     sections, projections, truth = prepare_inputs(volume, slices=slices, axis=axis)
     result = reconstruct(sections, projections, planner=planner, method=method)
     assert truth is not None

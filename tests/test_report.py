@@ -79,7 +79,7 @@ def _parse(path: Path) -> _Page:
 def _decode(src: str) -> Image.Image:
     prefix = "data:image/png;base64,"
     assert src.startswith(prefix), src[:40]
-    image = Image.open(io.BytesIO(base64.b64decode(src[len(prefix):], validate=True)))
+    image = Image.open(io.BytesIO(base64.b64decode(src[len(prefix) :], validate=True)))
     image.load()
     return image
 
@@ -97,10 +97,17 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> Path:
             run_case(mask, root / name / method, config)
     failed = root / "broken" / "loft"
     failed.mkdir(parents=True)
-    (failed / "error.json").write_text(json.dumps(
-        {"case": "broken/loft", "input": "missing.nii.gz", "method": "loft",
-         "planner": "heuristic", "error": FAILURE}
-    ))
+    (failed / "error.json").write_text(
+        json.dumps(
+            {
+                "case": "broken/loft",
+                "input": "missing.nii.gz",
+                "method": "loft",
+                "planner": "heuristic",
+                "error": FAILURE,
+            }
+        )
+    )
     return root
 
 
@@ -112,7 +119,11 @@ def report(results: Path) -> Path:
 def test_collect_results_reads_every_case(results: Path) -> None:
     cases = collect_results(results)
     assert [c.case for c in cases] == [
-        "box/loft", "box/sdf", "broken/loft", "sphere/loft", "sphere/sdf"
+        "box/loft",
+        "box/sdf",
+        "broken/loft",
+        "sphere/loft",
+        "sphere/sdf",
     ]
     by_name = {c.case: c for c in cases}
     assert by_name["sphere/sdf"].method == "sdf"
@@ -235,8 +246,7 @@ def test_error_colours_measure_millimetres(results: Path, tmp_path: Path) -> Non
 
 
 def test_report_is_deterministic(report: Path, results: Path) -> None:
-    before = {n: (results / n).read_bytes() for n in ("report.html", "metrics.csv",
-                                                      "summary.json")}
+    before = {n: (results / n).read_bytes() for n in ("report.html", "metrics.csv", "summary.json")}
     write_report(results, title="Spheres & boxes <test>")
     for name, data in before.items():
         assert (results / name).read_bytes() == data, name
@@ -244,17 +254,24 @@ def test_report_is_deterministic(report: Path, results: Path) -> None:
 
 def test_no_renders_and_unreadable_plan(results: Path, tmp_path: Path) -> None:
     copy = tmp_path / "copy"
-    shutil.copytree(results, copy, ignore=shutil.ignore_patterns("report*", "*.csv",
-                                                                 "summary.json"))
+    shutil.copytree(
+        results, copy, ignore=shutil.ignore_patterns("report*", "*.csv", "summary.json")
+    )
     bad = copy / "sphere" / "bad"
     bad.mkdir()
     (bad / "plan.json").write_text("{ not json")
     batch_style = copy / "liver_007"  # as pipelines/batch writes it: no method, a type
     batch_style.mkdir()
-    (batch_style / "error.json").write_text(json.dumps(
-        {"case": "liver_007", "input": "liver_007.nii.gz", "error": "truncated gzip",
-         "type": "FormatError"}
-    ))
+    (batch_style / "error.json").write_text(
+        json.dumps(
+            {
+                "case": "liver_007",
+                "input": "liver_007.nii.gz",
+                "error": "truncated gzip",
+                "type": "FormatError",
+            }
+        )
+    )
     path = write_report(copy, renders=False)
     page = _parse(path)
     assert len(page.images) == 2  # the summary figures only
@@ -291,8 +308,19 @@ def test_cli_evaluate_dataset_runs_every_mask_and_records_failures(
     (data / "corrupt.nii").write_bytes(b"this is not a NIfTI file")
     (data / "manifest.json").write_text("{}")
     out = tmp_path / "out"
-    args = ["evaluate-dataset", str(data), "-o", str(out), "--method", "loft,sdf",
-            "--n-points", "2000", "--slices", "6", "--no-renders"]
+    args = [
+        "evaluate-dataset",
+        str(data),
+        "-o",
+        str(out),
+        "--method",
+        "loft,sdf",
+        "--n-points",
+        "2000",
+        "--slices",
+        "6",
+        "--no-renders",
+    ]
     assert main(args) == 0
     assert Path(capsys.readouterr().out.strip()) == out / "report.html"
     for method in METHODS:
@@ -303,8 +331,12 @@ def test_cli_evaluate_dataset_runs_every_mask_and_records_failures(
         assert error["method"] == method and error["error"]
     with (out / "metrics.csv").open(newline="") as handle:
         rows = {r["case"]: r["status"] for r in csv.DictReader(handle)}
-    assert rows == {"ball/loft": "ok", "ball/sdf": "ok", "corrupt/loft": "failed",
-                    "corrupt/sdf": "failed"}
+    assert rows == {
+        "ball/loft": "ok",
+        "ball/sdf": "ok",
+        "corrupt/loft": "failed",
+        "corrupt/sdf": "failed",
+    }
     # Re-running skips cases finished with the same options.
     stamp = (out / "ball" / "loft" / "mesh.stl").stat().st_mtime_ns
     assert main(args) == 0
@@ -335,8 +367,9 @@ def test_renders_of_sparse_input_with_and_without_a_mesh_ground_truth(tmp_path: 
     root = tmp_path / "results"
     config = ReconstructConfig(n_points=2000)
     run_case(tmp_path / "sparse.nii.gz", root / "alone", config)
-    run_case(tmp_path / "sparse.nii.gz", root / "with_gt", config,
-             ground_truth=tmp_path / "truth.stl")
+    run_case(
+        tmp_path / "sparse.nii.gz", root / "with_gt", config, ground_truth=tmp_path / "truth.stl"
+    )
     page = _parse(write_report(root))
     alone, with_gt = (
         next(c for c in page.figcaptions if c.startswith(name)) for name in ("alone", "with_gt")
@@ -360,8 +393,14 @@ def test_report_modules_import_nothing_that_reconstructs() -> None:
     """No module of slicerecon.report imports the reconstruction, the planners or the runner,
     nor names run_case / reconstruct."""
     modules = sorted(REPORT_PACKAGE.glob("*.py"))
-    assert {m.name for m in modules} >= {"__init__.py", "tables.py", "figures.py", "renders.py",
-                                         "page.py", "writer.py"}
+    assert {m.name for m in modules} >= {
+        "__init__.py",
+        "tables.py",
+        "figures.py",
+        "renders.py",
+        "page.py",
+        "writer.py",
+    }
     for module in modules:
         tree = ast.parse(module.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
@@ -391,8 +430,9 @@ def test_writing_a_report_runs_no_reconstruction(results: Path, tmp_path: Path) 
         f"write_report({str(copy)!r}, max_renders=1)\n"
         f"print(sorted(m for m in sys.modules if m.startswith({RUNNING!r})))\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          check=True, timeout=300)
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300
+    )
     assert done.stdout.strip() == "[]"
     page = _parse(copy / "report.html")
     assert len(page.images) == 1 + 1  # the box plots (one plane count) and one render
@@ -410,11 +450,21 @@ def test_evaluate_dataset_uses_the_runner_and_its_records(tmp_path: Path) -> Non
     out = tmp_path / "out"
     seen = []
     config = ReconstructConfig(slices=6, n_points=2000)
-    report = evaluate_dataset(data, out, methods=["loft", "sdf"], config=config, renders=False,
-                              progress=lambda r, done, total: seen.append((r.case, r.status)))
+    report = evaluate_dataset(
+        data,
+        out,
+        methods=["loft", "sdf"],
+        config=config,
+        renders=False,
+        progress=lambda r, done, total: seen.append((r.case, r.status)),
+    )
     assert report == out / "report.html"
-    assert sorted(seen) == [("ball/loft", "ok"), ("ball/sdf", "ok"),
-                            ("corrupt/loft", "failed"), ("corrupt/sdf", "failed")]
+    assert sorted(seen) == [
+        ("ball/loft", "ok"),
+        ("ball/sdf", "ok"),
+        ("corrupt/loft", "failed"),
+        ("corrupt/sdf", "failed"),
+    ]
     with (out / "summary.csv").open(newline="") as handle:
         rows = {r["case"]: r for r in csv.DictReader(handle)}
     assert rows["ball/sdf"]["status"] == "ok" and rows["ball/sdf"]["input"] == "ball.nii.gz"
@@ -426,6 +476,12 @@ def test_evaluate_dataset_uses_the_runner_and_its_records(tmp_path: Path) -> Non
     assert by_name["corrupt/sdf"].error_text.startswith("FormatError: ")
     assert by_name["ball/loft"].watertight is True and by_name["ball/loft"].kind == "nifti"
     seen.clear()
-    evaluate_dataset(data, out, methods=["loft", "sdf"], config=config, renders=False,
-                     progress=lambda r, done, total: seen.append((r.case, r.status)))
+    evaluate_dataset(
+        data,
+        out,
+        methods=["loft", "sdf"],
+        config=config,
+        renders=False,
+        progress=lambda r, done, total: seen.append((r.case, r.status)),
+    )
     assert sorted(seen)[:2] == [("ball/loft", "skipped"), ("ball/sdf", "skipped")]

@@ -26,8 +26,10 @@ from slicerecon.results import (
 )
 
 PLAN = {
-    "parts": [{"box": {"lo": [0, 0, 0], "hi": [4, 4, 4]}}, {"box": {"lo": [4, 0, 0],
-                                                                    "hi": [8, 4, 4]}}],
+    "parts": [
+        {"box": {"lo": [0, 0, 0], "hi": [4, 4, 4]}},
+        {"box": {"lo": [4, 0, 0], "hi": [8, 4, 4]}},
+    ],
     "sections": {"axis": "z", "n_planes": 7},
     "input": "/data/ball.nii.gz",
     "ground_truth": None,
@@ -69,23 +71,50 @@ def test_a_finished_case_reads_back_every_field(tmp_path):
 
 
 def test_done_json_adds_what_the_runner_measured(tmp_path):
-    done = {"key": "k", "result": {"input": "ball.nii.gz", "kind": "nifti", "watertight": True,
-                                   "seconds": 3.5, "parts": 2}}
+    done = {
+        "key": "k",
+        "result": {
+            "input": "ball.nii.gz",
+            "kind": "nifti",
+            "watertight": True,
+            "seconds": 3.5,
+            "parts": 2,
+        },
+    }
     case = read_case(_finished(tmp_path / "ball", done=done))
     assert (case.input, case.kind, case.watertight, case.seconds) == (
-        "ball.nii.gz", "nifti", True, 3.5)
+        "ball.nii.gz",
+        "nifti",
+        True,
+        3.5,
+    )
     assert case.input_path == "/data/ball.nii.gz"  # what the reconstruction read
 
 
 def test_the_one_error_json_format_round_trips(tmp_path):
     record = FailureRecord.from_exception(
-        ValueError("bad spacing"), case="a/loft", input="/d/a.nii.gz", kind="nifti",
-        method="loft", planner="heuristic", traceback="Traceback ...")
+        ValueError("bad spacing"),
+        case="a/loft",
+        input="/d/a.nii.gz",
+        kind="nifti",
+        method="loft",
+        planner="heuristic",
+        traceback="Traceback ...",
+    )
     path = record.write(tmp_path)
     payload = json.loads(path.read_text())
     assert payload["type"] == "ValueError" and payload["error"] == "bad spacing"
-    assert {"case", "input", "kind", "error", "type", "method", "planner", "traceback",
-            "slicerecon_version"} == set(payload)
+    assert {
+        "case",
+        "input",
+        "kind",
+        "error",
+        "type",
+        "method",
+        "planner",
+        "traceback",
+        "slicerecon_version",
+    } == set(payload)
     assert FailureRecord.from_json(payload) == record
     assert record.text == "ValueError: bad spacing"
     assert FailureRecord.from_exception(KeyError(), case="x", input=None).error == "KeyError"
@@ -95,14 +124,29 @@ def test_the_one_error_json_format_round_trips(tmp_path):
     ("payload", "text", "method"),
     [
         # written by evaluate-dataset before the runner owned it: the type inside the message
-        ({"case": "b/loft", "input": "b.nii.gz", "method": "loft", "planner": "heuristic",
-          "error": "InputError: not found"}, "InputError: not found", "loft"),
+        (
+            {
+                "case": "b/loft",
+                "input": "b.nii.gz",
+                "method": "loft",
+                "planner": "heuristic",
+                "error": "InputError: not found",
+            },
+            "InputError: not found",
+            "loft",
+        ),
         # written by batch before: "type", no method
-        ({"case": "c", "input": "c.nii.gz", "error": "truncated gzip", "type": "FormatError"},
-         "FormatError: truncated gzip", None),
+        (
+            {"case": "c", "input": "c.nii.gz", "error": "truncated gzip", "type": "FormatError"},
+            "FormatError: truncated gzip",
+            None,
+        ),
         # "error_type" and a config object (documented by the report)
-        ({"error": "boom", "error_type": "RuntimeError", "config": {"method": "sdf"}},
-         "RuntimeError: boom", "sdf"),
+        (
+            {"error": "boom", "error_type": "RuntimeError", "config": {"method": "sdf"}},
+            "RuntimeError: boom",
+            "sdf",
+        ),
     ],
 )
 def test_older_error_json_formats_are_read(tmp_path, payload, text, method):
@@ -147,7 +191,10 @@ def test_collect_results_walks_the_layout(tmp_path):
     assert layout.case_name(root / "ball" / "loft") == "ball/loft"
     assert layout.case("ball/loft").find_mesh() == root / "ball" / "loft" / "mesh.ply"
     assert (layout.summary_csv.name, layout.metrics_csv.name, layout.report_html.name) == (
-        "summary.csv", "metrics.csv", "report.html")
+        "summary.csv",
+        "metrics.csv",
+        "report.html",
+    )
     with pytest.raises(InputError, match="not found"):
         collect_results(tmp_path / "absent")
     with pytest.raises(InputError, match="not a directory"):
@@ -155,10 +202,20 @@ def test_collect_results_walks_the_layout(tmp_path):
 
 
 def test_summary_rows(tmp_path):
-    ok = CaseResult("a", "a.nii.gz", "nifti", "ok", parts=2, planes=8, watertight=True,
-                    metrics={"volume_iou": 0.123456789, "n_points": 10}, seconds=1.23456)
-    failed = CaseResult("b", "b.nii.gz", "nifti", "failed", error="line one\nline two",
-                        error_type="FormatError")
+    ok = CaseResult(
+        "a",
+        "a.nii.gz",
+        "nifti",
+        "ok",
+        parts=2,
+        planes=8,
+        watertight=True,
+        metrics={"volume_iou": 0.123456789, "n_points": 10},
+        seconds=1.23456,
+    )
+    failed = CaseResult(
+        "b", "b.nii.gz", "nifti", "failed", error="line one\nline two", error_type="FormatError"
+    )
     path = write_summary([ok, failed], tmp_path / "summary.csv")
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))

@@ -42,7 +42,8 @@ def _ball(radius: float = 8.0, n: int = 24, spacing: tuple[float, ...] = (1, 1, 
     x, y, z = np.meshgrid(*[np.arange(n)] * 3, indexing="ij")
     c = (n - 1) / 2
     mask = ((x - c) * spacing[0]) ** 2 + ((y - c) * spacing[1]) ** 2 + (
-        (z - c) * spacing[2]) ** 2 < radius**2
+        (z - c) * spacing[2]
+    ) ** 2 < radius**2
     return Volume(mask, np.diag([*spacing, 1.0]))
 
 
@@ -106,8 +107,9 @@ def _usage_cases() -> list[tuple[str, list[str]]]:
                 cases.append((f"{name} {flag}: not a number", [*path, *args, flag, "abc"]))
         valued = [p for p in command.params if p.param_type_name == "option" and not p.is_flag]
         if valued:
-            cases.append((f"{name}: option without its value",
-                          [*path, *args, max(valued[0].opts, key=len)]))
+            cases.append(
+                (f"{name}: option without its value", [*path, *args, max(valued[0].opts, key=len)])
+            )
     return cases
 
 
@@ -120,8 +122,12 @@ def test_every_command_has_usage_cases() -> None:
     covered = {label.split(":")[0].split(" --")[0] for label, _ in USAGE_CASES}
     assert commands <= covered
     labels = {label for label, _ in USAGE_CASES}
-    assert {"run --slices: not a number", "run --max-memory: not a number",
-            "train --steps: not a number", "run: missing argument"} <= labels
+    assert {
+        "run --slices: not a number",
+        "run --max-memory: not a number",
+        "train --steps: not a number",
+        "run: missing argument",
+    } <= labels
 
 
 @pytest.mark.parametrize(("label", "argv"), USAGE_CASES, ids=[c[0] for c in USAGE_CASES])
@@ -141,13 +147,15 @@ def test_max_memory_default_matches_the_library() -> None:
 @pytest.fixture(scope="module")
 def two_segments(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("seg")
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0],
-                                          [-15.5, -15.5, 0.0])
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [-15.5, -15.5, 0.0]
+    )
     x, y, z = np.meshgrid(np.arange(32), np.arange(32), np.arange(20), indexing="ij")
     big = (x - 15.5) ** 2 + (y - 15.5) ** 2 + ((z - 10) * 2) ** 2 < 12**2
     small = (x - 15.5) ** 2 + (y - 15.5) ** 2 + ((z - 10) * 2) ** 2 < 6**2
-    return factory.write_seg(root / "seg.dcm", {1: big, 2: small}, affine,
-                             labels={1: "Liver", 2: "Lesion"})
+    return factory.write_seg(
+        root / "seg.dcm", {1: big, 2: small}, affine, labels={1: "Liver", 2: "Lesion"}
+    )
 
 
 def test_seg_segment_by_label_or_number(two_segments: Path, tmp_path: Path) -> None:
@@ -161,8 +169,9 @@ def test_seg_segment_by_label_or_number(two_segments: Path, tmp_path: Path) -> N
     assert trimesh.load(out / "mesh.stl").is_watertight
 
 
-def test_unknown_name_lists_what_there_is(two_segments: Path,
-                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_unknown_name_lists_what_there_is(
+    two_segments: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     with pytest.raises(LabelError, match="1: Liver, 2: Lesion"):
         load_input(two_segments, label="Kidney")
     assert main(["run", str(two_segments), "--label", "Kidney"]) == 2
@@ -186,13 +195,17 @@ def test_rtstruct_roi_by_label_or_roi(tmp_path: Path) -> None:
 
 
 # -- 3. third-party parser failures become FormatError naming the file ------------------
-@pytest.mark.parametrize("content", [
-    "[" * 100_000 + "]" * 100_000,                                   # RecursionError
-    '{"format": "slicerecon-contours", "version": 1, "planes": [{"polygons": '
-    '[[[0, 0, 0], [1, 0, 0], [0, 1, ' + "9" * 4400 + ']]]}]}',         # int too long
-    '{"format": "slicerecon-contours", "version": 1, "planes": [{"polygons": '
-    '[[[0, 0, 0], [1, 0, 0], [0, 1, 1' + "0" * 400 + ']]]}]}',         # int -> float overflow
-], ids=["deep nesting", "4400-digit integer", "integer beyond float"])
+@pytest.mark.parametrize(
+    "content",
+    [
+        "[" * 100_000 + "]" * 100_000,  # RecursionError
+        '{"format": "slicerecon-contours", "version": 1, "planes": [{"polygons": '
+        "[[[0, 0, 0], [1, 0, 0], [0, 1, " + "9" * 4400 + "]]]}]}",  # int too long
+        '{"format": "slicerecon-contours", "version": 1, "planes": [{"polygons": '
+        "[[[0, 0, 0], [1, 0, 0], [0, 1, 1" + "0" * 400 + "]]]}]}",  # int -> float overflow
+    ],
+    ids=["deep nesting", "4400-digit integer", "integer beyond float"],
+)
 def test_json_parser_failures(content: str, tmp_path: Path) -> None:
     path = tmp_path / "c.json"
     path.write_text(content)
@@ -259,8 +272,9 @@ def test_declared_size_is_bounded_not_the_file_size(tmp_path: Path) -> None:
         load_input(path)
 
 
-def test_max_memory_lowers_and_raises_the_budget(small_nii: Path, tmp_path: Path,
-                                                 capsys: pytest.CaptureFixture[str]) -> None:
+def test_max_memory_lowers_and_raises_the_budget(
+    small_nii: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["run", str(small_nii), "-o", str(tmp_path / "a"), "--max-memory", "1e-5"]) == 2
     line = _one_error_line(capsys)
     assert "memory budget of 1e-05 GiB" in line and "--max-memory" in line
@@ -271,16 +285,22 @@ def test_max_memory_lowers_and_raises_the_budget(small_nii: Path, tmp_path: Path
 # -- 5 and 6. contours between the image's slices; options reach every reader -----------
 def _ct(root: Path, positions: list[float] | None = None) -> list[Path]:
     shape = (48, 48, 21 if positions is None else len(positions))
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0],
-                                          [-23.5, -23.5, 0.0])
-    return factory.write_series(root, np.zeros(shape, np.uint16), affine, modality="CT",
-                                irregular_positions=positions)
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0], [-23.5, -23.5, 0.0]
+    )
+    return factory.write_series(
+        root, np.zeros(shape, np.uint16), affine, modality="CT", irregular_positions=positions
+    )
 
 
 def _sphere_rings(radius: float, centre_z: float, zs: list[float]) -> list:
-    return [factory.contour_item(factory.circle(math.sqrt(radius**2 - (z - centre_z) ** 2),
-                                                (0.0, 0.0), z))
-            for z in zs if abs(z - centre_z) < radius]
+    return [
+        factory.contour_item(
+            factory.circle(math.sqrt(radius**2 - (z - centre_z) ** 2), (0.0, 0.0), z)
+        )
+        for z in zs
+        if abs(z - centre_z) < radius
+    ]
 
 
 def test_contours_between_ct_slices_keep_their_planes(tmp_path: Path) -> None:
@@ -297,8 +317,9 @@ def test_contours_between_ct_slices_keep_their_planes(tmp_path: Path) -> None:
         meshes[name] = trimesh.load(tmp_path / f"out-{name}" / "mesh.stl")
         assert meshes[name].is_watertight
     z0, z1 = meshes["ct"].bounds[:, 2]
-    assert z0 == pytest.approx(zs[0] - 1.5, abs=0.25) and z1 == pytest.approx(zs[-1] + 1.5,
-                                                                               abs=0.25)
+    assert z0 == pytest.approx(zs[0] - 1.5, abs=0.25) and z1 == pytest.approx(
+        zs[-1] + 1.5, abs=0.25
+    )
     assert meshes["ct"].volume == pytest.approx(meshes["alone"].volume, rel=0.02)
 
 
@@ -311,8 +332,7 @@ def test_allow_irregular_reaches_the_series_of_an_rtstruct(
     factory.write_rtstruct(tmp_path / "ct" / "rs.dcm", {(1, "Ball"): rings})
     assert main(["run", str(tmp_path / "ct"), "-o", str(tmp_path / "a")]) == 2
     assert "--allow-irregular" in _one_error_line(capsys)
-    assert main(["run", str(tmp_path / "ct"), "--allow-irregular", "-o",
-                 str(tmp_path / "b")]) == 0
+    assert main(["run", str(tmp_path / "ct"), "--allow-irregular", "-o", str(tmp_path / "b")]) == 0
     assert trimesh.load(tmp_path / "b" / "mesh.stl").is_watertight
 
 
@@ -322,8 +342,9 @@ def test_info_lists_every_roi_and_accepts_what_run_accepts(
 ) -> None:
     _ct(tmp_path / "ct")
     rings = _sphere_rings(10.0, 30.0, [24.0, 27.0, 30.0, 33.0, 36.0])
-    factory.write_rtstruct(tmp_path / "ct" / "rs.dcm",
-                           {(1, "Ball"): rings, (2, "Ghost"): [], (3, "NoSeq"): None})
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm", {(1, "Ball"): rings, (2, "Ghost"): [], (3, "NoSeq"): None}
+    )
     assert main(["info", str(tmp_path / "ct"), "--json"]) == 0
     details = json.loads(capsys.readouterr().out)
     rois = {r["name"]: r for r in details["rois"]}
@@ -333,8 +354,9 @@ def test_info_lists_every_roi_and_accepts_what_run_accepts(
     assert details["image_series"]["n_slices"] == 21
 
 
-def test_info_lists_every_label_of_a_label_map(tmp_path: Path,
-                                               capsys: pytest.CaptureFixture[str]) -> None:
+def test_info_lists_every_label_of_a_label_map(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     labels = np.zeros((20, 20, 10), np.uint8)
     labels[2:8, 2:8, 1:4] = 3
     labels[10:18, 10:18, 5:9] = 7
@@ -366,8 +388,9 @@ def test_pydicoms_own_rtstruct_is_described(capsys: pytest.CaptureFixture[str]) 
 def test_a_structure_on_one_plane_is_a_one_slice_slab(tmp_path: Path) -> None:
     mask = np.zeros((20, 20, 9), bool)
     mask[5:15, 5:15, 4] = True
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0],
-                                          [0.0, 0.0, 0.0])
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0], [0.0, 0.0, 0.0]
+    )
     path = factory.write_seg(tmp_path / "one.dcm", {1: mask}, affine, labels={1: "Flat"})
     out = tmp_path / "out"
     assert main(["run", str(path), "-o", str(out)]) == 0

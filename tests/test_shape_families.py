@@ -23,8 +23,20 @@ RES = 32  # small grids keep the tests fast; every shape stays connected at this
 SEEDS = (0, 1, 2)
 FULL = np.ones((3, 3, 3), dtype=bool)
 NEW = [
-    "table", "lamp", "sofa", "airplane", "car", "rifle", "guitar",
-    "brain", "kidney", "lung", "vessel_tree", "genus2", "plate_with_holes", "blobs",
+    "table",
+    "lamp",
+    "sofa",
+    "airplane",
+    "car",
+    "rifle",
+    "guitar",
+    "brain",
+    "kidney",
+    "lung",
+    "vessel_tree",
+    "genus2",
+    "plate_with_holes",
+    "blobs",
 ]
 
 
@@ -90,8 +102,18 @@ def test_new_shapes_default_call_is_canonical(name: str) -> None:
 
 @pytest.mark.parametrize(
     ("name", "expected"),
-    [("genus2", -1), ("torus", 0), ("plate_with_holes", -1), ("brain", 1), ("kidney", 1),
-     ("lung", 1), ("sofa", 1), ("car", 1), ("guitar", 1), ("blobs", 4)],
+    [
+        ("genus2", -1),
+        ("torus", 0),
+        ("plate_with_holes", -1),
+        ("brain", 1),
+        ("kidney", 1),
+        ("lung", 1),
+        ("sofa", 1),
+        ("car", 1),
+        ("guitar", 1),
+        ("blobs", 4),
+    ],
 )
 def test_topology_euler_characteristic(name: str, expected: int) -> None:
     # chi = components - tunnels + cavities: genus 2 -> -1, torus -> 0, solids -> 1

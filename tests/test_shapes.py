@@ -154,8 +154,11 @@ def test_registry_and_errors() -> None:
 
 def test_parameter_checks_come_from_the_signature() -> None:
     # the signature stays the function's own: the registry reads the sizes from it
-    sizes = [p.name for p in inspect.signature(chair).parameters.values()
-             if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD]
+    sizes = [
+        p.name
+        for p in inspect.signature(chair).parameters.values()
+        if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD
+    ]
     assert sizes == list(shape_params("chair"))
     with pytest.raises(OptionError, match="radius must be a number of mm"):
         sphere("large")

@@ -25,8 +25,12 @@ SPACING = (0.8, 0.8, 2.0)
 def _four_labels() -> np.ndarray:
     """Two half-balls touching along x = 32 mm, a small ball and a bar (anisotropic voxels)."""
     shape = (80, 70, 40)
-    x, y, z = (a * s for a, s in zip(np.meshgrid(*[np.arange(n) for n in shape],
-                                                 indexing="ij"), SPACING, strict=True))
+    x, y, z = (
+        a * s
+        for a, s in zip(
+            np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), SPACING, strict=True
+        )
+    )
     labels = np.zeros(shape, np.uint8)
     ball = (x - 32) ** 2 + (y - 28) ** 2 + (z - 40) ** 2 < 22**2
     labels[ball & (x < 32)] = 1
@@ -69,8 +73,12 @@ def test_touching_structures_share_their_interface(joint) -> None:  # noqa: ANN0
     assert np.ptp(shared[:, 0]) < 0.5
     # no gap: well inside the ball, the voxels either side of the interface (x = 32 mm
     # is between x indices 39 and 40) all belong to one of the two
-    x, y, z = (a * s for a, s in zip(np.meshgrid(*[np.arange(n) for n in (80, 70, 40)],
-                                                 indexing="ij"), SPACING, strict=True))
+    x, y, z = (
+        a * s
+        for a, s in zip(
+            np.meshgrid(*[np.arange(n) for n in (80, 70, 40)], indexing="ij"), SPACING, strict=True
+        )
+    )
     deep = (x - 32) ** 2 + (y - 28) ** 2 + (z - 40) ** 2 < 16**2
     assert np.all(np.isin(joint.labels[38:42][deep[38:42]], (1, 2)))
 
@@ -80,10 +88,21 @@ def test_each_label_at_least_as_good_as_plain_sdf_on_the_same_planes(joint) -> N
     planes = np.rint(sections.indices).astype(int)
     for item in joint.results:
         truth = joint.truth_mask(item.structure.value)
-        own = CrossSections(np.moveaxis(truth.mask, 2, 0)[planes], sections.indices, 2,
-                            sections.affine, sections.grid_shape)
-        plain = reconstruct(own, projections_from_volume(truth), method="sdf", planner="none",
-                            carve=False, interpolation="linear").mesh
+        own = CrossSections(
+            np.moveaxis(truth.mask, 2, 0)[planes],
+            sections.indices,
+            2,
+            sections.affine,
+            sections.grid_shape,
+        )
+        plain = reconstruct(
+            own,
+            projections_from_volume(truth),
+            method="sdf",
+            planner="none",
+            carve=False,
+            interpolation="linear",
+        ).mesh
         plain_iou = _iou(mesh_to_mask(plain, sections.affine, sections.grid_shape), truth.mask)
         assert _iou(item.occupancy.mask, truth.mask) >= plain_iou - 1e-9, item.structure
 
@@ -134,22 +153,28 @@ def test_a_structure_between_the_planes_is_reported(tmp_path: Path) -> None:
 def test_every_roi_of_an_rtstruct_with_its_name_and_colour(tmp_path: Path) -> None:
     import dicom_factory as factory  # tests/io, on pytest's pythonpath
 
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0],
-                                          [-31.5, -31.5, 0.0])
-    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 21), np.uint16), affine,
-                         modality="CT")
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0], [-31.5, -31.5, 0.0]
+    )
+    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 21), np.uint16), affine, modality="CT")
 
     def rings(centre: tuple[float, float]) -> list:
-        return [factory.contour_item(factory.circle(np.sqrt(144 - (z - 30) ** 2), centre, z))
-                for z in np.arange(21) * 3.0 if abs(z - 30) < 12]
+        return [
+            factory.contour_item(factory.circle(np.sqrt(144 - (z - 30) ** 2), centre, z))
+            for z in np.arange(21) * 3.0
+            if abs(z - 30) < 12
+        ]
 
-    factory.write_rtstruct(tmp_path / "ct" / "rs.dcm", {
-        (1, "Left"): rings((-10, 0)), (2, "Right"): rings((10, 0)), (3, "Ghost"): None})
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {(1, "Left"): rings((-10, 0)), (2, "Right"): rings((10, 0)), (3, "Ghost"): None},
+    )
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "ct"), "-o", str(out)]) == 0
     assert sorted(p.name for p in (out / "meshes").iterdir()) == ["1_Left.stl", "2_Right.stl"]
-    records = {r["name"]: r for r in json.loads((out / "structures.json").read_text())[
-        "structures"]}
+    records = {
+        r["name"]: r for r in json.loads((out / "structures.json").read_text())["structures"]
+    }
     assert records["Ghost"]["status"] == "no closed planar contours"
     assert records["Left"]["colour"] == [255, 0, 0]
     sphere = 4 / 3 * np.pi * 12**3
@@ -170,5 +195,10 @@ def test_batch_and_report_give_one_row_per_structure(four: Path, tmp_path: Path)
     with (out / "metrics.csv").open(newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert [(r["case"], r["structure"]) for r in rows] == [
-        ("four", "1"), ("four", "2"), ("four", "5"), ("four", "7"), ("four", "mean")]
+        ("four", "1"),
+        ("four", "2"),
+        ("four", "5"),
+        ("four", "7"),
+        ("four", "mean"),
+    ]
     assert all(float(r["volume_iou"]) > 0.9 for r in rows)

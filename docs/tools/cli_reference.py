@@ -1,6 +1,6 @@
 """Regenerate docs/cli.md from the CLI's own help texts.
 
-    python docs/tools/cli_reference.py > docs/cli.md
+python docs/tools/cli_reference.py > docs/cli.md
 """
 
 from __future__ import annotations
@@ -37,8 +37,16 @@ contours are read without the image.
 """
 
 COMMANDS = [
-    [], ["info"], ["run"], ["evaluate"], ["evaluate-dataset"], ["report"],
-    ["dataset", "make"], ["dataset", "list"], ["batch"], ["train"],
+    [],
+    ["info"],
+    ["run"],
+    ["evaluate"],
+    ["evaluate-dataset"],
+    ["report"],
+    ["dataset", "make"],
+    ["dataset", "list"],
+    ["batch"],
+    ["train"],
 ]
 
 
@@ -50,11 +58,18 @@ def main() -> int:
     for command in COMMANDS:
         text = subprocess.run(
             [sys.executable, "-m", "slicerecon.cli", *command, "--help"],
-            capture_output=True, text=True, env=env, check=True,
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
         ).stdout.replace("python -m slicerecon.cli", "slicerecon")
         text = "\n".join(line.rstrip() for line in text.splitlines()).strip("\n")
-        parts.append(f"## slicerecon {' '.join(command)}".rstrip() + "\n\n```text\n"
-                     + text.rstrip() + "\n```\n")
+        parts.append(
+            f"## slicerecon {' '.join(command)}".rstrip()
+            + "\n\n```text\n"
+            + text.rstrip()
+            + "\n```\n"
+        )
     sys.stdout.write("\n".join(parts))
     return 0
 

@@ -198,12 +198,19 @@ def load_input(
     with reading(path):
         kind = detect_kind(path)
         if image_dir is not None and kind.kind != "rtstruct":
-            raise OptionError(f"an image series applies to RTSTRUCT inputs only; {path} is "
-                              f"a {kind.kind} input")
+            raise OptionError(
+                f"an image series applies to RTSTRUCT inputs only; {path} is a {kind.kind} input"
+            )
         logger.info("reading %s as %s", kind.path, kind.kind)
-        return _read(kind, selector, image_dir=image_dir, allow_irregular=allow_irregular,
-                     mesh_resolution=mesh_resolution, pixel_spacing=pixel_spacing,
-                     memory_budget_gb=memory_budget_gb)
+        return _read(
+            kind,
+            selector,
+            image_dir=image_dir,
+            allow_irregular=allow_irregular,
+            mesh_resolution=mesh_resolution,
+            pixel_spacing=pixel_spacing,
+            memory_budget_gb=memory_budget_gb,
+        )
 
 
 def load_ground_truth(
@@ -243,8 +250,9 @@ def load_ground_truth(
 
             _single_structure(Path(path), parse_selector(label))
             return read_mesh(path)
-    data = load_input(path, label=label, allow_irregular=allow_irregular,
-                      memory_budget_gb=memory_budget_gb)
+    data = load_input(
+        path, label=label, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb
+    )
     if not isinstance(data, Volume):
         raise InputError(
             f"{path} holds contours on some planes; a ground truth must be a dense mask "

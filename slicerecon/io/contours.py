@@ -93,7 +93,6 @@ CSV_COLUMNS = ("plane", "polygon", "x", "y", "z")
 """Columns a CSV contour file must have (in any order)."""
 
 
-
 @dataclass
 class _Parsed:
     """Polygons of a contour file, flattened, with what else the file says."""
@@ -278,7 +277,8 @@ Normal = Annotated[list[Number], _expect("[nx, ny, nz]", 3), AfterValidator(_non
 AffineRow = Annotated[list[Number], _expect("4 numbers", 4)]
 Affine = Annotated[list[AffineRow], _expect("4 rows of 4 numbers", 4), AfterValidator(_homogeneous)]
 GridShape = Annotated[
-    list[Annotated[int, Field(gt=0)]], Field(min_length=3, max_length=3),
+    list[Annotated[int, Field(gt=0)]],
+    Field(min_length=3, max_length=3),
     WrapValidator(_grid_shape),
 ]
 
@@ -352,16 +352,16 @@ class ContourFile(_JsonObject):
     @classmethod
     def _version(cls, value: int) -> int:
         if value != CONTOUR_VERSION:
-            raise _refuse(f"version {value} is not supported; this slicerecon reads version "
-                          f"{CONTOUR_VERSION}")
+            raise _refuse(
+                f"version {value} is not supported; this slicerecon reads version {CONTOUR_VERSION}"
+            )
         return value
 
     @field_validator("units", mode="after")
     @classmethod
     def _units(cls, value: Any) -> Any:
         if value != "mm":
-            raise _refuse(f"must be \"mm\" (got {value!r}); convert the coordinates to "
-                          "millimetres")
+            raise _refuse(f'must be "mm" (got {value!r}); convert the coordinates to millimetres')
         return value
 
 
@@ -424,8 +424,11 @@ def _parse_json(text: str, path: Path) -> _Parsed:
         where = f"planes[{p}]"
         if not plane.polygons:
             if plane.position is None or parsed.normal is None:
-                raise _fail(path, where, "a plane without polygons needs a \"position\" and "
-                            "the file a top-level \"normal\"")
+                raise _fail(
+                    path,
+                    where,
+                    'a plane without polygons needs a "position" and the file a top-level "normal"',
+                )
             parsed.empty_positions.append(plane.position)
             continue
         for q, polygon in enumerate(plane.polygons):
@@ -434,8 +437,12 @@ def _parse_json(text: str, path: Path) -> _Parsed:
             if plane.position is not None and parsed.normal is not None:
                 at = float(points.mean(axis=0) @ parsed.normal)
                 if abs(at - plane.position) > max(0.01, 1e-6 * abs(plane.position)):
-                    raise _fail(path, pname, f"lies at {at:.6g} mm along the normal but the "
-                                f"plane's position is {plane.position:.6g} mm")
+                    raise _fail(
+                        path,
+                        pname,
+                        f"lies at {at:.6g} mm along the normal but the "
+                        f"plane's position is {plane.position:.6g} mm",
+                    )
             parsed.polygons.append(points)
             parsed.names.append(pname)
     return parsed
@@ -616,8 +623,7 @@ def write_contours_csv(sections: CrossSections, path: str | os.PathLike[str]) ->
             for x, y, z in ring.tolist():
                 writer.writerow((plane, number, repr(x), repr(y), repr(z)))
     if empty:
-        logger.warning("%d planes without foreground are not written: CSV cannot hold them",
-                       empty)
+        logger.warning("%d planes without foreground are not written: CSV cannot hold them", empty)
     target = Path(path)
     with atomic_path(target) as tmp:
         tmp.write_text(buffer.getvalue(), encoding="utf-8")

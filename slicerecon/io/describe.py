@@ -86,15 +86,21 @@ def describe_label_map(
         hi = np.array([s.stop for s in box])
         other = tuple(a for a in range(3) if a != axis)
         planes = np.flatnonzero(mask[box].any(axis=other)) + lo[axis]
-        out.append({
-            "value": int(value),
-            "name": (names or {}).get(int(value), ""),
-            "voxels": int(count),
-            "volume_mm3": round(count * voxel, 3),
-            "planes": {"axis": AXIS_NAMES[axis], "count": int(planes.size),
-                       "first": int(planes[0]), "last": int(planes[-1])},
-            "extent_mm": _box_mm(affine, lo, hi),
-        })
+        out.append(
+            {
+                "value": int(value),
+                "name": (names or {}).get(int(value), ""),
+                "voxels": int(count),
+                "volume_mm3": round(count * voxel, 3),
+                "planes": {
+                    "axis": AXIS_NAMES[axis],
+                    "count": int(planes.size),
+                    "first": int(planes[0]),
+                    "last": int(planes[-1]),
+                },
+                "extent_mm": _box_mm(affine, lo, hi),
+            }
+        )
     return out
 
 
@@ -114,7 +120,9 @@ def describe_volume(volume: Volume) -> dict[str, Any]:
         for name, ax in zip(AXIS_NAMES, range(3), strict=True):
             planes = volume.occupied_planes(ax)
             info[f"planes_{name}"] = {
-                "occupied": int(planes.size), "first": int(planes[0]), "last": int(planes[-1])
+                "occupied": int(planes.size),
+                "first": int(planes[0]),
+                "last": int(planes[-1]),
             }
     return info
 
@@ -128,9 +136,9 @@ def describe_sections(sections: CrossSections) -> dict[str, Any]:
         "planes": sections.n_planes,
         "axis": AXIS_NAMES[sections.axis],
         "positions_mm": _round(sections.positions, 4),
-        "gap_mm": None if gaps.size == 0 else {
-            "min": round(float(gaps.min()), 4), "max": round(float(gaps.max()), 4)
-        },
+        "gap_mm": None
+        if gaps.size == 0
+        else {"min": round(float(gaps.min()), 4), "max": round(float(gaps.max()), 4)},
         "uniform_spacing": bool(gaps.size == 0 or np.ptp(gaps) < 1e-6),
         "area_mm2": _round(areas, 2),
         "in_plane_shape": list(sections.masks.shape[1:]),
@@ -139,20 +147,25 @@ def describe_sections(sections: CrossSections) -> dict[str, Any]:
     }
 
 
-def _polygon_record(number: int, name: str, polygons: list[NDArray[np.float64]],
-                    normal: NDArray[np.float64] | None) -> dict[str, Any]:
+def _polygon_record(
+    number: int, name: str, polygons: list[NDArray[np.float64]], normal: NDArray[np.float64] | None
+) -> dict[str, Any]:
     record: dict[str, Any] = {"number": number, "name": name, "contours": len(polygons)}
     if not polygons:
         return record
     points = np.concatenate(polygons)
-    record["extent_mm"] = {"min": _round(points.min(axis=0), 3),
-                           "max": _round(points.max(axis=0), 3)}
+    record["extent_mm"] = {
+        "min": _round(points.min(axis=0), 3),
+        "max": _round(points.max(axis=0), 3),
+    }
     if normal is not None:
         positions = np.array([float(p.mean(axis=0) @ normal) for p in polygons])
         distinct = np.unique(np.round(positions, 2))
         record["planes"] = int(distinct.size)
-        record["positions_mm"] = {"first": round(float(distinct[0]), 3),
-                                  "last": round(float(distinct[-1]), 3)}
+        record["positions_mm"] = {
+            "first": round(float(distinct[0]), 3),
+            "last": round(float(distinct[-1]), 3),
+        }
     return record
 
 
@@ -175,8 +188,10 @@ def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
     if image_dir is not None:
         from .dicom import dicom_info
 
-        details["image_series"] = {"path": str(image_dir),
-                                   **dicom_info(image_dir, allow_irregular=True)}
+        details["image_series"] = {
+            "path": str(image_dir),
+            **dicom_info(image_dir, allow_irregular=True),
+        }
     return details
 
 
@@ -240,8 +255,11 @@ def describe_input(
             label_map = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
             details["coordinates"] = label_map.coordinates
             details.update(_grid(label_map.affine, label_map.shape))
-            records = describe_label_map(label_map.labels, label_map.affine,
-                                         names={s.value: s.name for s in label_map.structures})
+            records = describe_label_map(
+                label_map.labels,
+                label_map.affine,
+                names={s.value: s.name for s in label_map.structures},
+            )
             for record, structure in zip(records, label_map.structures, strict=True):
                 record["colour"] = None if structure.colour is None else list(structure.colour)
             details["structures"] = records
@@ -270,8 +288,9 @@ def describe_input(
             segments = []
             for segment in details["dicom"]["segments"]:
                 try:
-                    volume = read_dicom_seg(kind.path, segment=segment["number"],
-                                            memory_budget_gb=memory_budget_gb)
+                    volume = read_dicom_seg(
+                        kind.path, segment=segment["number"], memory_budget_gb=memory_budget_gb
+                    )
                 except EmptyMaskError:
                     segments.append({**segment, "voxels": 0})
                     continue
@@ -287,16 +306,20 @@ def describe_input(
 
             mesh = read_mesh(kind.path)
             details["mesh"] = {
-                "vertices": int(len(mesh.vertices)), "faces": int(len(mesh.faces)),
+                "vertices": int(len(mesh.vertices)),
+                "faces": int(len(mesh.faces)),
                 "watertight": bool(mesh.is_watertight),
                 "extent_mm": {"min": _round(mesh.bounds[0], 3), "max": _round(mesh.bounds[1], 3)},
             }
         single = kind.kind in ("contours", "mesh")
         if single or label is not None:
-            data = load_input(kind.path, label=label, allow_irregular=allow_irregular,
-                              memory_budget_gb=memory_budget_gb)
-            summary = (describe_volume(data) if isinstance(data, Volume)
-                       else describe_sections(data))
+            data = load_input(
+                kind.path,
+                label=label,
+                allow_irregular=allow_irregular,
+                memory_budget_gb=memory_budget_gb,
+            )
+            summary = describe_volume(data) if isinstance(data, Volume) else describe_sections(data)
             if single:
                 details.update(summary)
             else:

@@ -72,8 +72,11 @@ class Structure:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
-        return {"value": self.value, "name": self.name,
-                "colour": None if self.colour is None else list(self.colour)}
+        return {
+            "value": self.value,
+            "name": self.name,
+            "colour": None if self.colour is None else list(self.colour),
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,8 +128,7 @@ class LabelMap:
         names = {s.value: s.name for s in self.structures}
         chosen: list[Structure] = []
         for selector in selectors:
-            value = choose_structure(names, parse_selector(selector), kind="label",
-                                     source=source)
+            value = choose_structure(names, parse_selector(selector), kind="label", source=source)
             found = next(s for s in self.structures if s.value == value)
             if found not in chosen:
                 chosen.append(found)
@@ -135,11 +137,17 @@ class LabelMap:
         return LabelMap(labels, self.affine, tuple(chosen), self.coordinates)
 
 
-def _structures(labels: NDArray[np.integer], names: dict[int, str] | None = None,
-                colours: dict[int, tuple[int, int, int]] | None = None) -> tuple[Structure, ...]:
+def _structures(
+    labels: NDArray[np.integer],
+    names: dict[int, str] | None = None,
+    colours: dict[int, tuple[int, int, int]] | None = None,
+) -> tuple[Structure, ...]:
     values = np.unique(labels)
-    return tuple(Structure(int(v), (names or {}).get(int(v), ""), (colours or {}).get(int(v)))
-                 for v in values if v != 0)
+    return tuple(
+        Structure(int(v), (names or {}).get(int(v), ""), (colours or {}).get(int(v)))
+        for v in values
+        if v != 0
+    )
 
 
 def _as_labels(values: NDArray[Any]) -> NDArray[np.integer]:
@@ -251,8 +259,9 @@ def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
     if labels is None or affine is None:
         raise EmptyMaskError(f"{path}: no segment has a foreground pixel")
     if overlap:
-        logger.warning("%s: segments overlap on %d voxels; each goes to the later segment",
-                       path, overlap)
+        logger.warning(
+            "%s: segments overlap on %d voxels; each goes to the later segment", path, overlap
+        )
     return LabelMap(labels, affine, _structures(labels, names), "LPS")
 
 

@@ -150,8 +150,10 @@ def check_geometry(affine: ArrayLike, shape: Sequence[int], *, what: str) -> Non
             f"{MAX_COORDINATE_MM:g} mm (1 km) any scanner spans; the header is corrupt"
         )
     spacing = np.linalg.norm(aff[:3, :3], axis=0)
-    if not np.all(np.isfinite(spacing)) or np.any(spacing < MIN_SPACING_MM) or np.any(
-        spacing > MAX_SPACING_MM
+    if (
+        not np.all(np.isfinite(spacing))
+        or np.any(spacing < MIN_SPACING_MM)
+        or np.any(spacing > MAX_SPACING_MM)
     ):
         shown = ", ".join(f"{s:.4g}" for s in spacing)
         raise GeometryError(

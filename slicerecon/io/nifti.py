@@ -129,8 +129,9 @@ def _read_labels(
     shape = _grid_shape(p, img)
     check_geometry(img.affine, shape, what=str(p))
     itemsize = np.dtype(img.get_data_dtype()).itemsize
-    check_grid(shape, what=str(p), memory_budget_gb=memory_budget_gb,
-               bytes_per_voxel=2 * itemsize + 2)
+    check_grid(
+        shape, what=str(p), memory_budget_gb=memory_budget_gb, bytes_per_voxel=2 * itemsize + 2
+    )
     try:
         data = np.asanyarray(img.dataobj)
     except Exception as exc:  # truncated data, bad gzip stream, impossible header
@@ -271,8 +272,10 @@ def read_nifti(
     volume = Volume(mask, img.affine)
     logger.info(
         "read %s: %s, label %s, %d foreground voxels",
-        p, "x".join(str(n) for n in volume.shape),
-        "any non-zero" if label is None else label, int(np.count_nonzero(mask)),
+        p,
+        "x".join(str(n) for n in volume.shape),
+        "any non-zero" if label is None else label,
+        int(np.count_nonzero(mask)),
     )
     return volume
 

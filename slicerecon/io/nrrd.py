@@ -75,32 +75,59 @@ _MAGIC = b"NRRD000"
 _INTEGER_TYPES: dict[str, str] = {
     **dict.fromkeys(("signed char", "int8", "int8_t"), "i1"),
     **dict.fromkeys(("uchar", "unsigned char", "uint8", "uint8_t"), "u1"),
-    **dict.fromkeys(("short", "short int", "signed short", "signed short int", "int16",
-                     "int16_t"), "i2"),
-    **dict.fromkeys(("ushort", "unsigned short", "unsigned short int", "uint16",
-                     "uint16_t"), "u2"),
+    **dict.fromkeys(
+        ("short", "short int", "signed short", "signed short int", "int16", "int16_t"), "i2"
+    ),
+    **dict.fromkeys(("ushort", "unsigned short", "unsigned short int", "uint16", "uint16_t"), "u2"),
     **dict.fromkeys(("int", "signed int", "int32", "int32_t"), "i4"),
     **dict.fromkeys(("uint", "unsigned int", "uint32", "uint32_t"), "u4"),
-    **dict.fromkeys(("longlong", "long long", "long long int", "signed long long",
-                     "signed long long int", "int64", "int64_t"), "i8"),
-    **dict.fromkeys(("ulonglong", "unsigned long long", "unsigned long long int", "uint64",
-                     "uint64_t"), "u8"),
+    **dict.fromkeys(
+        (
+            "longlong",
+            "long long",
+            "long long int",
+            "signed long long",
+            "signed long long int",
+            "int64",
+            "int64_t",
+        ),
+        "i8",
+    ),
+    **dict.fromkeys(
+        ("ulonglong", "unsigned long long", "unsigned long long int", "uint64", "uint64_t"), "u8"
+    ),
 }
 """NRRD ``type`` names of integer data → numpy type codes (byte order added per file)."""
 
 _FLOAT_TYPES = {"float": "f4", "double": "f8"}
 
 _SPACES: dict[str, str | None] = {
-    "right-anterior-superior": "RAS", "ras": "RAS",
-    "left-anterior-superior": "LAS", "las": "LAS",
-    "left-posterior-superior": "LPS", "lps": "LPS",
-    "scanner-xyz": None, "3d-right-handed": None, "3d-left-handed": None,
+    "right-anterior-superior": "RAS",
+    "ras": "RAS",
+    "left-anterior-superior": "LAS",
+    "las": "LAS",
+    "left-posterior-superior": "LPS",
+    "lps": "LPS",
+    "scanner-xyz": None,
+    "3d-right-handed": None,
+    "3d-left-handed": None,
 }
 """NRRD 3-D ``space`` values → anatomical frame (None: no anatomical meaning)."""
 
-_UNITS_MM = {"": 1.0, "mm": 1.0, "millimeter": 1.0, "millimeters": 1.0, "millimetre": 1.0,
-             "millimetres": 1.0, "cm": 10.0, "m": 1000.0, "um": 1e-3, "µm": 1e-3,
-             "micron": 1e-3, "microns": 1e-3}
+_UNITS_MM = {
+    "": 1.0,
+    "mm": 1.0,
+    "millimeter": 1.0,
+    "millimeters": 1.0,
+    "millimetre": 1.0,
+    "millimetres": 1.0,
+    "cm": 10.0,
+    "m": 1000.0,
+    "um": 1e-3,
+    "µm": 1e-3,
+    "micron": 1e-3,
+    "microns": 1e-3,
+}
 """``space units`` → millimetres per unit."""
 
 _SEGMENT_KEY = re.compile(r"^Segment(\d+)_(.+)$")
@@ -109,8 +136,16 @@ _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 _LAS_TO_RAS = np.diag([-1.0, 1.0, 1.0, 1.0])
 
 PALETTE: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-    (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207),
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
 )
 """Colours given to structures that have none when a segmentation is written."""
 
@@ -162,10 +197,15 @@ class NrrdSegment:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
-        return {"index": self.index, "id": self.id, "name": self.name,
-                "colour": None if self.colour is None else list(self.colour),
-                "label_value": self.label_value, "layer": self.layer,
-                "extent": None if self.extent is None else list(self.extent)}
+        return {
+            "index": self.index,
+            "id": self.id,
+            "name": self.name,
+            "colour": None if self.colour is None else list(self.colour),
+            "label_value": self.label_value,
+            "layer": self.layer,
+            "extent": None if self.extent is None else list(self.extent),
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -209,9 +249,13 @@ class NrrdInfo:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
-            "path": str(self.path), "shape": list(self.shape), "layers": self.layers,
-            "affine": self.affine.tolist(), "coordinates": self.coordinates,
-            "dtype": str(self.dtype), "segments": [s.to_dict() for s in self.segments],
+            "path": str(self.path),
+            "shape": list(self.shape),
+            "layers": self.layers,
+            "affine": self.affine.tolist(),
+            "coordinates": self.coordinates,
+            "dtype": str(self.dtype),
+            "segments": [s.to_dict() for s in self.segments],
         }
 
 
@@ -254,8 +298,10 @@ def _dtype(p: Path, header: Mapping[str, Any]) -> np.dtype[Any]:
     if dtype.itemsize > 1 and str(header["encoding"]).lower() not in ("ascii", "text", "txt"):
         endian = str(header.get("endian", "")).lower()
         if endian not in ("little", "big"):
-            raise FormatError(f"{p}: 'endian' must be little or big for {name} data "
-                              f"(got {header.get('endian')!r})")
+            raise FormatError(
+                f"{p}: 'endian' must be little or big for {name} data "
+                f"(got {header.get('endian')!r})"
+            )
         dtype = dtype.newbyteorder("<" if endian == "little" else ">")
     return dtype
 
@@ -307,8 +353,9 @@ def _units_mm(p: Path, header: Mapping[str, Any]) -> NDArray[np.float64]:
     return np.array([_UNITS_MM[u] for u in names])
 
 
-def _geometry(p: Path, header: Mapping[str, Any],
-              spatial: Sequence[int]) -> tuple[NDArray[np.float64], str]:
+def _geometry(
+    p: Path, header: Mapping[str, Any], spatial: Sequence[int]
+) -> tuple[NDArray[np.float64], str]:
     """Voxel index → world mm and the frame's name, from the header alone."""
     affine = np.eye(4)
     space = header.get("space")
@@ -324,8 +371,11 @@ def _geometry(p: Path, header: Mapping[str, Any],
                 origin[n] += spacings[n] / 2  # axis mins is the edge of a cell-centred axis
         affine[:3, :3] = np.diag(spacings)
         affine[:3, 3] = origin
-        logger.info("%s has no space fields: spacings %s mm along the array axes", p,
-                    ", ".join(f"{s:g}" for s in spacings))
+        logger.info(
+            "%s has no space fields: spacings %s mm along the array axes",
+            p,
+            ", ".join(f"{s:g}" for s in spacings),
+        )
         return affine, "RAS"
     if space is not None:
         key = str(space).strip().lower()
@@ -356,8 +406,12 @@ def _geometry(p: Path, header: Mapping[str, Any],
     if frame == "LAS":
         return _LAS_TO_RAS @ affine, "RAS"
     if frame is None:
-        logger.warning("%s: space %s has no anatomical orientation; its coordinates are "
-                       "used as they are (as RAS)", p, space if space is not None else "(none)")
+        logger.warning(
+            "%s: space %s has no anatomical orientation; its coordinates are "
+            "used as they are (as RAS)",
+            p,
+            space if space is not None else "(none)",
+        )
         return affine, "RAS"
     return affine, frame
 
@@ -373,8 +427,9 @@ def _per_axis(values: Any, spatial: Sequence[int], default: float) -> NDArray[np
     return out
 
 
-def _segments(p: Path, header: Mapping[str, Any], layers: int,
-              four_d: bool) -> tuple[NrrdSegment, ...]:
+def _segments(
+    p: Path, header: Mapping[str, Any], layers: int, four_d: bool
+) -> tuple[NrrdSegment, ...]:
     fields: dict[int, dict[str, str]] = {}
     for key, value in header.items():
         match = _SEGMENT_KEY.match(str(key))
@@ -391,8 +446,9 @@ def _segments(p: Path, header: Mapping[str, Any], layers: int,
             try:
                 return int(text)
             except ValueError:
-                raise FormatError(f"{p}: Segment{index}_{field} must be an integer "
-                                  f"(got {text!r})") from None
+                raise FormatError(
+                    f"{p}: Segment{index}_{field} must be an integer (got {text!r})"
+                ) from None
 
         layer = number("Layer", index if four_d else 0)
         if not 0 <= layer < layers:
@@ -401,12 +457,17 @@ def _segments(p: Path, header: Mapping[str, Any], layers: int,
                 f"layer{'s' if layers != 1 else ''}"
             )
         seg_id = own.get("ID", "")
-        out.append(NrrdSegment(
-            index=index, id=seg_id, name=own.get("Name") or seg_id,
-            colour=_colour(p, index, own.get("Color", own.get("DefaultColor"))),
-            label_value=number("LabelValue", 1), layer=layer,
-            extent=_extent(p, index, own.get("Extent")),
-        ))
+        out.append(
+            NrrdSegment(
+                index=index,
+                id=seg_id,
+                name=own.get("Name") or seg_id,
+                colour=_colour(p, index, own.get("Color", own.get("DefaultColor"))),
+                label_value=number("LabelValue", 1),
+                layer=layer,
+                extent=_extent(p, index, own.get("Extent")),
+            )
+        )
     return tuple(out)
 
 
@@ -418,8 +479,12 @@ def _colour(p: Path, index: int, text: str | None) -> tuple[int, int, int] | Non
     except ValueError:
         values = []
     if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        logger.warning("%s: Segment%d_Color %r is not three numbers 0-1; the segment has "
-                       "no colour", p, index, text)
+        logger.warning(
+            "%s: Segment%d_Color %r is not three numbers 0-1; the segment has no colour",
+            p,
+            index,
+            text,
+        )
         return None
     r, g, b = (int(round(min(max(v, 0.0), 1.0) * 255)) for v in values)
     return r, g, b
@@ -433,8 +498,9 @@ def _extent(p: Path, index: int, text: str | None) -> tuple[int, int, int, int, 
     except ValueError:
         values = []
     if len(values) != 6:
-        raise FormatError(f"{p}: Segment{index}_Extent must be 6 integers "
-                          f"(i0 i1 j0 j1 k0 k1; got {text!r})")
+        raise FormatError(
+            f"{p}: Segment{index}_Extent must be 6 integers (i0 i1 j0 j1 k0 k1; got {text!r})"
+        )
     i0, i1, j0, j1, k0, k1 = values
     return i0, i1, j0, j1, k0, k1
 
@@ -485,8 +551,9 @@ def nrrd_info(path: str | os.PathLike[str]) -> NrrdInfo:
 
 def _decompress(p: Path, fh: IO[bytes], method: str, limit: int) -> bytearray:
     """At most ``limit`` bytes of a gzip / bzip2 stream; more is a FormatError."""
-    decoder: Any = (zlib.decompressobj(zlib.MAX_WBITS | 32) if method == "gzip"
-                    else bz2.BZ2Decompressor())
+    decoder: Any = (
+        zlib.decompressobj(zlib.MAX_WBITS | 32) if method == "gzip" else bz2.BZ2Decompressor()
+    )
     out = bytearray()
 
     def more(data: bytes) -> None:
@@ -576,8 +643,12 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
     kept: list[NrrdSegment] = []
     for segment in info.segments:
         if segment.label_value == 0:
-            logger.warning("%s: segment %d (%s) has label value 0, the background; it is "
-                           "skipped", p, segment.index, segment.name)
+            logger.warning(
+                "%s: segment %d (%s) has label value 0, the background; it is skipped",
+                p,
+                segment.index,
+                segment.name,
+            )
             continue
         kept.append(segment)
     values = [s.label_value for s in kept]
@@ -587,9 +658,13 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
         out_value = {s.index: n for n, s in enumerate(kept, start=1)}
         logger.warning(
             "%s: segments of different layers share label values; they are numbered in file "
-            "order: %s", p,
-            ", ".join(f"{s.name or s.index} (layer {s.layer}, value {s.label_value}) -> "
-                      f"{out_value[s.index]}" for s in kept),
+            "order: %s",
+            p,
+            ", ".join(
+                f"{s.name or s.index} (layer {s.layer}, value {s.label_value}) -> "
+                f"{out_value[s.index]}"
+                for s in kept
+            ),
         )
     labels = np.zeros(info.shape, dtype=labels_dtype(list(out_value.values())))
     overlap = 0
@@ -599,8 +674,13 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
         stray = sorted(label_values(data[layer]) - claimed - {0})
         if stray:
             listed = ", ".join(str(v) for v in stray[:10])
-            logger.warning("%s: layer %d holds values no segment claims (%s%s); they are "
-                           "ignored", p, layer, listed, ", ..." if len(stray) > 10 else "")
+            logger.warning(
+                "%s: layer %d holds values no segment claims (%s%s); they are ignored",
+                p,
+                layer,
+                listed,
+                ", ..." if len(stray) > 10 else "",
+            )
         for segment in sorted(own, key=lambda s: s.index):
             mask = data[layer] == segment.label_value
             if segment.extent is not None:
@@ -608,15 +688,20 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
             overlap += int(np.count_nonzero(labels[mask]))
             labels[mask] = out_value[segment.index]
     if overlap:
-        logger.warning("%s: segments of different layers overlap on %d voxels; each goes to "
-                       "the segment of the later layer", p, overlap)
+        logger.warning(
+            "%s: segments of different layers overlap on %d voxels; each goes to "
+            "the segment of the later layer",
+            p,
+            overlap,
+        )
     present = label_values(labels)
     structures = []
     for segment in sorted(kept, key=lambda s: out_value[s.index]):
         value = out_value[segment.index]
         if value not in present:
-            logger.warning("%s: segment %d (%s) holds no voxel; it is skipped", p,
-                           segment.index, segment.name)
+            logger.warning(
+                "%s: segment %d (%s) holds no voxel; it is skipped", p, segment.index, segment.name
+            )
             continue
         structures.append(Structure(value, segment.name, segment.colour))
     return LabelMap(labels, info.affine, tuple(structures), info.coordinates)
@@ -625,8 +710,7 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
 def _inside(extent: Sequence[int], shape: Sequence[int]) -> NDArray[np.bool_]:
     """The voxels of ``shape`` inside an inclusive ``(i0, i1, j0, j1, k0, k1)`` extent."""
     box = np.zeros(tuple(shape), dtype=bool)
-    region = tuple(slice(max(extent[2 * a], 0), max(extent[2 * a + 1] + 1, 0))
-                   for a in range(3))
+    region = tuple(slice(max(extent[2 * a], 0), max(extent[2 * a + 1] + 1, 0)) for a in range(3))
     box[region] = True
     return box
 
@@ -681,18 +765,28 @@ def read_nrrd_label_map(
                 f"{p} is a 4-D image holding {info.layers} volumes and no Slicer segment "
                 "fields; extract the one 3-D label map to use and pass that"
             )
-        check_grid(info.shape, what=str(p), memory_budget_gb=memory_budget_gb,
-                   bytes_per_voxel=2 * info.layers * info.dtype.itemsize + 5)
+        check_grid(
+            info.shape,
+            what=str(p),
+            memory_budget_gb=memory_budget_gb,
+            bytes_per_voxel=2 * info.layers * info.dtype.itemsize + 5,
+        )
         data = _integer_values(p, _voxels(p, header, info, fh))
     if info.is_segmentation:
         result = _flatten(p, info, data)
     else:
         labels = data[0]
         values = sorted(label_values(labels) - {0})
-        result = LabelMap(labels, info.affine, tuple(Structure(v) for v in values),
-                          info.coordinates)
-    logger.info("read %s: %s, %d structure(s), %s", p, "x".join(map(str, info.shape)),
-                len(result.structures), info.coordinates)
+        result = LabelMap(
+            labels, info.affine, tuple(Structure(v) for v in values), info.coordinates
+        )
+    logger.info(
+        "read %s: %s, %d structure(s), %s",
+        p,
+        "x".join(map(str, info.shape)),
+        len(result.structures),
+        info.coordinates,
+    )
     return result
 
 
@@ -732,8 +826,9 @@ def read_nrrd(
     selector = parse_selector(label)
     label_map = read_nrrd_label_map(path, memory_budget_gb=memory_budget_gb)
     if not label_map.structures:
-        raise EmptyMaskError(f"{path} is empty: every voxel is background, there is nothing "
-                             "to reconstruct")
+        raise EmptyMaskError(
+            f"{path} is empty: every voxel is background, there is nothing to reconstruct"
+        )
     if selector is None:
         return label_map.union()
     names = {s.value: s.name for s in label_map.structures}

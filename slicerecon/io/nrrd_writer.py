@@ -95,8 +95,9 @@ def write_seg_nrrd(
         raise OptionError(f"coordinates must be 'RAS' or 'LPS' (got {coordinates!r})")
     values = np.asarray(labels)
     if values.ndim != 3 or values.dtype.kind not in "iub":
-        raise OptionError(f"labels must be a 3-D integer array (got {values.dtype} of shape "
-                          f"{values.shape})")
+        raise OptionError(
+            f"labels must be a 3-D integer array (got {values.dtype} of shape {values.shape})"
+        )
     aff = np.array(check_affine(affine))
     if coordinates == "RAS":
         aff = _LPS_TO_RAS @ aff  # the flip is its own inverse: RAS → LPS
@@ -107,8 +108,9 @@ def write_seg_nrrd(
     present = sorted(label_values(values) - {0})
     for value in present:
         if value not in numbers:
-            logger.warning("%s: label value %d has no structure; it is written unnamed",
-                           target, value)
+            logger.warning(
+                "%s: label value %d has no structure; it is written unnamed", target, value
+            )
             chosen.append(Structure(value))
             numbers.append(value)
     out_dtype = labels_dtype(numbers + [0])
@@ -141,6 +143,5 @@ def write_seg_nrrd(
     with atomic_path(target) as tmp:
         # gzip level 1: label maps compress almost as well as at 9, several times faster
         nrrd.write(str(tmp), data, header, index_order="F", compression_level=1)
-    logger.info("wrote %s (%s, %d segments)", target, "x".join(map(str, data.shape)),
-                len(chosen))
+    logger.info("wrote %s (%s, %d segments)", target, "x".join(map(str, data.shape)), len(chosen))
     return target

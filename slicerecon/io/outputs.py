@@ -62,8 +62,10 @@ class LabelOutputs:
 
     def to_dict(self) -> dict[str, object]:
         """JSON-ready: file names written and reasons for those skipped."""
-        return {"written": {k: v.name for k, v in self.written.items()},
-                "skipped": dict(self.skipped)}
+        return {
+            "written": {k: v.name for k, v in self.written.items()},
+            "skipped": dict(self.skipped),
+        }
 
 
 def dicom_image_series(
@@ -143,10 +145,12 @@ def write_label_outputs(
 
     out = Path(outdir)
     result = LabelOutputs()
-    result.written["labels"] = write_label_map(labels, affine, out / "labels.nii.gz",
-                                               coordinates=coordinates)
-    result.written["seg_nrrd"] = write_seg_nrrd(labels, affine, list(structures),
-                                                out / "labels.seg.nrrd", coordinates=coordinates)
+    result.written["labels"] = write_label_map(
+        labels, affine, out / "labels.nii.gz", coordinates=coordinates
+    )
+    result.written["seg_nrrd"] = write_seg_nrrd(
+        labels, affine, list(structures), out / "labels.seg.nrrd", coordinates=coordinates
+    )
     if series is None:
         if rtstruct is not None:
             result.skipped["rtstruct"] = "the RTSTRUCT's image series was not found beside it"
@@ -161,8 +165,9 @@ def write_label_outputs(
     from .dicom.seg_writer import write_seg
 
     try:
-        result.written["seg"] = write_seg(labels, lps, chosen, series, out / "seg.dcm",
-                                          allow_irregular=allow_irregular)
+        result.written["seg"] = write_seg(
+            labels, lps, chosen, series, out / "seg.dcm", allow_irregular=allow_irregular
+        )
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
@@ -171,8 +176,13 @@ def write_label_outputs(
 
         try:
             result.written["rtstruct"] = write_rtstruct(
-                labels, lps, list(structures), series, out / "rtstruct.dcm",
-                reference=rtstruct, allow_irregular=allow_irregular,
+                labels,
+                lps,
+                list(structures),
+                series,
+                out / "rtstruct.dcm",
+                reference=rtstruct,
+                allow_irregular=allow_irregular,
             )
         except SlicereconError as exc:
             logger.warning("rtstruct.dcm not written: %s", exc)

@@ -130,9 +130,7 @@ def _vector_area(points: NDArray[np.float64]) -> NDArray[np.float64]:
     return 0.5 * np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)
 
 
-def _as_polygons(
-    polygons: Sequence[ArrayLike], names: Sequence[str] | None
-) -> list[_Polygon]:
+def _as_polygons(polygons: Sequence[ArrayLike], names: Sequence[str] | None) -> list[_Polygon]:
     items = list(polygons)
     if names is not None and len(names) != len(items):
         raise OptionError(f"polygon_names has {len(names)} names for {len(items)} polygons")
@@ -190,9 +188,7 @@ def _common_normal(
     else:
         common = normal
         against = f"the given normal {np.round(normal, 6).tolist()}"
-    tilts = [
-        _angle_deg(p.vector_area / np.linalg.norm(p.vector_area), common) for p in polys
-    ]
+    tilts = [_angle_deg(p.vector_area / np.linalg.norm(p.vector_area), common) for p in polys]
     worst = int(np.argmax(tilts))
     if tilts[worst] > tolerance_deg:
         raise GeometryError(
@@ -307,7 +303,11 @@ def _built_grid(
     n_planes = int(math.ceil(_built_indices(plane_positions, tolerance_mm)[-1])) + 1
     logger.debug(
         "built grid: pixel %.4g mm, %d x %d pixels, plane step %.4g mm, %d planes",
-        spacing, sizes[0], sizes[1], gap, n_planes,
+        spacing,
+        sizes[0],
+        sizes[1],
+        gap,
+        n_planes,
     )
     return _Grid(affine, (int(sizes[0]), int(sizes[1]), n_planes), axis=2)
 
@@ -459,9 +459,7 @@ def sections_from_polygons(
         raise OptionError(f"axis_tolerance_deg must be in [0, 90) (got {axis_tolerance_deg})")
     if not (math.isfinite(plane_tolerance_mm) and plane_tolerance_mm >= 0):
         raise OptionError(f"plane_tolerance_mm must be >= 0 (got {plane_tolerance_mm})")
-    if pixel_spacing is not None and not (
-        math.isfinite(pixel_spacing) and pixel_spacing > 0
-    ):
+    if pixel_spacing is not None and not (math.isfinite(pixel_spacing) and pixel_spacing > 0):
         raise OptionError(f"pixel_spacing must be a positive number of mm (got {pixel_spacing})")
     given_normal = None if normal is None else _unit(normal, "normal")
     empties = np.asarray(list(empty_positions), dtype=np.float64).reshape(-1)
@@ -483,7 +481,8 @@ def sections_from_polygons(
     if not polys:
         raise EmptyMaskError(
             "no contour encloses any area: there is nothing to reconstruct"
-            if items else "no contours given: there is nothing to reconstruct"
+            if items
+            else "no contours given: there is nothing to reconstruct"
         )
     common = _common_normal(polys, given_normal, axis_tolerance_deg)
     _check_planar(polys, plane_tolerance_mm)
@@ -525,7 +524,10 @@ def sections_from_polygons(
             logger.warning("plane %d: its contours cover no pixel centre (too small)", p)
     logger.info(
         "%d polygons on %d planes, in-plane grid %d x %d",
-        len(polys), len(groups), masks.shape[1], masks.shape[2],
+        len(polys),
+        len(groups),
+        masks.shape[1],
+        masks.shape[2],
     )
     return CrossSections(masks, indices, grid.axis, grid.affine, grid.shape)
 
@@ -540,8 +542,9 @@ def _reference_indices(
     grid: _Grid, along: NDArray[np.float64], plane_pos: NDArray[np.float64], tolerance_mm: float
 ) -> NDArray[np.float64]:
     step = float(np.dot(grid.affine[:3, grid.axis], along))
-    indices = _snap((plane_pos - float(np.dot(grid.affine[:3, 3], along))) / step, step,
-                    tolerance_mm)
+    indices = _snap(
+        (plane_pos - float(np.dot(grid.affine[:3, 3], along))) / step, step, tolerance_mm
+    )
     size = grid.shape[grid.axis]
     outside = (indices < -0.5) | (indices > size - 0.5)
     if outside.any():
@@ -580,7 +583,9 @@ def _contour_axis(
     shape[axis] = int(math.ceil(_built_indices(plane_pos, tolerance_mm)[-1])) + 1
     logger.info(
         "the contour planes lie between the image's slices (index %.3g): they keep their "
-        "positions on a slice axis of their own, %.4g mm apart", float(indices[0]), gap,
+        "positions on a slice axis of their own, %.4g mm apart",
+        float(indices[0]),
+        gap,
     )
     return _Grid(affine, (shape[0], shape[1], shape[2]), axis)
 

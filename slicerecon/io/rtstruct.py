@@ -123,7 +123,10 @@ def _contour_points(item: Any, where: str, path: Path) -> NDArray[np.float64]:
     if declared is not None and int(declared) != points.shape[0]:
         logger.warning(
             "%s: %s declares %d points but ContourData holds %d; using ContourData",
-            path, where, int(declared), points.shape[0],
+            path,
+            where,
+            int(declared),
+            points.shape[0],
         )
     return points
 
@@ -134,7 +137,8 @@ def _roi_polygons(
     """Closed planar polygons of ROI ``number``, their names, referenced image UIDs."""
     label = f"ROI {number} ({name or 'no name'})"
     items = [
-        item for item in ds.get("ROIContourSequence", [])
+        item
+        for item in ds.get("ROIContourSequence", [])
         if "ReferencedROINumber" in item and int(item.ReferencedROINumber) == number
     ]
     contours = [c for item in items for c in item.get("ContourSequence", [])]
@@ -154,8 +158,12 @@ def _roi_polygons(
         if points.shape[0] > 1 and np.array_equal(points[0], points[-1]):
             points = points[:-1]
         if points.shape[0] < 3:
-            logger.warning("%s: %s has %d points, too few to enclose an area; skipped",
-                           path, where, points.shape[0])
+            logger.warning(
+                "%s: %s has %d points, too few to enclose an area; skipped",
+                path,
+                where,
+                points.shape[0],
+            )
             continue
         polygons.append(points)
         names.append(where)
@@ -164,8 +172,13 @@ def _roi_polygons(
             if uid:
                 image_uids.add(uid)
     for kind, count in skipped.items():
-        logger.warning("%s: %s: skipped %d %s contours (only CLOSED_PLANAR bound an area)",
-                       path, label, count, kind)
+        logger.warning(
+            "%s: %s: skipped %d %s contours (only CLOSED_PLANAR bound an area)",
+            path,
+            label,
+            count,
+            kind,
+        )
     if not polygons:
         raise EmptyMaskError(f"{path}: {label} has no closed planar contour")
     return polygons, names, image_uids
@@ -274,7 +287,10 @@ def read_rtstruct(
         if image_uids and not image_uids & set(series_uids):
             logger.warning(
                 "%s: ROI %d refers to none of the images in %s; its contours are placed "
-                "on that grid by their coordinates anyway", p, number, image_dir,
+                "on that grid by their coordinates anyway",
+                p,
+                number,
+                image_dir,
             )
         reference = (affine, shape)
         if pixel_spacing is not None:
@@ -282,15 +298,25 @@ def read_rtstruct(
             pixel_spacing = None
     try:
         sections = sections_from_polygons(
-            polygons, pixel_spacing=pixel_spacing, reference=reference, polygon_names=names,
-            memory_budget_gb=memory_budget_gb, own_planes=True,
+            polygons,
+            pixel_spacing=pixel_spacing,
+            reference=reference,
+            polygon_names=names,
+            memory_budget_gb=memory_budget_gb,
+            own_planes=True,
         )
     except OptionError:
         raise
     except SlicereconError as exc:
         raise type(exc)(f"{p}: {exc}") from exc
-    logger.info("%s: ROI %d (%s): %d contours on %d planes",
-                p, number, name, len(polygons), sections.n_planes)
+    logger.info(
+        "%s: ROI %d (%s): %d contours on %d planes",
+        p,
+        number,
+        name,
+        len(polygons),
+        sections.n_planes,
+    )
     return sections
 
 
@@ -352,8 +378,9 @@ def read_rtstruct_structures(
         No chosen ROI has a closed planar contour.
     """
     with reading(path):
-        return _read_structures(path, rois, image_dir, pixel_spacing, allow_irregular,
-                                memory_budget_gb)
+        return _read_structures(
+            path, rois, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+        )
 
 
 def _read_structures(
@@ -390,12 +417,18 @@ def _read_structures(
         pixel_spacing = None
     try:
         union = sections_from_polygons(
-            everything, pixel_spacing=pixel_spacing, reference=reference,
-            memory_budget_gb=memory_budget_gb, own_planes=True,
+            everything,
+            pixel_spacing=pixel_spacing,
+            reference=reference,
+            memory_budget_gb=memory_budget_gb,
+            own_planes=True,
         )
         sections = [
-            None if not group else sections_from_polygons(
-                group, reference=(union.affine, union.grid_shape),
+            None
+            if not group
+            else sections_from_polygons(
+                group,
+                reference=(union.affine, union.grid_shape),
                 memory_budget_gb=memory_budget_gb,
             )
             for group in polygons

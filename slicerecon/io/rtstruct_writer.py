@@ -78,10 +78,26 @@ STUDY_REFERENCE_SOP_CLASS_UID = "1.2.840.10008.3.1.2.3.1"
 """ReferencedSOPClassUID of RTReferencedStudySequence items, as planning systems write it."""
 
 _PATIENT = ("PatientName", "PatientID", "IssuerOfPatientID", "PatientBirthDate", "PatientSex")
-_STUDY = ("StudyInstanceUID", "StudyDate", "StudyTime", "ReferringPhysicianName", "StudyID",
-          "AccessionNumber", "StudyDescription")
-_TYPE2 = {"PatientName", "PatientID", "PatientBirthDate", "PatientSex", "StudyDate",
-          "StudyTime", "ReferringPhysicianName", "StudyID", "AccessionNumber"}
+_STUDY = (
+    "StudyInstanceUID",
+    "StudyDate",
+    "StudyTime",
+    "ReferringPhysicianName",
+    "StudyID",
+    "AccessionNumber",
+    "StudyDescription",
+)
+_TYPE2 = {
+    "PatientName",
+    "PatientID",
+    "PatientBirthDate",
+    "PatientSex",
+    "StudyDate",
+    "StudyTime",
+    "ReferringPhysicianName",
+    "StudyID",
+    "AccessionNumber",
+}
 
 
 def _ds_text(value: float) -> str:
@@ -113,8 +129,13 @@ def _roi_polygons(
     if not occupied:
         return []
     planes = series.planes[occupied]
-    sections = CrossSections(np.moveaxis(mask[:, :, planes], 2, 0), planes.astype(np.float64),
-                             2, series.affine, series.shape)
+    sections = CrossSections(
+        np.moveaxis(mask[:, :, planes], 2, 0),
+        planes.astype(np.float64),
+        2,
+        series.affine,
+        series.shape,
+    )
     out: list[tuple[int, NDArray[np.float64]]] = []
     for p, n in enumerate(occupied):
         for contour in sections.contours(p):
@@ -160,26 +181,34 @@ def _read_reference(reference: Any) -> Any:
     else:
         ds, where = reference, "the reference dataset"
     if object_kind(ds) != "rtstruct":
-        raise InputError(f"{where} is not an RTSTRUCT (Modality "
-                         f"{ds.get('Modality', '') or 'missing'}); pass the input structure set")
+        raise InputError(
+            f"{where} is not an RTSTRUCT (Modality "
+            f"{ds.get('Modality', '') or 'missing'}); pass the input structure set"
+        )
     return ds
 
 
-def _reference_rois(ref: Any) -> tuple[dict[int, Any], dict[int, tuple[int, int, int]],
-                                        dict[int, Any]]:
+def _reference_rois(
+    ref: Any,
+) -> tuple[dict[int, Any], dict[int, tuple[int, int, int]], dict[int, Any]]:
     """The reference's StructureSetROI items, colours and RT ROI observations by ROINumber."""
     try:
-        rois = {int(item.ROINumber): item for item in ref.get("StructureSetROISequence", [])
-                if "ROINumber" in item}
+        rois = {
+            int(item.ROINumber): item
+            for item in ref.get("StructureSetROISequence", [])
+            if "ROINumber" in item
+        }
         colours: dict[int, tuple[int, int, int]] = {}
         for item in ref.get("ROIContourSequence", []):
             colour = item.get("ROIDisplayColor")
             if "ReferencedROINumber" in item and colour is not None and len(colour) == 3:
                 r, g, b = (int(c) for c in colour)
                 colours[int(item.ReferencedROINumber)] = (r, g, b)
-        observations = {int(item.ReferencedROINumber): item
-                        for item in ref.get("RTROIObservationsSequence", [])
-                        if "ReferencedROINumber" in item}
+        observations = {
+            int(item.ReferencedROINumber): item
+            for item in ref.get("RTROIObservationsSequence", [])
+            if "ReferencedROINumber" in item
+        }
     except PARSE_ERRORS as exc:
         raise FormatError(f"the reference RTSTRUCT has malformed ROI items ({exc})") from exc
     return rois, colours, observations
@@ -266,8 +295,9 @@ def write_rtstruct(
     ref = None if reference is None else _read_reference(reference)
     on_grid = labels_on_series(values, aff, series)
 
-    ref_rois, ref_colours, ref_observations = _reference_rois(ref) if ref is not None else (
-        {}, {}, {})
+    ref_rois, ref_colours, ref_observations = (
+        _reference_rois(ref) if ref is not None else ({}, {}, {})
+    )
     now = dt.datetime.now()
     date, time = now.strftime("%Y%m%d"), now.strftime("%H%M%S.%f")
     sop_uid = generate_uid()
@@ -282,9 +312,12 @@ def write_rtstruct(
     ds.SOPInstanceUID = sop_uid
     _copy_identifiers(ds, ref if ref is not None else series.first)
     if ref is not None and str(ds.StudyInstanceUID) != series.study_instance_uid:
-        logger.warning("the reference RTSTRUCT is in study %s, the images in study %s; the "
-                       "structure set takes the reference's", ds.StudyInstanceUID,
-                       series.study_instance_uid)
+        logger.warning(
+            "the reference RTSTRUCT is in study %s, the images in study %s; the "
+            "structure set takes the reference's",
+            ds.StudyInstanceUID,
+            series.study_instance_uid,
+        )
     ds.Modality = "RTSTRUCT"
     ds.SeriesInstanceUID = generate_uid()
     ds.SeriesNumber = series_number
@@ -302,15 +335,22 @@ def write_rtstruct(
 
     frame_uid = series.frame_of_reference_uid
     if ref is not None:
-        ref_frames = {str(item.get("FrameOfReferenceUID", ""))
-                      for item in ref.get("ReferencedFrameOfReferenceSequence", [])}
-        ref_frames |= {str(item.get("ReferencedFrameOfReferenceUID", ""))
-                       for item in ref.get("StructureSetROISequence", [])}
+        ref_frames = {
+            str(item.get("FrameOfReferenceUID", ""))
+            for item in ref.get("ReferencedFrameOfReferenceSequence", [])
+        }
+        ref_frames |= {
+            str(item.get("ReferencedFrameOfReferenceUID", ""))
+            for item in ref.get("StructureSetROISequence", [])
+        }
         ref_frames.discard("")
         if ref_frames and frame_uid not in ref_frames:
-            logger.warning("the reference RTSTRUCT refers to frame of reference %s, the images "
-                           "are in %s; the contours are written in the images' frame",
-                           ", ".join(sorted(ref_frames)), frame_uid)
+            logger.warning(
+                "the reference RTSTRUCT refers to frame of reference %s, the images "
+                "are in %s; the contours are written in the images' frame",
+                ", ".join(sorted(ref_frames)),
+                frame_uid,
+            )
         predecessor = Dataset()
         predecessor.ReferencedSOPClassUID = str(ref.get("SOPClassUID", RTSTRUCT_SOP_CLASS_UID))
         predecessor.ReferencedSOPInstanceUID = str(ref.get("SOPInstanceUID", ""))
@@ -320,7 +360,8 @@ def write_rtstruct(
     referenced_series = Dataset()
     referenced_series.SeriesInstanceUID = series.series_instance_uid
     referenced_series.ContourImageSequence = _sequence(
-        [_image_reference(image) for image in series.images])
+        [_image_reference(image) for image in series.images]
+    )
     referenced_study = Dataset()
     referenced_study.ReferencedSOPClassUID = STUDY_REFERENCE_SOP_CLASS_UID
     referenced_study.ReferencedSOPInstanceUID = series.study_instance_uid
@@ -346,22 +387,28 @@ def write_rtstruct(
         if ref_roi is not None and ref_roi.get("ROIDescription"):
             roi.ROIDescription = ref_roi.ROIDescription
         roi.ROIGenerationAlgorithm = "SEMIAUTOMATIC"
-        roi.ROIGenerationDescription = f"slicerecon {__version__}: surface reconstructed " \
-                                       "from cross-sections"
+        roi.ROIGenerationDescription = (
+            f"slicerecon {__version__}: surface reconstructed from cross-sections"
+        )
         roi_items.append(roi)
 
         holder = Dataset()
         holder.ROIDisplayColor = list(colour)
         polygons = _roi_polygons(on_grid == number, series)
         if polygons:
-            holder.ContourSequence = _sequence([
-                _contour_item(c, series.images[n], points)
-                for c, (n, points) in enumerate(polygons, start=1)
-            ])
+            holder.ContourSequence = _sequence(
+                [
+                    _contour_item(c, series.images[n], points)
+                    for c, (n, points) in enumerate(polygons, start=1)
+                ]
+            )
             written += 1
         else:
-            logger.warning("structure %d (%s) holds no voxel on the images; its ROI has no "
-                           "contour", number, name)
+            logger.warning(
+                "structure %d (%s) holds no voxel on the images; its ROI has no contour",
+                number,
+                name,
+            )
         holder.ReferencedROINumber = number
         contour_items.append(holder)
 
@@ -369,14 +416,20 @@ def write_rtstruct(
         observation.ObservationNumber = number
         observation.ReferencedROINumber = number
         ref_observation = ref_observations.get(number)
-        observation.RTROIInterpretedType = "" if ref_observation is None else str(
-            ref_observation.get("RTROIInterpretedType", "") or "")
-        observation.ROIInterpreter = "" if ref_observation is None else (
-            ref_observation.get("ROIInterpreter", "") or "")
+        observation.RTROIInterpretedType = (
+            ""
+            if ref_observation is None
+            else str(ref_observation.get("RTROIInterpretedType", "") or "")
+        )
+        observation.ROIInterpreter = (
+            "" if ref_observation is None else (ref_observation.get("ROIInterpreter", "") or "")
+        )
         observation_items.append(observation)
     if not written:
-        raise EmptyMaskError(f"no structure holds a voxel on the images of {series.name}: "
-                             "there is nothing to write in an RTSTRUCT")
+        raise EmptyMaskError(
+            f"no structure holds a voxel on the images of {series.name}: "
+            "there is nothing to write in an RTSTRUCT"
+        )
     ds.StructureSetROISequence = _sequence(roi_items)
     ds.ROIContourSequence = _sequence(contour_items)
     ds.RTROIObservationsSequence = _sequence(observation_items)
@@ -385,6 +438,11 @@ def write_rtstruct(
     target = Path(path)
     with atomic_path(target) as tmp:
         ds.save_as(tmp, enforce_file_format=True)
-    logger.info("wrote RTSTRUCT %s: %d ROIs (%d with contours) on %s", target, len(roi_items),
-                written, series.name)
+    logger.info(
+        "wrote RTSTRUCT %s: %d ROIs (%d with contours) on %s",
+        target,
+        len(roi_items),
+        written,
+        series.name,
+    )
     return target

@@ -102,7 +102,8 @@ def choose_structure(
     if isinstance(selector, str):
         exact = [n for n, name in structures.items() if name == selector]
         folded = exact or [
-            n for n, name in structures.items()
+            n
+            for n, name in structures.items()
             if name and " ".join(name.split()).casefold() == " ".join(selector.split()).casefold()
         ]
         if len(folded) == 1:
@@ -122,5 +123,6 @@ def choose_structure(
             )
     elif int(selector) in structures:
         return int(selector)
-    raise LabelError(f"{kind} {selector!r} is not in {source}; its {kind}s are: "
-                     f"{_listing(structures)}")
+    raise LabelError(
+        f"{kind} {selector!r} is not in {source}; its {kind}s are: {_listing(structures)}"
+    )

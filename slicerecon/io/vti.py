@@ -44,13 +44,27 @@ __all__ = ["VtiImage", "read_vti"]
 logger = logging.getLogger(__name__)
 
 _TYPES: dict[str, str] = {
-    "Int8": "i1", "UInt8": "u1", "Int16": "i2", "UInt16": "u2",
-    "Int32": "i4", "UInt32": "u4", "Int64": "i8", "UInt64": "u8",
-    "Float32": "f4", "Float64": "f8",
+    "Int8": "i1",
+    "UInt8": "u1",
+    "Int16": "i2",
+    "UInt16": "u2",
+    "Int32": "i4",
+    "UInt32": "u4",
+    "Int64": "i8",
+    "UInt64": "u8",
+    "Float32": "f4",
+    "Float64": "f8",
     # legacy names written by old VTK versions
-    "Char": "i1", "UnsignedChar": "u1", "Short": "i2", "UnsignedShort": "u2",
-    "Int": "i4", "UnsignedInt": "u4", "Long": "i8", "UnsignedLong": "u8",
-    "Float": "f4", "Double": "f8",
+    "Char": "i1",
+    "UnsignedChar": "u1",
+    "Short": "i2",
+    "UnsignedShort": "u2",
+    "Int": "i4",
+    "UnsignedInt": "u4",
+    "Long": "i8",
+    "UnsignedLong": "u8",
+    "Float": "f4",
+    "Double": "f8",
 }
 """VTK XML data type names → numpy type codes (byte order added per file)."""
 
@@ -252,10 +266,7 @@ def read_vti(
             continue
         for element in group.findall("DataArray"):
             candidates.append((element, assoc.lower()))
-            if (
-                default is None and assoc == "Point"
-                and element.get("Name") == group.get("Scalars")
-            ):
+            if default is None and assoc == "Point" and element.get("Name") == group.get("Scalars"):
                 default = element
     if not candidates:
         raise FormatError(f"{p}: the file holds no data array")
@@ -291,8 +302,12 @@ def read_vti(
     affine[:3, :3] = rot * spacing  # scales the columns
     affine[:3, 3] = origin + rot @ (spacing * start)
     check_geometry(affine, counts.tolist(), what=str(p))
-    check_grid(counts.tolist(), what=str(p), memory_budget_gb=memory_budget_gb,
-               bytes_per_voxel=3 * dtype.itemsize + 2)
+    check_grid(
+        counts.tolist(),
+        what=str(p),
+        memory_budget_gb=memory_budget_gb,
+        bytes_per_voxel=3 * dtype.itemsize + 2,
+    )
     n_values = int(np.prod(counts))
 
     fmt = element.get("format", "ascii")
@@ -311,7 +326,8 @@ def read_vti(
             raw_encoding = root.find("AppendedData")
             if raw_encoding is not None and raw_encoding.get("encoding") == "base64":
                 later = [
-                    int(e.get("offset", "0")) for e, _ in candidates
+                    int(e.get("offset", "0"))
+                    for e, _ in candidates
                     if e.get("format") == "appended" and int(e.get("offset", "0")) > offset
                 ]
                 stop = min(later) if later else len(appended)
@@ -330,10 +346,15 @@ def read_vti(
     grid = values.reshape(tuple(int(c) for c in counts), order="F")
     logger.info(
         "read %s: array %r (%s data, %s), grid %s",
-        p, element.get("Name"), association, dtype, "x".join(str(int(c)) for c in counts),
+        p,
+        element.get("Name"),
+        association,
+        dtype,
+        "x".join(str(int(c)) for c in counts),
     )
     return VtiImage(
         np.ascontiguousarray(grid.astype(dtype.newbyteorder("="))),
-        affine, element.get("Name", ""), association,
+        affine,
+        element.get("Name", ""),
+        association,
     )
-

@@ -22,7 +22,6 @@ representations are derived from each shape, once:
 samples. The exact definitions are in ``docs/metrics.md``.
 """
 
-
 from __future__ import annotations
 
 import numpy as np
@@ -145,8 +144,9 @@ def evaluate(
     as_rng(seed)  # validate before the expensive work
     p, g = metric_inputs(pred, gt)
 
-    occ = occupancy_grid(p, g, resolution=res, voxel_size=size, margin_mm=tol or 0.0,
-                     pred_occupancy=pred_occupancy)
+    occ = occupancy_grid(
+        p, g, resolution=res, voxel_size=size, margin_mm=tol or 0.0, pred_occupancy=pred_occupancy
+    )
     tol_mm = tol if tol is not None else float(occ.spacing.max())
     dist = distances_between(p, g, n_points=n, seed=seed)
     tau_mm = tau * dist.gt_diagonal_mm
@@ -171,4 +171,3 @@ def evaluate(
         voxel_size_mm=float(occ.spacing.max()),
         n_points=n,
     )
-

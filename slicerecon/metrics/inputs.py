@@ -34,7 +34,6 @@ CHUNK_VOXELS = 4_000_000
 """Voxels resampled at once by nearest-neighbour index mapping."""
 
 
-
 # -- results ------------------------------------------------------------------------------
 
 
@@ -254,5 +253,3 @@ def as_rng(seed: int | np.random.Generator) -> np.random.Generator:
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
         raise OptionError(f"seed must be an integer or a numpy Generator (got {seed!r})")
     return np.random.default_rng(int(seed))
-
-

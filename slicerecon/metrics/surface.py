@@ -95,9 +95,7 @@ def surface_distances(
     -------
     SurfaceDistances
     """
-    return distances_between(
-        *metric_inputs(pred, gt), n_points=check_n_points(n_points), seed=seed
-    )
+    return distances_between(*metric_inputs(pred, gt), n_points=check_n_points(n_points), seed=seed)
 
 
 def distances_between(
@@ -132,9 +130,7 @@ def precision_recall(dist: SurfaceDistances, tau_mm: float) -> tuple[float, floa
 
 
 def hd95_of(dist: SurfaceDistances) -> float:
-    return max(
-        float(np.percentile(dist.pred_to_gt, 95)), float(np.percentile(dist.gt_to_pred, 95))
-    )
+    return max(float(np.percentile(dist.pred_to_gt, 95)), float(np.percentile(dist.gt_to_pred, 95)))
 
 
 def assd_of(dist: SurfaceDistances) -> float:
@@ -254,5 +250,3 @@ def assd(
     float
     """
     return assd_of(surface_distances(pred, gt, n_points=n_points, seed=seed))
-
-

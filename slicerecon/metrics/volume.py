@@ -116,8 +116,10 @@ def occupancy_grid(
         pred_mask = pred.rasterize(affine, shape)
     logger.debug(
         "evaluation grid %s, spacing %s mm: %d predicted and %d true voxels",
-        shape, np.round(np.linalg.norm(affine[:3, :3], axis=0), 4),
-        int(np.count_nonzero(pred_mask)), int(np.count_nonzero(gt_mask)),
+        shape,
+        np.round(np.linalg.norm(affine[:3, :3], axis=0), 4),
+        int(np.count_nonzero(pred_mask)),
+        int(np.count_nonzero(gt_mask)),
     )
     return Occupancy(pred_mask, gt_mask, affine)
 
@@ -226,9 +228,7 @@ def resample_nearest(
     last = np.clip(np.ceil(ijk.max(axis=0)).astype(np.int64) + 1, 0, shape)
     if np.any(last <= first):
         return out
-    jj, kk = np.meshgrid(
-        np.arange(first[1], last[1]), np.arange(first[2], last[2]), indexing="ij"
-    )
+    jj, kk = np.meshgrid(np.arange(first[1], last[1]), np.arange(first[2], last[2]), indexing="ij")
     plane = np.stack([np.zeros_like(jj), jj, kk], axis=-1).astype(np.float64)  # (J, K, 3)
     rows = max(1, CHUNK_VOXELS // max(1, jj.size))
     src_shape = np.asarray(volume.shape)
@@ -333,9 +333,7 @@ def _shell(mask: NDArray[np.bool_], spacing: NDArray[np.float64], tol: float) ->
         return np.zeros_like(mask)
     limit = tol * (1.0 + 1e-9)
     reach = np.floor(limit / np.asarray(spacing, dtype=np.float64)).astype(np.int64)
-    offsets = np.stack(
-        np.meshgrid(*(np.arange(-r, r + 1) for r in reach), indexing="ij"), axis=-1
-    )
+    offsets = np.stack(np.meshgrid(*(np.arange(-r, r + 1) for r in reach), indexing="ij"), axis=-1)
     structure = np.sqrt(((offsets * np.asarray(spacing)) ** 2).sum(axis=-1)) <= limit
     if structure.sum() <= 125:
         # Dilation and erosion by the structure's offsets on shifted views (a few
@@ -442,5 +440,3 @@ def surface_iou(
         margin_mm=margin,
     )
     return occupancy_surface_iou(occ, tol if tol is not None else float(occ.spacing.max()))
-
-

@@ -345,9 +345,7 @@ def side_image(cut: Cut, image_shape: Sequence[int]) -> NDArray[np.int8]:
     return line_sides(np.array([cut.p1]), np.array([cut.p2]), image_shape)[0]
 
 
-def choose_sides(
-    n_pos: ArrayLike, n_neg: ArrayLike
-) -> tuple[NDArray[np.int8], NDArray[np.bool_]]:
+def choose_sides(n_pos: ArrayLike, n_neg: ArrayLike) -> tuple[NDArray[np.int8], NDArray[np.bool_]]:
     """Which open side of each cut becomes the part ``W``.
 
     Parameters

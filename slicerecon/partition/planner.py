@@ -248,17 +248,17 @@ def planner_entry(name: str) -> PlannerEntry:
     """
     key = str(name).strip().lower()
     if key not in PLANNERS:
-        raise OptionError(
-            f"unknown planner {name!r}; choose one of: {', '.join(planner_names())}"
-        )
+        raise OptionError(f"unknown planner {name!r}; choose one of: {', '.join(planner_names())}")
     found = PLANNERS[key]
     return found if isinstance(found, PlannerEntry) else PlannerEntry(key, found)
 
 
-register_planner(PlannerEntry("none", _plan_none, partitions=False,
-                              summary="one part: the no-projection baseline"))
-register_planner(PlannerEntry("heuristic", _plan_heuristic,
-                              summary="the paper's heuristic expert"))
+register_planner(
+    PlannerEntry(
+        "none", _plan_none, partitions=False, summary="one part: the no-projection baseline"
+    )
+)
+register_planner(PlannerEntry("heuristic", _plan_heuristic, summary="the paper's heuristic expert"))
 
 
 def planner_names() -> list[str]:
@@ -337,8 +337,12 @@ def plan_partition(
             raise OptionError("a reward reconstruction needs the full grid: give max_grid=None")
         coarse = pool_any(occ.astype(bool, copy=False), factor)
         parts = entry(
-            coarse, reconstruct=None, max_parts=int(max_parts),
-            min_remaining=float(min_remaining), lam=float(lam), **options,
+            coarse,
+            reconstruct=None,
+            max_parts=int(max_parts),
+            min_remaining=float(min_remaining),
+            lam=float(lam),
+            **options,
         )
         shape = tuple(int(s) for s in occ.shape)
         refined = _refine(parts, occ.astype(bool, copy=False), factor)
@@ -379,13 +383,18 @@ def _refine(parts: list[Part], occupancy: NDArray[np.bool_], factor: int) -> tup
         if not own.any():
             continue
         tight = Box.of_mask(own)
-        box = Box(tuple(a + t for a, t in zip(lo, tight.lo, strict=True)),  # type: ignore[arg-type]
-                  tuple(a + t for a, t in zip(lo, tight.hi, strict=True)))  # type: ignore[arg-type]
+        box = Box(
+            tuple(a + t for a, t in zip(lo, tight.lo, strict=True)),  # type: ignore[arg-type]
+            tuple(a + t for a, t in zip(lo, tight.hi, strict=True)),
+        )  # type: ignore[arg-type]
         taken[region] |= own
         cut = part.cut
         if cut is not None:
             half = (factor - 1) / 2.0
-            cut = Cut(cut.view, tuple(v * factor + half for v in cut.p1),  # type: ignore[arg-type]
-                      tuple(v * factor + half for v in cut.p2))  # type: ignore[arg-type]
+            cut = Cut(
+                cut.view,
+                tuple(v * factor + half for v in cut.p1),  # type: ignore[arg-type]
+                tuple(v * factor + half for v in cut.p2),
+            )  # type: ignore[arg-type]
         out.append(PlanPart(box, cut, int(np.count_nonzero(own))))
     return tuple(out)

@@ -266,8 +266,11 @@ class PartitionState:
             return True
         return bool(
             episode_done(
-                [self.remaining_voxels], [self.n_occupied], [self.step_count],
-                max_steps=self.max_steps, min_remaining=self.min_remaining,
+                [self.remaining_voxels],
+                [self.n_occupied],
+                [self.step_count],
+                max_steps=self.max_steps,
+                min_remaining=self.min_remaining,
             )[0]
         )
 

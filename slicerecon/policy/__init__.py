@@ -29,6 +29,11 @@ def _plan_policy(occupancy: Any, **options: Any) -> Any:
 
 
 register_planner(
-    PlannerEntry("policy", _plan_policy, needs_torch=True, takes_weights=True,
-                 summary="a trained actor (docs/policy.md)")
+    PlannerEntry(
+        "policy",
+        _plan_policy,
+        needs_torch=True,
+        takes_weights=True,
+        summary="a trained actor (docs/policy.md)",
+    )
 )

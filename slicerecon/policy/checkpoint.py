@@ -135,7 +135,8 @@ def load_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
             f"{type(state).__name__}, not a dict); {_WHAT_TO_DO}"
         )
     problems = [
-        name for name, kind in CHECKPOINT_KEYS.items()
+        name
+        for name, kind in CHECKPOINT_KEYS.items()
         if not isinstance(state.get(name), kind) or isinstance(state.get(name), bool)
     ]
     rng = state.get("rng")

@@ -145,7 +145,10 @@ class DDPG:
         return out
 
     def update(
-        self, demo: ReplayBatch | None = None, agent: ReplayBatch | None = None, *,
+        self,
+        demo: ReplayBatch | None = None,
+        agent: ReplayBatch | None = None,
+        *,
         pretrain: bool = False,
     ) -> dict[str, float]:
         """One gradient step of critic and actor on the given minibatches.
@@ -167,8 +170,13 @@ class DDPG:
             raise OptionError("update needs a demonstration or an agent minibatch")
         batch = _cat(parts)
         n_demo = 0 if demo is None else int(demo.actions.shape[0])
-        out = {"critic_loss": float("nan"), "actor_loss": float("nan"), "bc_loss": float("nan"),
-               "q_mean": float("nan"), "q_filter_frac": float("nan")}
+        out = {
+            "critic_loss": float("nan"),
+            "actor_loss": float("nan"),
+            "bc_loss": float("nan"),
+            "q_mean": float("nan"),
+            "q_filter_frac": float("nan"),
+        }
 
         # 1. critic: one-step TD target from the target networks
         if self.uses_critic:

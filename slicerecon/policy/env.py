@@ -183,15 +183,16 @@ def resize_views(images: torch.Tensor, resolution: int) -> torch.Tensor:
     x = images.to(torch.float32).unsqueeze(1)
     if tuple(x.shape[-2:]) != (resolution, resolution):
         x = F.interpolate(
-            x, size=(resolution, resolution), mode="bilinear", align_corners=False,
+            x,
+            size=(resolution, resolution),
+            mode="bilinear",
+            align_corners=False,
             antialias=True,
         )
     return x.squeeze(1).clamp_(0.0, 1.0)
 
 
-_CORNER_CACHE: OrderedDict[tuple[bytes, tuple[int, ...], int], NDArray[np.float64]] = (
-    OrderedDict()
-)
+_CORNER_CACHE: OrderedDict[tuple[bytes, tuple[int, ...], int], NDArray[np.float64]] = OrderedDict()
 _CORNER_CACHE_SIZE = 8192
 
 
@@ -395,7 +396,9 @@ class CutEnv:
         return np.ascontiguousarray(dist)
 
     def _start(
-        self, envs: Sequence[int], occupancies: Sequence[NDArray[np.bool_]],
+        self,
+        envs: Sequence[int],
+        occupancies: Sequence[NDArray[np.bool_]],
         n_planes: Sequence[int] | None = None,
     ) -> None:
         """Begin new episodes in ``envs`` on the given grids."""
@@ -547,8 +550,9 @@ class CutEnv:
     # -- voxel work on the device ---------------------------------------------------------
     def _column_counts(self, view: torch.Tensor) -> torch.Tensor:
         """Remaining voxels per pixel of each episode's view, (B, G, G) int64."""
-        counts = torch.zeros((self.n_envs, self.grid, self.grid), dtype=torch.int64,
-                             device=self.device)
+        counts = torch.zeros(
+            (self.n_envs, self.grid, self.grid), dtype=torch.int64, device=self.device
+        )
         for v in range(3):
             sel = view == v
             if bool(sel.any()):
@@ -560,7 +564,8 @@ class CutEnv:
         """Pixel masks (B, G, G) of each episode's view extruded along it, (B, G, G, G)."""
         v = view[:, None, None, None]
         return torch.where(
-            v == 0, pixels[:, None, :, :],
+            v == 0,
+            pixels[:, None, :, :],
             torch.where(v == 1, pixels[:, :, None, :], pixels[:, :, :, None]),
         )
 
@@ -578,12 +583,17 @@ class CutEnv:
             his.append(torch.where(empty, 0, hi))
         return torch.stack(los, 1), torch.stack(his, 1)
 
-    def _reconstruct(self, envs: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor
-                     ) -> torch.Tensor:
+    def _reconstruct(self, envs: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
         """``S_i`` of parts with boxes ``[lo, hi)`` in episodes ``envs``, (n, G, G, G) bool."""
         if self.reward_surface == "surrogate":
-            return surrogate_parts(self.plane_dist[envs], self.plane_index[envs],
-                                   self.plane_valid[envs], self.hull[envs], lo, hi)
+            return surrogate_parts(
+                self.plane_dist[envs],
+                self.plane_index[envs],
+                self.plane_valid[envs],
+                self.hull[envs],
+                lo,
+                hi,
+            )
         out = torch.zeros((len(envs), *(self.grid,) * 3), dtype=torch.bool, device=self.device)
         lo_np, hi_np = lo.cpu().numpy(), hi.cpu().numpy()
         for i, env in enumerate(envs.tolist()):
@@ -618,8 +628,13 @@ class CutEnv:
         view = torch.from_numpy(cuts.view).to(dev)
         # Voxel counts on the device, the choice of side by the rules.
         counts = self._column_counts(view)
-        n_side = torch.stack([(counts * (sides > 0)).sum(dim=(1, 2)),
-                              (counts * (sides < 0)).sum(dim=(1, 2))]).cpu().numpy()
+        n_side = (
+            torch.stack(
+                [(counts * (sides > 0)).sum(dim=(1, 2)), (counts * (sides < 0)).sum(dim=(1, 2))]
+            )
+            .cpu()
+            .numpy()
+        )
         keep, removes_nothing = choose_sides(n_side[0], n_side[1])
         noop = cuts.degenerate | removes_nothing
         keep = np.where(noop, _NO_SIDE, keep).astype(np.int8)
@@ -631,14 +646,26 @@ class CutEnv:
         s = torch.zeros_like(w)
         if parts.numel():
             s[parts] = self._reconstruct(parts, lo[parts], hi[parts])
-        sums = torch.stack([w.sum(dim=(1, 2, 3)), (s & w).sum(dim=(1, 2, 3)),
-                            (s | w).sum(dim=(1, 2, 3))]).cpu().numpy()
+        sums = (
+            torch.stack(
+                [w.sum(dim=(1, 2, 3)), (s & w).sum(dim=(1, 2, 3)), (s | w).sum(dim=(1, 2, 3))]
+            )
+            .cpu()
+            .numpy()
+        )
         iou_part = count_iou(sums[0], self.n_occupied)
         iou_rec = count_iou(sums[1], sums[2])
         reward = np.where(noop, NOOP_REWARD, part_rewards(iou_part, iou_rec, lam=self.lam))
         self.last_step = StepRecord(
-            cuts, removes_nothing, noop, w, lo.cpu().numpy(), hi.cpu().numpy(),
-            np.where(noop, np.nan, iou_part), np.where(noop, np.nan, iou_rec), reward,
+            cuts,
+            removes_nothing,
+            noop,
+            w,
+            lo.cpu().numpy(),
+            hi.cpu().numpy(),
+            np.where(noop, np.nan, iou_part),
+            np.where(noop, np.nan, iou_rec),
+            reward,
         )
         # Bookkeeping and the end of episodes (the rules again).
         self.remaining = self.remaining & ~w
@@ -647,8 +674,13 @@ class CutEnv:
         self.returns += reward
         self.n_parts += ~noop
         left = self.remaining.sum(dim=(1, 2, 3)).cpu().numpy()
-        done = episode_done(left, self.n_occupied, self._steps, max_steps=self.max_steps,
-                            min_remaining=self.min_remaining)
+        done = episode_done(
+            left,
+            self.n_occupied,
+            self._steps,
+            max_steps=self.max_steps,
+            min_remaining=self.min_remaining,
+        )
         ended = [int(e) for e in np.flatnonzero(done)]
         episode_return = np.full(b, np.nan)
         final_iou = np.full(b, np.nan)
@@ -680,13 +712,20 @@ class CutEnv:
         if rows.numel():
             recon[rows] |= self._reconstruct(idx[rows], lo[rows], hi[rows])
         occ = self.occupancy[idx]
-        sums = torch.stack([(recon & occ).sum(dim=(1, 2, 3)),
-                            (recon | occ).sum(dim=(1, 2, 3))]).cpu().numpy()
+        sums = (
+            torch.stack([(recon & occ).sum(dim=(1, 2, 3)), (recon | occ).sum(dim=(1, 2, 3))])
+            .cpu()
+            .numpy()
+        )
         return count_iou(sums[0], sums[1]), self.n_parts[envs] + left.cpu().numpy()
 
 
 def observe_state(
-    state: PartitionState, *, resolution: int, max_corners: int, max_steps: int,
+    state: PartitionState,
+    *,
+    resolution: int,
+    max_corners: int,
+    max_steps: int,
     device: str | torch.device = "cpu",
 ) -> Observation:
     """The policy's observation of a numpy :class:`PartitionState` (batch of one).
@@ -698,8 +737,10 @@ def observe_state(
     ``max_corners`` (the strongest corners are kept).
     """
     views = torch.stack(
-        [resize_views(torch.from_numpy(np.ascontiguousarray(v))[None], resolution)[0]
-         for v in state.projections()]
+        [
+            resize_views(torch.from_numpy(np.ascontiguousarray(v))[None], resolution)[0]
+            for v in state.projections()
+        ]
     )[None]
     pts, valid = state.padded_corners(int(max_corners))
     step = torch.tensor([[state.step_count / max(int(max_steps), 1)]], dtype=torch.float32)

@@ -123,8 +123,10 @@ class StateEncoder(nn.Module):
         self.views = ViewEncoder(config.channels)
         k = config.max_corners
         self.corners = nn.Sequential(
-            nn.Linear(1 + 3 * k * 3, config.hidden), nn.ReLU(),
-            nn.Linear(config.hidden, config.hidden), nn.ReLU(),
+            nn.Linear(1 + 3 * k * 3, config.hidden),
+            nn.ReLU(),
+            nn.Linear(config.hidden, config.hidden),
+            nn.ReLU(),
         )
         self.view_proj = nn.Sequential(
             nn.Linear(3 * self.views.out_features, config.hidden), nn.ReLU()
@@ -150,7 +152,8 @@ class Actor(nn.Module):
         self.config = config
         self.encoder = StateEncoder(config)
         self.head = nn.Sequential(
-            nn.Linear(self.encoder.out_features, config.hidden), nn.ReLU(),
+            nn.Linear(self.encoder.out_features, config.hidden),
+            nn.ReLU(),
             nn.Linear(config.hidden, ACTION_DIM),
         )
 
@@ -171,8 +174,10 @@ class Critic(nn.Module):
         self.config = config
         self.encoder = StateEncoder(config)
         self.head = nn.Sequential(
-            nn.Linear(self.encoder.out_features + ACTION_DIM, config.hidden), nn.ReLU(),
-            nn.Linear(config.hidden, config.hidden), nn.ReLU(),
+            nn.Linear(self.encoder.out_features + ACTION_DIM, config.hidden),
+            nn.ReLU(),
+            nn.Linear(config.hidden, config.hidden),
+            nn.ReLU(),
             nn.Linear(config.hidden, 1),
         )
 

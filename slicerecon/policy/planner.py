@@ -125,13 +125,22 @@ def plan_policy(
 
     recon = None if reconstruct is None else (lambda box: reconstruct(to_grid(box)))
     state = PartitionState(
-        cube, reconstruct=recon, lam=lam, max_steps=int(max_parts) - 1,
-        min_remaining=min_remaining, max_corners=cfg.max_corners,
+        cube,
+        reconstruct=recon,
+        lam=lam,
+        max_steps=int(max_parts) - 1,
+        min_remaining=min_remaining,
+        max_corners=cfg.max_corners,
     )
     with torch.no_grad():
         while not state.done:
-            obs = observe_state(state, resolution=cfg.resolution, max_corners=cfg.max_corners,
-                                max_steps=train_steps, device=device)
+            obs = observe_state(
+                state,
+                resolution=cfg.resolution,
+                max_corners=cfg.max_corners,
+                max_steps=train_steps,
+                device=device,
+            )
             action = actor(obs)[0].double().cpu().numpy()
             result = state.step(action)
             logger.debug("policy step %d: %s", state.step_count, result.info["noop"] or "cut")

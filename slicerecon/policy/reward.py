@@ -74,8 +74,9 @@ def part_surface_voxels(
     """
     from ..surface.part import part_voxels
 
-    voxels = part_voxels(sections, box, method=SURFACE_METHOD, hull=hull,
-                         interpolation=SURFACE_INTERPOLATION)
+    voxels = part_voxels(
+        sections, box, method=SURFACE_METHOD, hull=hull, interpolation=SURFACE_INTERPOLATION
+    )
     return voxels & hull[box.slices]
 
 
@@ -146,5 +147,4 @@ def plane_distances(sections: CrossSections) -> NDArray[np.float32]:
     if sections.axis != SECTION_AXIS:
         raise OptionError(f"the surrogate needs planes along z (got axis {sections.axis})")
     a, b = sections.plane_axes
-    return mask_distances(sections.masks, (float(sections.spacing[a]),
-                                           float(sections.spacing[b])))
+    return mask_distances(sections.masks, (float(sections.spacing[a]), float(sections.spacing[b])))

@@ -190,12 +190,14 @@ def surrogate_field(
     neg = torch.full_like(depth, -float("inf"))
     prev_depth = torch.cat([neg[:, :1], depth[:, :-1]], dim=1)
     next_depth = torch.cat([depth[:, 1:], neg[:, :1]], dim=1)
-    substitute = torch.maximum(torch.where(prev_ok, prev_depth, neg),
-                               torch.where(next_ok, next_depth, neg))
+    substitute = torch.maximum(
+        torch.where(prev_ok, prev_depth, neg), torch.where(next_ok, next_depth, neg)
+    )
     has_substitute = prev_ok | next_ok
     pchip = (count >= 3) & ~(empty & ~has_substitute).any(dim=1)
-    y_p = torch.where((empty & has_substitute)[:, :, None, None],
-                      substitute[:, :, None, None].expand_as(y), y)
+    y_p = torch.where(
+        (empty & has_substitute)[:, :, None, None], substitute[:, :, None, None].expand_as(y), y
+    )
     y_p = torch.where(used[:, :, None, None], y_p, torch.zeros_like(y_p)).to(torch.float64)
     slopes = _pchip_slopes(zc, y_p, count.clamp(min=3))
 
@@ -224,10 +226,18 @@ def surrogate_field(
         tc = t[cubic]
         t2, t3 = tc * tc, tc * tc * tc
         hc = h[cubic]
-        basis = [(2 * t3 - 3 * t2 + 1), (t3 - 2 * t2 + tc) * hc, (-2 * t3 + 3 * t2),
-                 (t3 - t2) * hc]  # the library's h00, h10 * h, h01, h11 * h
-        terms = [rows(y_p, slab, cubic), rows(slopes, slab, cubic), rows(y_p, nxt, cubic),
-                 rows(slopes, nxt, cubic)]
+        basis = [
+            (2 * t3 - 3 * t2 + 1),
+            (t3 - 2 * t2 + tc) * hc,
+            (-2 * t3 + 3 * t2),
+            (t3 - t2) * hc,
+        ]  # the library's h00, h10 * h, h01, h11 * h
+        terms = [
+            rows(y_p, slab, cubic),
+            rows(slopes, slab, cubic),
+            rows(y_p, nxt, cubic),
+            rows(slopes, nxt, cubic),
+        ]
         value = basis[0][:, None, None] * terms[0]
         for b, term in zip(basis[1:], terms[1:], strict=True):
             value = value + b[:, None, None] * term

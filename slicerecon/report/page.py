@@ -142,7 +142,8 @@ def _links(case: CaseResult, root: Path) -> list[_Link]:
     ]
     return [
         _Link(urllib.parse.quote(target.relative_to(root).as_posix()), text)
-        for target, text in found if target is not None
+        for target, text in found
+        if target is not None
     ]
 
 
@@ -192,10 +193,12 @@ def render_page(
         "version": __version__,
         "has_metrics": bool(names),
         "columns": [c for c in TABLE_METRICS if c.key in names],
-        "figures": [{"name": name, "png": png, "caption": CAPTIONS[name]}
-                    for name, png in figures.items()],
-        "case_tables": [{"method": m, "cases": [c for c in cases if c.method == m]}
-                        for m in methods],
+        "figures": [
+            {"name": name, "png": png, "caption": CAPTIONS[name]} for name, png in figures.items()
+        ],
+        "case_tables": [
+            {"method": m, "cases": [c for c in cases if c.method == m]} for m in methods
+        ],
         "links": {c.case: _links(c, root) for c in cases},
         "renders": renders,
         "render_note": render_note,

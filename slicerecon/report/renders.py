@@ -57,10 +57,16 @@ def decimate(
     if len(faces) <= max_faces:
         return vertices, faces
     lo = vertices.min(axis=0)
-    area = float(np.linalg.norm(np.cross(
-        vertices[faces[:, 1]] - vertices[faces[:, 0]],
-        vertices[faces[:, 2]] - vertices[faces[:, 0]],
-    ), axis=1).sum() / 2.0)
+    area = float(
+        np.linalg.norm(
+            np.cross(
+                vertices[faces[:, 1]] - vertices[faces[:, 0]],
+                vertices[faces[:, 2]] - vertices[faces[:, 0]],
+            ),
+            axis=1,
+        ).sum()
+        / 2.0
+    )
     cell = math.sqrt(max(area, 1e-12) / max_faces)
     new_v, new_f = vertices, faces
     for _ in range(20):
@@ -168,8 +174,9 @@ def _draw_surface(
 ) -> None:
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    collection = Poly3DCollection(vertices[faces], facecolors=colours, edgecolors="none",
-                                  linewidths=0.0)
+    collection = Poly3DCollection(
+        vertices[faces], facecolors=colours, edgecolors="none", linewidths=0.0
+    )
     ax.add_collection3d(collection)
 
 
@@ -216,8 +223,9 @@ def render_case(case: CaseResult, truth: trimesh.Trimesh | None) -> tuple[bytes,
     if case.mesh_path is None:
         raise ValueError(f"case {case.case} has no mesh to render")
     recon = read_mesh(case.mesh_path)
-    rv, rf = decimate(np.asarray(recon.vertices, np.float64),
-                      np.asarray(recon.faces, np.int64), RENDER_FACES)
+    rv, rf = decimate(
+        np.asarray(recon.vertices, np.float64), np.asarray(recon.faces, np.int64), RENDER_FACES
+    )
     lo, hi = rv.min(axis=0), rv.max(axis=0)
     panels = 3 if truth is not None else 1
     plt = pyplot()
@@ -231,22 +239,27 @@ def render_case(case: CaseResult, truth: trimesh.Trimesh | None) -> tuple[bytes,
         _frame(ax, lo, hi, f"reconstruction ({len(recon.faces)} faces)")
         fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.9)
         return png_bytes(fig), stats
-    gv, gf = decimate(np.asarray(truth.vertices, np.float64),
-                      np.asarray(truth.faces, np.int64), RENDER_FACES)
+    gv, gf = decimate(
+        np.asarray(truth.vertices, np.float64), np.asarray(truth.faces, np.int64), RENDER_FACES
+    )
     lo, hi = np.minimum(lo, gv.min(axis=0)), np.maximum(hi, gv.max(axis=0))
     # Distance of each drawn reconstruction face centre to the full-resolution truth surface.
     _, dist, _ = tm.proximity.closest_point(truth, rv[rf].mean(axis=1))
     dist = np.asarray(dist, dtype=np.float64)
-    stats = {"mean_mm": float(dist.mean()), "p95_mm": float(np.percentile(dist, 95)),
-             "max_mm": float(dist.max())}
+    stats = {
+        "mean_mm": float(dist.mean()),
+        "p95_mm": float(np.percentile(dist, 95)),
+        "max_mm": float(dist.max()),
+    }
     vmax = max(float(np.percentile(dist, 99)), 1e-3)
     norm = Normalize(vmin=0.0, vmax=vmax)
     cmap = colormaps["viridis"]
     error_colour = np.clip(cmap(norm(dist))[:, :3] * (0.55 + 0.45 * recon_shade), 0, 1)
     truth_colour = np.clip(_face_shading(gv, gf)[:, None] * np.array([[0.55, 0.65, 0.85]]), 0, 1)
     width = 3.3 * 3 + 0.5
-    axes = [fig.add_axes((i * 3.3 / width, 0.0, 3.3 / width, 0.9), projection="3d")
-            for i in range(3)]
+    axes = [
+        fig.add_axes((i * 3.3 / width, 0.0, 3.3 / width, 0.9), projection="3d") for i in range(3)
+    ]
     _draw_surface(axes[0], gv, gf, truth_colour)
     _frame(axes[0], lo, hi, "ground truth")
     _draw_surface(axes[1], rv, rf, recon_colour)

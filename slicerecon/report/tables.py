@@ -116,9 +116,15 @@ def summarize(cases: Sequence[CaseResult]) -> dict[str, Any]:
             )
         ],
         "failures": [
-            {"case": c.case, "method": c.method, "planner": c.planner, "input": c.input,
-             "error": c.error_text}
-            for c in cases if not c.ok
+            {
+                "case": c.case,
+                "method": c.method,
+                "planner": c.planner,
+                "input": c.input,
+                "error": c.error_text,
+            }
+            for c in cases
+            if not c.ok
         ],
     }
 
@@ -143,23 +149,26 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
     names = metric_names(cases)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["case", "structure", "method", "planner", "planes", "status", *names,
-                     "seconds", "error"])
+    writer.writerow(
+        ["case", "structure", "method", "planner", "planes", "status", *names, "seconds", "error"]
+    )
     for c in cases:
         seconds = c.stage_seconds
         rows = [("", c.metrics or {})]
         if c.structure_metrics:  # one row per structure, then their mean
             rows = [*sorted(c.structure_metrics.items()), ("mean", c.metrics or {})]
         for structure, metrics in rows:
-            writer.writerow([
-                c.case,
-                structure,
-                c.method or "",
-                c.planner or "",
-                "" if c.planes is None else c.planes,
-                "ok" if c.ok else "failed",
-                *(repr(metrics[n]) if n in metrics else "" for n in names),
-                "" if seconds is None else repr(round(seconds, 4)),
-                c.error_text,
-            ])
+            writer.writerow(
+                [
+                    c.case,
+                    structure,
+                    c.method or "",
+                    c.planner or "",
+                    "" if c.planes is None else c.planes,
+                    "ok" if c.ok else "failed",
+                    *(repr(metrics[n]) if n in metrics else "" for n in names),
+                    "" if seconds is None else repr(round(seconds, 4)),
+                    c.error_text,
+                ]
+            )
     return buffer.getvalue()

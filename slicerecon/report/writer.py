@@ -76,8 +76,10 @@ def _renders(
             rendered.append(Render(case, None, f"render failed: {type(exc).__name__}: {exc}"))
             continue
         if stats:
-            where += (f"; face-centre distance to truth mean {stats['mean_mm']:.2f} mm, "
-                      f"95th percentile {stats['p95_mm']:.2f} mm, max {stats['max_mm']:.2f} mm")
+            where += (
+                f"; face-centre distance to truth mean {stats['mean_mm']:.2f} mm, "
+                f"95th percentile {stats['p95_mm']:.2f} mm, max {stats['max_mm']:.2f} mm"
+            )
         rendered.append(Render(case, png, where))
         asset, k = f"cases/{_slug(case.case)}.png", 2
         while asset in assets:
@@ -160,8 +162,15 @@ def write_report(
     _write_text(layout.metrics_csv, metrics_csv_text(cases))
     payload = {"title": title, **summary}
     _write_text(layout.summary_json, json.dumps(payload, indent=2, allow_nan=False) + "\n")
-    page = render_page(title=title, cases=cases, summary=summary, figures=figures,
-                       renders=rendered, root=root, render_note=note)
+    page = render_page(
+        title=title,
+        cases=cases,
+        summary=summary,
+        figures=figures,
+        renders=rendered,
+        root=root,
+        render_note=note,
+    )
     _write_text(layout.report_html, page)
     logger.info("report of %d case(s) written to %s", len(cases), layout.report_html)
     return layout.report_html

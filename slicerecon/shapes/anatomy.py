@@ -288,8 +288,9 @@ def vessel_tree(
     parts: list[Part] = []
     thinnest = min(0.09 * length, radius)
 
-    def grow(start: NDArray, direction: NDArray, seg_len: float, r: float, level: int,
-             roll: float) -> None:
+    def grow(
+        start: NDArray, direction: NDArray, seg_len: float, r: float, level: int, roll: float
+    ) -> None:
         end = start + seg_len * direction
         r_end = max(0.9 * r, thinnest)
         parts.append(capsule(start, end, r, r_end))
@@ -303,8 +304,14 @@ def vessel_tree(
             side = math.cos(phi) * u + math.sin(phi) * v
             child = math.cos(theta) * direction + math.sin(theta) * side
             r_child = max(r_end * draws.uniform(0.7, 0.85, 0.79), thinnest)
-            grow(end, child / np.linalg.norm(child), seg_len * draws.uniform(0.65, 0.85, 0.75),
-                 r_child, level + 1, roll + math.pi / 2)
+            grow(
+                end,
+                child / np.linalg.norm(child),
+                seg_len * draws.uniform(0.65, 0.85, 0.75),
+                r_child,
+                level + 1,
+                roll + math.pi / 2,
+            )
 
     grow(np.zeros(3), np.array([0.0, 0.0, 1.0]), length, radius, 0, 0.0)
     return compose(parts, spacing=spacing, margin=margin, name="vessel_tree")
@@ -359,6 +366,10 @@ def y_branch(
         )
 
     return rasterize(
-        inside, (-side - r, -r, -r), (side + r, r, trunk + rise + r),
-        spacing=spacing, margin=margin, name="y_branch",
+        inside,
+        (-side - r, -r, -r),
+        (side + r, r, trunk + rise + r),
+        spacing=spacing,
+        margin=margin,
+        name="y_branch",
     )

@@ -41,7 +41,5 @@ class Draws:
         if style is None:
             return self.choice(choices, choices[0])
         if style not in choices:
-            raise OptionError(
-                f"{shape} style must be one of {', '.join(choices)} (got {style!r})"
-            )
+            raise OptionError(f"{shape} style must be one of {', '.join(choices)} (got {style!r})")
         return str(style)

@@ -124,8 +124,12 @@ def chair(
         return out
 
     return rasterize(
-        inside, (-w, -d, 0.0), (w, d, seat_top + back_h),
-        spacing=spacing, margin=margin, name="chair",
+        inside,
+        (-w, -d, 0.0),
+        (w, d, seat_top + back_h),
+        spacing=spacing,
+        margin=margin,
+        name="chair",
     )
 
 
@@ -177,8 +181,11 @@ def table(
     draws = Draws(seed)
     kind = draws.style(style, TABLE_STYLES, "table")
     reject_if("table", t >= h, f"top_thickness ({t} mm) must be less than height ({h} mm)")
-    reject_if("table", leg >= min(w, d),
-         f"leg_width ({leg} mm) must be less than half the top width and depth")
+    reject_if(
+        "table",
+        leg >= min(w, d),
+        f"leg_width ({leg} mm) must be less than half the top width and depth",
+    )
     under = h - t
     parts = [rounded_box((-w, -d, under), (w, d, h), min(t / 2.0, 2.0))]
     if kind == "legs":
@@ -187,10 +194,13 @@ def table(
         cy = d - leg / 2.0 - inset * (d - leg)
         for sx in (-1.0, 1.0):
             for sy in (-1.0, 1.0):
-                parts.append(rounded_box(
-                    (sx * cx - leg / 2, sy * cy - leg / 2, 0.0),
-                    (sx * cx + leg / 2, sy * cy + leg / 2, under + t / 2), leg / 4,
-                ))
+                parts.append(
+                    rounded_box(
+                        (sx * cx - leg / 2, sy * cy - leg / 2, 0.0),
+                        (sx * cx + leg / 2, sy * cy + leg / 2, under + t / 2),
+                        leg / 4,
+                    )
+                )
     elif kind == "pedestal":
         column = max(leg, 0.12 * min(w, d))
         foot = draws.uniform(0.5, 0.8, 0.65) * min(w, d)
@@ -200,10 +210,13 @@ def table(
         end_x = w * draws.uniform(0.6, 0.85, 0.75)
         board_d = d * draws.uniform(0.6, 0.9, 0.8)
         for sx in (-1.0, 1.0):
-            parts.append(rounded_box(
-                (sx * end_x - leg / 2, -board_d, 0.0),
-                (sx * end_x + leg / 2, board_d, under + t / 2), leg / 4,
-            ))
+            parts.append(
+                rounded_box(
+                    (sx * end_x - leg / 2, -board_d, 0.0),
+                    (sx * end_x + leg / 2, board_d, under + t / 2),
+                    leg / 4,
+                )
+            )
         bar = 0.3 * under
         parts.append(rounded_box((-end_x, -leg / 2, bar), (end_x, leg / 2, bar + leg), leg / 4))
     return compose(parts, spacing=spacing, margin=margin, name="table")
@@ -260,8 +273,9 @@ def lamp(
     hs = shade_height
     draws = Draws(seed)
     kind = draws.style(style, LAMP_STYLES, "lamp")
-    reject_if("lamp", rp >= min(rb, rs) / 2,
-              "pole_radius must be under half the base and shade radii")
+    reject_if(
+        "lamp", rp >= min(rb, rs) / 2, "pole_radius must be under half the base and shade radii"
+    )
     narrow = rs * draws.uniform(0.35, 0.6, 0.5)
     parts = [frustum((0.0, 0.0, 0.0), (0.0, 0.0, hb), rb, 0.85 * rb)]
     if kind == "floor":
@@ -338,8 +352,12 @@ def sofa(
     back_t = d * draws.uniform(0.35, 0.6, 0.45)
     lean = back_t * draws.uniform(0.0, 0.5, 0.2)
     parts = [rounded_box((-w, -d, 0.0), (w, d, hs), rad)]
-    back = [(d - back_t, hs - rad), (d, hs - rad), (d + lean, hs + hb),
-            (d - back_t + lean, hs + hb)]
+    back = [
+        (d - back_t, hs - rad),
+        (d, hs - rad),
+        (d + lean, hs + hb),
+        (d - back_t + lean, hs + hb),
+    ]
     parts.append(prism(back, 0, -w, w))
     side = 1.0 if draws.uniform(0.0, 1.0, 0.7) > 0.5 else -1.0
     arms = {"two_arms": (-1.0, 1.0), "chaise": (-1.0, 1.0), "one_arm": (side,), "no_arms": ()}

@@ -17,9 +17,7 @@ from .solids import frustum, rounded_box
 
 
 @checked
-def torus(
-    major: Mm = 30.0, minor: Mm = 10.0, *, spacing: Spacing = 1.0, margin: int = 3
-) -> Volume:
+def torus(major: Mm = 30.0, minor: Mm = 10.0, *, spacing: Spacing = 1.0, margin: int = 3) -> Volume:
     """A ring torus whose hole axis is z.
 
     Parameters
@@ -45,8 +43,11 @@ def torus(
     outer = big + small
     return rasterize(
         lambda x, y, z: (np.sqrt(x * x + y * y) - big) ** 2 + z * z <= small * small,
-        (-outer, -outer, -small), (outer, outer, small),
-        spacing=spacing, margin=margin, name="torus",
+        (-outer, -outer, -small),
+        (outer, outer, small),
+        spacing=spacing,
+        margin=margin,
+        name="torus",
     )
 
 
@@ -83,8 +84,9 @@ def genus2(
     """
     big = major
     small = minor
-    reject_if("genus2", small >= big / 2,
-              f"minor ({small} mm) must be under half of major ({big} mm)")
+    reject_if(
+        "genus2", small >= big / 2, f"minor ({small} mm) must be under half of major ({big} mm)"
+    )
     draws = Draws(seed)
     d = big + draws.uniform(0.3, 0.8, 0.5) * small
     tilt = math.radians(draws.uniform(-10.0, 10.0, 0.0))
@@ -100,11 +102,11 @@ def genus2(
             return (np.sqrt(px * px + y * y) - big) ** 2 + pz * pz <= small * small
 
         reach = big + small
-        return Part(inside, np.array([cx - reach, -reach, -reach]),
-                     np.array([cx + reach, reach, reach]))
+        return Part(
+            inside, np.array([cx - reach, -reach, -reach]), np.array([cx + reach, reach, reach])
+        )
 
-    return compose([ring(-d, False), ring(d, True)], spacing=spacing, margin=margin,
-                    name="genus2")
+    return compose([ring(-d, False), ring(d, True)], spacing=spacing, margin=margin, name="genus2")
 
 
 @checked
@@ -144,9 +146,12 @@ def plate_with_holes(
     n = holes
     draws = Draws(seed)
     pitch = sx / n
-    reject_if("plate_with_holes", 3 * rh > pitch or 3 * rh > sy,
-         f"hole_radius ({rh} mm) must be at most a third of the plate depth and of the "
-         f"hole pitch ({pitch:.3g} mm)")
+    reject_if(
+        "plate_with_holes",
+        3 * rh > pitch or 3 * rh > sy,
+        f"hole_radius ({rh} mm) must be at most a third of the plate depth and of the "
+        f"hole pitch ({pitch:.3g} mm)",
+    )
     plate = rounded_box((-sx / 2, -sy / 2, -sz / 2), (sx / 2, sy / 2, sz / 2), min(sz, sy) / 4)
     minus = []
     for k in range(n):
@@ -156,5 +161,4 @@ def plate_with_holes(
         cx = -sx / 2 + pitch * (k + 0.5) + draws.uniform(-1.0, 1.0, 0.0) * slack_x
         cy = draws.uniform(-1.0, 1.0, 0.0) * slack_y
         minus.append(frustum((cx, cy, -sz), (cx, cy, sz), r))
-    return compose([plate], minus=minus, spacing=spacing, margin=margin,
-                    name="plate_with_holes")
+    return compose([plate], minus=minus, spacing=spacing, margin=margin, name="plate_with_holes")

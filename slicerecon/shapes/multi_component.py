@@ -43,7 +43,11 @@ def two_spheres(
         return ((x - d) ** 2 + yz <= r * r) | ((x + d) ** 2 + yz <= r * r)
 
     return rasterize(
-        inside, (-d - r, -r, -r), (d + r, r, r), spacing=spacing, margin=margin,
+        inside,
+        (-d - r, -r, -r),
+        (d + r, r, r),
+        spacing=spacing,
+        margin=margin,
         name="two_spheres",
     )
 

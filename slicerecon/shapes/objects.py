@@ -71,8 +71,12 @@ def airplane(
         out = []
         for sy in (-1.0, 1.0):
             tip_le = root_le - tip * sweep
-            poly = [(root_le, 0.0), (root_le - root_chord, 0.0),
-                    (tip_le - root_chord * taper, sy * tip), (tip_le, sy * tip)]
+            poly = [
+                (root_le, 0.0),
+                (root_le - root_chord, 0.0),
+                (tip_le - root_chord * taper, sy * tip),
+                (tip_le, sy * tip),
+            ]
             out.append(prism(poly, 2, z0 - th / 2, z0 + th / 2))
         return out
 
@@ -80,8 +84,12 @@ def airplane(
     tail_chord = 0.45 * chord
     tail_le = -half + 1.2 * tail_chord
     fin_h = 2.2 * rf + 0.15 * span
-    fin = [(tail_le, 0.0), (-half + 0.3 * rf, 0.0), (-half + 0.3 * rf - 0.2 * fin_h, fin_h),
-           (-half + 0.3 * rf - 0.2 * fin_h + 0.6 * tail_chord, fin_h)]
+    fin = [
+        (tail_le, 0.0),
+        (-half + 0.3 * rf, 0.0),
+        (-half + 0.3 * rf - 0.2 * fin_h, fin_h),
+        (-half + 0.3 * rf - 0.2 * fin_h + 0.6 * tail_chord, fin_h),
+    ]
     parts.append(prism(fin, 1, -th / 2, th / 2))
     t_tail = draws.uniform(0.0, 1.0, 0.0) > 0.6
     tail_z = fin_h - th / 2 if t_tail else 0.0
@@ -173,8 +181,12 @@ def car(
         front_slope, rear_slope = front_slope * scale, rear_slope * scale
     shift = half * draws.uniform(-0.05, 0.05, 0.0)
     x0, x1 = x0 + shift, x1 + shift
-    cabin = [(x0, top - 1.0), (x1, top - 1.0), (x1 - front_slope, top + hc),
-             (x0 + rear_slope, top + hc)]
+    cabin = [
+        (x0, top - 1.0),
+        (x1, top - 1.0),
+        (x1 - front_slope, top + hc),
+        (x0 + rear_slope, top + hc),
+    ]
     parts.append(prism(cabin, 1, -0.85 * hw, 0.85 * hw))
     return compose(parts, spacing=spacing, margin=margin, name="car")
 
@@ -228,22 +240,43 @@ def rifle(
     parts = [
         capsule((rec1 - rb, 0.0, 0.3 * rh), (half - rb, 0.0, 0.3 * rh), rb),
         rounded_box((rec0, -ht, -rh), (rec1, ht, rh), 0.3 * ht),
-        prism([(rec0 + 1.0, rh), (rec0 + 1.0, -0.5 * rh), (-half, rh - hs), (-half, rh)],
-               1, -0.9 * ht, 0.9 * ht),
+        prism(
+            [(rec0 + 1.0, rh), (rec0 + 1.0, -0.5 * rh), (-half, rh - hs), (-half, rh)],
+            1,
+            -0.9 * ht,
+            0.9 * ht,
+        ),
     ]
     grip_len = 1.1 * hs
     grip_angle = math.radians(draws.uniform(10.0, 30.0, 20.0))
     gx = rec0 + 0.2 * (rec1 - rec0)
     gw = 0.45 * hs
     dx, dz = grip_len * math.sin(grip_angle), grip_len * math.cos(grip_angle)
-    parts.append(prism([(gx, -rh + 1.0), (gx + gw, -rh + 1.0), (gx + gw - dx, -rh - dz),
-                         (gx - dx, -rh - dz)], 1, -0.8 * ht, 0.8 * ht))
+    parts.append(
+        prism(
+            [(gx, -rh + 1.0), (gx + gw, -rh + 1.0), (gx + gw - dx, -rh - dz), (gx - dx, -rh - dz)],
+            1,
+            -0.8 * ht,
+            0.8 * ht,
+        )
+    )
     mag_len = hs * draws.uniform(1.0, 2.2, 1.5)
     mag_lean = mag_len * draws.uniform(0.0, 0.5, 0.2)
     mx = rec0 + 0.6 * (rec1 - rec0)
     mw = 0.5 * hs
-    parts.append(prism([(mx, -rh + 1.0), (mx + mw, -rh + 1.0), (mx + mw + mag_lean, -rh - mag_len),
-                         (mx + mag_lean, -rh - mag_len)], 1, -0.7 * ht, 0.7 * ht))
+    parts.append(
+        prism(
+            [
+                (mx, -rh + 1.0),
+                (mx + mw, -rh + 1.0),
+                (mx + mw + mag_lean, -rh - mag_len),
+                (mx + mag_lean, -rh - mag_len),
+            ],
+            1,
+            -0.7 * ht,
+            0.7 * ht,
+        )
+    )
     if draws.uniform(0.0, 1.0, 0.0) > 0.5:
         sz = rh + 1.6 * rb + 0.3 * hs
         rs = 0.8 * rb + 0.1 * hs
@@ -326,6 +359,11 @@ def guitar(
     if kind == "electric":
         for sy, size in ((1.0, 0.5), (-1.0, 0.4)):
             rc = size * ru
-            minus.append(frustum((xu + 0.6 * ru, sy * (ru + 0.2 * rc), -2 * bt),
-                                  (xu + 0.6 * ru, sy * (ru + 0.2 * rc), 2 * bt), rc))
+            minus.append(
+                frustum(
+                    (xu + 0.6 * ru, sy * (ru + 0.2 * rc), -2 * bt),
+                    (xu + 0.6 * ru, sy * (ru + 0.2 * rc), 2 * bt),
+                    rc,
+                )
+            )
     return compose(parts, minus=minus, spacing=spacing, margin=margin, name="guitar")

@@ -59,8 +59,10 @@ def sizes_xyz(value: object, name: str) -> tuple[float, float, float]:
 
 def whole_number(value: object, name: str, *, low: int, high: int) -> int:
     """``value`` as an int, if it is a whole number from ``low`` to ``high``."""
-    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not (
-        low <= value <= high
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or not (low <= value <= high)
     ):
         raise OptionError(f"{name} must be a whole number from {low} to {high} (got {value!r})")
     return int(value)
@@ -127,7 +129,8 @@ def checked(func: Callable[P, R]) -> Callable[P, R]:
         if isinstance(meta, Check)
     }
     unchecked = [
-        p.name for p in signature.parameters.values()
+        p.name
+        for p in signature.parameters.values()
         if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD and p.name not in checks
     ]
     if unchecked:

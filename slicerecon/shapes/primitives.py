@@ -31,7 +31,11 @@ def sphere(radius: Mm = 40.0, *, spacing: Spacing = 1.0, margin: int = 3) -> Vol
     r = radius
     return rasterize(
         lambda x, y, z: x * x + y * y + z * z <= r * r,
-        (-r, -r, -r), (r, r, r), spacing=spacing, margin=margin, name="sphere",
+        (-r, -r, -r),
+        (r, r, r),
+        spacing=spacing,
+        margin=margin,
+        name="sphere",
     )
 
 
@@ -56,14 +60,16 @@ def ellipsoid(
     a, b, c = radii
     return rasterize(
         lambda x, y, z: (x / a) ** 2 + (y / b) ** 2 + (z / c) ** 2 <= 1.0,
-        (-a, -b, -c), (a, b, c), spacing=spacing, margin=margin, name="ellipsoid",
+        (-a, -b, -c),
+        (a, b, c),
+        spacing=spacing,
+        margin=margin,
+        name="ellipsoid",
     )
 
 
 @checked
-def box(
-    size: MmXYZ = (60.0, 40.0, 30.0), *, spacing: Spacing = 1.0, margin: int = 3
-) -> Volume:
+def box(size: MmXYZ = (60.0, 40.0, 30.0), *, spacing: Spacing = 1.0, margin: int = 3) -> Volume:
     """An axis-aligned cuboid.
 
     Parameters
@@ -81,5 +87,9 @@ def box(
     h = np.array(size) / 2.0
     return rasterize(
         lambda x, y, z: in_box(x, y, z, -h, h),
-        -h, h, spacing=spacing, margin=margin, name="box",
+        -h,
+        h,
+        spacing=spacing,
+        margin=margin,
+        name="box",
     )

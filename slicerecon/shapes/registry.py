@@ -211,17 +211,21 @@ def make_shape(
     func = _lookup(name)
     option_names = set(_options(func))
     options = {k: v for k, v in params.items() if k in option_names}
-    sizes = shape_params(name, seed=seed, **{k: v for k, v in params.items()
-                                            if k not in option_names})
+    sizes = shape_params(
+        name, seed=seed, **{k: v for k, v in params.items() if k not in option_names}
+    )
     if _takes_seed(func):
         options["seed"] = seed
     if resolution is None:
         return func(**sizes, **options, spacing=spacing, margin=margin)
-    if isinstance(resolution, bool) or not isinstance(resolution, int | np.integer) or not (
-        8 <= resolution <= 2048
+    if (
+        isinstance(resolution, bool)
+        or not isinstance(resolution, int | np.integer)
+        or not (8 <= resolution <= 2048)
     ):
-        raise OptionError(f"resolution must be a whole number of voxels, 8 to 2048 "
-                          f"(got {resolution!r})")
+        raise OptionError(
+            f"resolution must be a whole number of voxels, 8 to 2048 (got {resolution!r})"
+        )
     ratio = np.array(sizes_xyz(spacing, "spacing"))
     ratio = ratio / ratio.max()
 

@@ -22,9 +22,7 @@ def vec(v: ArrayLike) -> NDArray[np.float64]:
     return np.asarray(v, dtype=np.float64)
 
 
-def in_box(
-    x: NDArray, y: NDArray, z: NDArray, lo: ArrayLike, hi: ArrayLike
-) -> NDArray[np.bool_]:
+def in_box(x: NDArray, y: NDArray, z: NDArray, lo: ArrayLike, hi: ArrayLike) -> NDArray[np.bool_]:
     """Points in the axis-aligned box ``[lo, hi)`` (mm)."""
     lo = np.asarray(lo, dtype=np.float64)
     hi = np.asarray(hi, dtype=np.float64)
@@ -57,8 +55,9 @@ def aligned_box(lo: Sequence[float], hi: Sequence[float]) -> Part:
     return Part(functools.partial(in_box, lo=lo, hi=hi), vec(lo), vec(hi))
 
 
-def capsule(start: ArrayLike, end: ArrayLike, radius: float, end_radius: float | None = None
-            ) -> Part:
+def capsule(
+    start: ArrayLike, end: ArrayLike, radius: float, end_radius: float | None = None
+) -> Part:
     """Points closer to segment ``start``-``end`` than a radius varying linearly along it."""
     p0, p1 = vec(start), vec(end)
     r0 = float(radius)
@@ -80,8 +79,9 @@ def capsule(start: ArrayLike, end: ArrayLike, radius: float, end_radius: float |
     return Part(inside, np.minimum(p0, p1) - reach, np.maximum(p0, p1) + reach)
 
 
-def frustum(start: ArrayLike, end: ArrayLike, radius: float, end_radius: float | None = None
-            ) -> Part:
+def frustum(
+    start: ArrayLike, end: ArrayLike, radius: float, end_radius: float | None = None
+) -> Part:
     """A solid truncated cone (cylinder when the radii agree) with flat caps."""
     p0, p1 = vec(start), vec(end)
     r0 = float(radius)
@@ -100,8 +100,9 @@ def frustum(start: ArrayLike, end: ArrayLike, radius: float, end_radius: float |
     return Part(inside, np.minimum(p0, p1) - reach, np.maximum(p0, p1) + reach)
 
 
-def oriented_ellipsoid(centre: ArrayLike, radii: ArrayLike, rotation: ArrayLike | None = None
-                       ) -> Part:
+def oriented_ellipsoid(
+    centre: ArrayLike, radii: ArrayLike, rotation: ArrayLike | None = None
+) -> Part:
     """An ellipsoid; ``rotation`` (3x3) holds its semi-axis directions as columns."""
     c = vec(centre)
     r = vec(radii)
@@ -143,8 +144,9 @@ def prism(polygon: ArrayLike, axis: int, low: float, high: float) -> Part:
     increasing order (for ``axis=1``: x and z).
     """
     poly = vec(polygon)
-    area2 = float(np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1)
-                         * poly[:, 1]))
+    area2 = float(
+        np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+    )
     if area2 < 0:
         poly = poly[::-1]
     a_ax, b_ax = (ax for ax in range(3) if ax != axis)

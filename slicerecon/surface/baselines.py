@@ -568,7 +568,8 @@ def sdf_hull(
     step = float(spacing.min())
     logger.debug(
         "sdf-hull: %d of %d interpolated samples kept inside the hull",
-        int(np.count_nonzero(carved < 0)), int(np.count_nonzero(field < 0)),
+        int(np.count_nonzero(carved < 0)),
+        int(np.count_nonzero(field < 0)),
     )
     return field_to_mesh(_nudged(carved, step), affine, level=0.0, inside="negative")
 
@@ -683,7 +684,8 @@ def itk_mci(
         )
     logger.debug(
         "itk-mci: %d annotated voxels -> %d interpolated voxels",
-        int(np.count_nonzero(labels)), int(np.count_nonzero(filled)),
+        int(np.count_nonzero(labels)),
+        int(np.count_nonzero(filled)),
     )
     return volume_to_mesh(Volume(filled | volume.mask, sections.affine))
 

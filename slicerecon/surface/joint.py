@@ -103,8 +103,10 @@ def resolve(fields: Sequence[SdfField | None], grid_shape: tuple[int, int, int])
 
     def region(i: int) -> tuple[slice, slice, slice]:
         start, size = extents[i]  # type: ignore[misc]
-        a, b, c = (slice(int(s0 - o), int(s0 - o + n))
-                   for s0, o, n in zip(start, origin, size, strict=True))
+        a, b, c = (
+            slice(int(s0 - o), int(s0 - o + n))
+            for s0, o, n in zip(start, origin, size, strict=True)
+        )
         return a, b, c
 
     for i, field in enumerate(fields):

@@ -244,9 +244,11 @@ def loft_solid(
         assert box is not None
         ends = (
             extension_maps(hull, box, sections.axis, planes[0].w, 0)
-            if planes[0].w > span[0] + 1e-9 else None,
+            if planes[0].w > span[0] + 1e-9
+            else None,
             extension_maps(hull, box, sections.axis, planes[-1].w, 1)
-            if planes[-1].w < span[1] - 1e-9 else None,
+            if planes[-1].w < span[1] - 1e-9
+            else None,
         )
     elif len(planes) == 1:
         ends = ([identity_map(planes[0].w - 0.5)], [identity_map(planes[0].w + 0.5)])
@@ -267,7 +269,10 @@ def loft_solid(
     solid = solid.transform(_plane_to_index(sections.axis))
     logger.debug(
         "lofted %d planes from %d solids: %d triangles, %.4g voxel volume",
-        len(planes), len(parts), solid.num_tri(), solid.volume(),
+        len(planes),
+        len(parts),
+        solid.num_tri(),
+        solid.volume(),
     )
     return solid
 
@@ -368,9 +373,7 @@ def _plane(mask: NDArray[np.bool_], w: float, window: _Window) -> _Plane:
     return _Plane(w, labels.astype(np.int32), regions, hole_labels.astype(np.int32), holes)
 
 
-def _regions(
-    labels: NDArray[np.integer], n: int, window: _Window, *, hole: bool
-) -> list[_Region]:
+def _regions(labels: NDArray[np.integer], n: int, window: _Window, *, hole: bool) -> list[_Region]:
     """One :class:`_Region` per label ``1..n`` (those with a usable polygon)."""
     if n == 0:
         return []
@@ -467,9 +470,11 @@ def _match(
     pos_lo = map_lo[lower_labels]
     pos_up = map_up[upper_labels]
     both = (pos_lo >= 0) & (pos_up >= 0)
-    overlap = np.bincount(
-        pos_lo[both] * n_up + pos_up[both], minlength=n_lo * n_up
-    ).reshape(n_lo, n_up).astype(np.float64)
+    overlap = (
+        np.bincount(pos_lo[both] * n_up + pos_up[both], minlength=n_lo * n_up)
+        .reshape(n_lo, n_up)
+        .astype(np.float64)
+    )
     size_lo = np.bincount(pos_lo[pos_lo >= 0], minlength=n_lo).astype(np.float64)
     size_up = np.bincount(pos_up[pos_up >= 0], minlength=n_up).astype(np.float64)
     relative = overlap / np.maximum(np.minimum.outer(size_lo, size_up), 1.0)
@@ -515,10 +520,12 @@ def _pieces(
     if len(partners) == 1:
         return [[region.polygon]]
     mask = labels == region.label
-    distances = np.stack([
-        ndimage.distance_transform_edt(partner_labels != p.label, sampling=window.spacing)
-        for p in partners
-    ])
+    distances = np.stack(
+        [
+            ndimage.distance_transform_edt(partner_labels != p.label, sampling=window.spacing)
+            for p in partners
+        ]
+    )
     nearest = np.argmin(distances[:, mask], axis=0)
     out: list[list[NDArray[np.float64]]] = []
     structure = _EIGHT if hole else _FOUR
@@ -572,10 +579,22 @@ def _solids(
                 following[k][i] = j
                 continued[k + 1].add(j)
                 continue
-            pieces_lo = _pieces(lower[i], lower_labels, [upper[q] for q in partners_lo[i]],
-                                upper_labels, window, hole=hole)[partners_lo[i].index(j)]
-            pieces_up = _pieces(upper[j], upper_labels, [lower[q] for q in partners_up[j]],
-                                lower_labels, window, hole=hole)[partners_up[j].index(i)]
+            pieces_lo = _pieces(
+                lower[i],
+                lower_labels,
+                [upper[q] for q in partners_lo[i]],
+                upper_labels,
+                window,
+                hole=hole,
+            )[partners_lo[i].index(j)]
+            pieces_up = _pieces(
+                upper[j],
+                upper_labels,
+                [lower[q] for q in partners_up[j]],
+                lower_labels,
+                window,
+                hole=hole,
+            )[partners_up[j].index(i)]
             for p in pieces_lo:
                 for q in pieces_up:
                     solids.append(_tube([(w0 - eps, p), (w1 + eps, q)]))
@@ -617,17 +636,16 @@ def _solids(
     return [s for s in solids if s is not None]
 
 
-def _deepest_point(
-    labels: NDArray[np.int32], label: int, window: _Window
-) -> NDArray[np.float64]:
+def _deepest_point(labels: NDArray[np.int32], label: int, window: _Window) -> NDArray[np.float64]:
     """Plane coordinates (u, v) of the region pixel farthest from its boundary."""
     rows, cols = np.nonzero(labels == label)
     bbox = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
     sub = np.pad(labels[bbox] == label, 1)
     depth = ndimage.distance_transform_edt(sub, sampling=window.spacing)
     r, c = np.unravel_index(int(np.argmax(depth)), depth.shape)
-    return np.array([r - 1 + bbox[0].start + window.u0, c - 1 + bbox[1].start + window.v0],
-                    dtype=np.float64)
+    return np.array(
+        [r - 1 + bbox[0].start + window.u0, c - 1 + bbox[1].start + window.v0], dtype=np.float64
+    )
 
 
 def _cap(polygon: NDArray[np.float64]) -> NDArray[np.int64]:
@@ -731,10 +749,12 @@ def _cone(
 ) -> manifold3d.Manifold | None:
     """Closed cone from a counter-clockwise polygon at ``w`` to a point at ``w_apex``."""
     n = polygon.shape[0]
-    verts = np.vstack([
-        np.column_stack([polygon, np.full(n, w)]),
-        [[apex[0], apex[1], w_apex]],
-    ])
+    verts = np.vstack(
+        [
+            np.column_stack([polygon, np.full(n, w)]),
+            [[apex[0], apex[1], w_apex]],
+        ]
+    )
     idx = np.arange(n)
     sides = np.column_stack([idx, (idx + 1) % n, np.full(n, n)])
     faces = np.vstack([sides, _cap(polygon)[:, ::-1]])

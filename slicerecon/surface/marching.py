@@ -87,8 +87,15 @@ def volume_to_mesh(
     cropped = volume.crop(pad=1)
     # C order for skimage (a NIfTI mask is often Fortran-ordered: no second copy)
     field = np.ascontiguousarray(cropped.mask, dtype=np.float32)
-    mesh = _march(field, cropped.affine, level=level, inside_high=True, pad_value=0.0, step=step,
-                  check_orientation=repair)
+    mesh = _march(
+        field,
+        cropped.affine,
+        level=level,
+        inside_high=True,
+        pad_value=0.0,
+        step=step,
+        check_orientation=repair,
+    )
     if not repair or step != 1 or mesh.is_watertight:
         return mesh
     # Rare voxel configurations make skimage's marching cubes emit edges shared by
@@ -104,7 +111,9 @@ def _block_corners(mask: NDArray[np.bool_]) -> dict[tuple[int, int, int], NDArra
     ni, nj, nk = mask.shape
     return {
         (i, j, k): mask[i : ni - 1 + i, j : nj - 1 + j, k : nk - 1 + k]
-        for i in (0, 1) for j in (0, 1) for k in (0, 1)
+        for i in (0, 1)
+        for j in (0, 1)
+        for k in (0, 1)
     }
 
 
@@ -115,8 +124,10 @@ def _ambiguous_blocks(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     for axis in range(3):
         rest = [d for d in range(3) if d != axis]
         for side in (0, 1):
-            def corner(a: int, b: int, axis: int = axis, side: int = side,
-                       rest: list[int] = rest) -> NDArray[np.bool_]:
+
+            def corner(
+                a: int, b: int, axis: int = axis, side: int = side, rest: list[int] = rest
+            ) -> NDArray[np.bool_]:
                 index = [0, 0, 0]
                 index[axis], index[rest[0]], index[rest[1]] = side, a, b
                 return c[index[0], index[1], index[2]]
@@ -146,8 +157,9 @@ def _repair_ambiguous_blocks(
     for round_ in range(max_rounds):
         padded = np.pad(fixed.astype(np.float32), 1)
         verts, faces, _, _ = marching_cubes(padded, level, method="lewiner")
-        edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
-                        axis=1)
+        edges = np.sort(
+            np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1
+        )
         unique, counts = np.unique(edges, axis=0, return_counts=True)
         bad = unique[counts > 2]
         if bad.size == 0:
@@ -282,8 +294,15 @@ def march_field(field: NDArray[np.float32], affine: NDArray[np.float64]) -> trim
     trimesh.Trimesh
         Closed, outward-oriented mesh, world mm.
     """
-    return _march(np.asarray(field, dtype=np.float32), check_affine(affine), level=0.0,
-                  inside_high=False, pad_value=0.0, step=1, pad=False)
+    return _march(
+        np.asarray(field, dtype=np.float32),
+        check_affine(affine),
+        level=0.0,
+        inside_high=False,
+        pad_value=0.0,
+        step=1,
+        pad=False,
+    )
 
 
 def _check_step(step_size: int) -> int:
@@ -292,8 +311,6 @@ def _check_step(step_size: int) -> int:
     if step_size < 1:
         raise OptionError(f"step_size must be >= 1 (got {step_size})")
     return int(step_size)
-
-
 
 
 def _march(
@@ -348,6 +365,9 @@ def _march(
         mesh.invert()
     logger.debug(
         "marching cubes on a %s grid (step %d): %d vertices, %d faces",
-        field.shape, step, len(mesh.vertices), len(mesh.faces),
+        field.shape,
+        step,
+        len(mesh.vertices),
+        len(mesh.faces),
     )
     return mesh

@@ -72,9 +72,7 @@ def to_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
     return solid  # type: ignore[return-value]
 
 
-def solid_from_arrays(
-    vertices: ArrayLike, faces: ArrayLike
-) -> manifold3d.Manifold | None:
+def solid_from_arrays(vertices: ArrayLike, faces: ArrayLike) -> manifold3d.Manifold | None:
     """Build a manifold3d solid from vertex and face arrays, or None if they are not manifold.
 
     Parameters
@@ -227,9 +225,7 @@ def union_meshes(meshes: Sequence[trimesh.Trimesh]) -> trimesh.Trimesh:
         if mesh is None:
             continue
         if not isinstance(mesh, trimesh.Trimesh):
-            raise InputError(
-                f"mesh {number} is a {type(mesh).__name__}, not a trimesh.Trimesh"
-            )
+            raise InputError(f"mesh {number} is a {type(mesh).__name__}, not a trimesh.Trimesh")
         if len(mesh.faces) == 0:
             logger.debug("union_meshes: dropped mesh %d (no faces)", number)
             continue
@@ -266,8 +262,9 @@ def check_closed(mesh: trimesh.Trimesh, what: str) -> bool:
         logger.warning(
             "%s: result is not a clean closed volume (watertight=%s, volume=%.4g); "
             "coincident geometry may have pinched it",
-            what, mesh.is_watertight, mesh.volume,
+            what,
+            mesh.is_watertight,
+            mesh.volume,
         )
         return False
     return True
-

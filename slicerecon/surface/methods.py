@@ -100,25 +100,51 @@ def method_names(*, per_part: bool | None = None) -> tuple[str, ...]:
 
 _BASELINES = "slicerecon.surface.baselines"
 
-register_method(MethodEntry(
-    "sdf", per_part=True, carved=True, implicit_carve=True,
-    summary="signed-distance interpolation across planes (the default)",
-))
-register_method(MethodEntry("loft", per_part=True, carved=True,
-                            summary="contour lofting, the paper's method"))
-register_method(MethodEntry(
-    "hybrid", per_part=True, carved=True,
-    summary="loft where contours correspond simply, sdf elsewhere",
-))
-register_method(MethodEntry(
-    "poisson", per_part=False, carved=False, function=f"{_BASELINES}:poisson",
-    summary="screened Poisson reconstruction of the contour points",
-))
-register_method(MethodEntry(
-    "sdf-hull", per_part=False, carved=False, function=f"{_BASELINES}:sdf_hull",
-    summary="signed-distance interpolation intersected with the visual hull",
-))
-register_method(MethodEntry(
-    "itk-mci", per_part=False, carved=False, needs_itk=True, function=f"{_BASELINES}:itk_mci",
-    summary="ITK morphological contour interpolation (3D Slicer's Fill between slices)",
-))
+register_method(
+    MethodEntry(
+        "sdf",
+        per_part=True,
+        carved=True,
+        implicit_carve=True,
+        summary="signed-distance interpolation across planes (the default)",
+    )
+)
+register_method(
+    MethodEntry("loft", per_part=True, carved=True, summary="contour lofting, the paper's method")
+)
+register_method(
+    MethodEntry(
+        "hybrid",
+        per_part=True,
+        carved=True,
+        summary="loft where contours correspond simply, sdf elsewhere",
+    )
+)
+register_method(
+    MethodEntry(
+        "poisson",
+        per_part=False,
+        carved=False,
+        function=f"{_BASELINES}:poisson",
+        summary="screened Poisson reconstruction of the contour points",
+    )
+)
+register_method(
+    MethodEntry(
+        "sdf-hull",
+        per_part=False,
+        carved=False,
+        function=f"{_BASELINES}:sdf_hull",
+        summary="signed-distance interpolation intersected with the visual hull",
+    )
+)
+register_method(
+    MethodEntry(
+        "itk-mci",
+        per_part=False,
+        carved=False,
+        needs_itk=True,
+        function=f"{_BASELINES}:itk_mci",
+        summary="ITK morphological contour interpolation (3D Slicer's Fill between slices)",
+    )
+)

@@ -123,8 +123,9 @@ def reconstruct_part(
         solid = loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
         return None if solid is None else from_manifold(solid, transform=sections.affine)
     try:
-        return sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull,
-                        interpolation=interpolation)
+        return sdf_mesh(
+            sections, box=box, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+        )
     except EmptyMaskError:
         return None
 
@@ -173,14 +174,13 @@ def part_voxels(
             f"box {box.to_dict()} must lie inside the reference grid {sections.grid_shape}"
         )
     if method == "sdf":
-        field, _ = sdf_field(sections, box=box, extend_to_box=extend_to_box, hull=hull,
-                             interpolation=interpolation)
+        field, _ = sdf_field(
+            sections, box=box, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+        )
         return field < 0
     from ..rasterize import mesh_to_mask
 
-    mesh = reconstruct_part(
-        sections, box, method="loft", extend_to_box=extend_to_box, hull=hull
-    )
+    mesh = reconstruct_part(sections, box, method="loft", extend_to_box=extend_to_box, hull=hull)
     if mesh is None:
         return np.zeros(box.shape, dtype=bool)
     affine = sections.affine.copy()
@@ -239,8 +239,16 @@ def reconstruct_parts(
         If no box holds section foreground.
     """
     return reconstruct_surface(
-        sections, boxes, method=method, smooth=smooth, extend_to_box=extend_to_box,
-        hull=hull, interpolation=interpolation, carve=carve, upsample=upsample, cover=cover,
+        sections,
+        boxes,
+        method=method,
+        smooth=smooth,
+        extend_to_box=extend_to_box,
+        hull=hull,
+        interpolation=interpolation,
+        carve=carve,
+        upsample=upsample,
+        cover=cover,
     ).mesh
 
 
@@ -294,8 +302,10 @@ def reconstruct_surface(
     occupancy, field = None, None
     if method == "hybrid":
         solids = [
-            _hybrid_solid(sections, b, extend_to_box=extend_to_box, hull=hull,
-                          interpolation=interpolation) for b in boxes
+            _hybrid_solid(
+                sections, b, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+            )
+            for b in boxes
         ]
         kept = [s for s in solids if s is not None]
         if not kept:
@@ -315,9 +325,17 @@ def reconstruct_surface(
         check_closed(mesh, "reconstruct_parts")
     else:
         # Implicit union: the minimum of the parts' signed distances, meshed once.
-        surface = sdf_parts_surface(sections, boxes, extend_to_box=extend_to_box, hull=hull,
-                                    interpolation=interpolation, carve=carve,
-                                    upsample=upsample, keep_field=keep_field, cover=cover)
+        surface = sdf_parts_surface(
+            sections,
+            boxes,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=interpolation,
+            carve=carve,
+            upsample=upsample,
+            keep_field=keep_field,
+            cover=cover,
+        )
         mesh, occupancy, field = surface.mesh, surface.occupancy, surface.field
     logger.debug("merged %d parts (%s): %d faces", len(boxes), method, len(mesh.faces))
     if smooth:
@@ -326,15 +344,20 @@ def reconstruct_surface(
 
 
 def _hybrid_solid(
-    sections: CrossSections, box: Box, *, extend_to_box: bool, hull: NDArray[np.bool_] | None,
+    sections: CrossSections,
+    box: Box,
+    *,
+    extend_to_box: bool,
+    hull: NDArray[np.bool_] | None,
     interpolation: str = "linear",
 ) -> manifold3d.Manifold | None:
     """One part of the ``"hybrid"`` method as a solid in voxel index coordinates."""
     if correspondence_is_simple(sections, box):
         return loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
     try:
-        mesh = sdf_mesh(sections, box=box, extend_to_box=extend_to_box, hull=hull,
-                        interpolation=interpolation)
+        mesh = sdf_mesh(
+            sections, box=box, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+        )
     except EmptyMaskError:
         return None
     logger.debug("part %s: contours split, merge or appear; signed-distance surface", box.to_dict())

@@ -107,7 +107,10 @@ def plane_signed_distance(
 
 # -- validation -------------------------------------------------------------------------
 def _check(
-    sections: CrossSections, upsample: int, extend_to_box: bool, hull: object = None,
+    sections: CrossSections,
+    upsample: int,
+    extend_to_box: bool,
+    hull: object = None,
     interpolation: str = "linear",
 ) -> int:
     if not isinstance(sections, CrossSections):
@@ -166,8 +169,10 @@ def _box_field(
     grid = sections.grid_shape
     rows = (max(box.lo[a] - _MARGIN, 0), min(box.hi[a] + _MARGIN, grid[a]))
     cols = (max(box.lo[b] - _MARGIN, 0), min(box.hi[b] + _MARGIN, grid[b]))
-    inner = (slice(box.lo[a] - rows[0], box.hi[a] - rows[0]),
-             slice(box.lo[b] - cols[0], box.hi[b] - cols[0]))
+    inner = (
+        slice(box.lo[a] - rows[0], box.hi[a] - rows[0]),
+        slice(box.lo[b] - cols[0], box.hi[b] - cols[0]),
+    )
     spacing = sections.spacing[[a, b]]
     crop = sections.masks[:, rows[0] : rows[1], cols[0] : cols[1]]
     samples = box.lo[axis] - 0.5 + (np.arange(box.shape[axis] * upsample) + 0.5) / upsample
@@ -261,8 +266,11 @@ def _fill_between(
         values = {p: distances[p] for p in order}
         for i, p in enumerate(order):
             if _is_empty(values[p]):
-                depths = [-float(distances[q].min()) for q in order[max(i - 1, 0) : i + 2]
-                          if not _is_empty(distances[q])]
+                depths = [
+                    -float(distances[q].min())
+                    for q in order[max(i - 1, 0) : i + 2]
+                    if not _is_empty(distances[q])
+                ]
                 if depths:
                     values[p] = np.full_like(values[p], max(depths))
         if not any(_is_empty(values[p]) for p in order):
@@ -303,8 +311,10 @@ def _pchip_slopes(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.
     with np.errstate(divide="ignore", invalid="ignore"):
         inner = (w1 + w2) / (w1 / m[:-1] + w2 / m[1:])
     d[1:-1] = np.where(flat, 0.0, inner)
-    for end, (h0, h1, m0, m1) in ((0, (h[0], h[1], m[0], m[1])),
-                                   (-1, (h[-1], h[-2], m[-1], m[-2]))):
+    for end, (h0, h1, m0, m1) in (
+        (0, (h[0], h[1], m[0], m[1])),
+        (-1, (h[-1], h[-2], m[-1], m[-2])),
+    ):
         e = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
         e = np.where(np.sign(e) != np.sign(m0), 0.0, e)
         e = np.where((np.sign(m0) != np.sign(m1)) & (np.abs(e) > 3 * np.abs(m0)), 3 * m0, e)
@@ -333,8 +343,7 @@ def _pchip_fill(
         t2, t3 = t * t, t * t * t
         h00, h10 = 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t
         h01, h11 = -2 * t3 + 3 * t2, t3 - t2
-        field[k] = (h00 * y[i] + h10 * h * slopes[i] + h01 * y[i + 1]
-                    + h11 * h * slopes[i + 1])
+        field[k] = h00 * y[i] + h10 * h * slopes[i] + h01 * y[i + 1] + h11 * h * slopes[i + 1]
 
 
 def _is_empty(distance: NDArray[np.float32]) -> bool:
@@ -342,8 +351,9 @@ def _is_empty(distance: NDArray[np.float32]) -> bool:
     return bool(np.isinf(distance.flat[0]))
 
 
-def _to_index(sections: CrossSections, lo: tuple[int, int, int], upsample: int,
-              pad: int) -> NDArray[np.float64]:
+def _to_index(
+    sections: CrossSections, lo: tuple[int, int, int], upsample: int, pad: int
+) -> NDArray[np.float64]:
     """Affine from sample indices of a grid starting at box corner ``lo`` to voxel indices.
 
     ``pad`` samples of padding precede the box on every axis.
@@ -411,8 +421,13 @@ def sdf_field(
     upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
     region = _grid_box(sections, box)
     field = _box_field(
-        sections, region, bounded=box is not None, upsample=upsample,
-        extend_to_box=extend_to_box, hull=hull, interpolation=interpolation,
+        sections,
+        region,
+        bounded=box is not None,
+        upsample=upsample,
+        extend_to_box=extend_to_box,
+        hull=hull,
+        interpolation=interpolation,
     )
     out = np.ascontiguousarray(np.moveaxis(field, 0, sections.axis))
     affine = sections.affine @ _to_index(sections, region.lo, upsample, pad=0)
@@ -446,7 +461,11 @@ def sdf_interpolate(
         exactly.
     """
     field, affine = sdf_field(
-        sections, box=box, upsample=upsample, extend_to_box=extend_to_box, hull=hull,
+        sections,
+        box=box,
+        upsample=upsample,
+        extend_to_box=extend_to_box,
+        hull=hull,
         interpolation=interpolation,
     )
     return Volume(field < 0, affine)
@@ -482,8 +501,13 @@ def sdf_mesh(
     upsample = _check(sections, upsample, extend_to_box, hull, interpolation)
     region = _grid_box(sections, box)
     field = _box_field(
-        sections, region, bounded=box is not None, upsample=upsample,
-        extend_to_box=extend_to_box, hull=hull, interpolation=interpolation,
+        sections,
+        region,
+        bounded=box is not None,
+        upsample=upsample,
+        extend_to_box=extend_to_box,
+        hull=hull,
+        interpolation=interpolation,
     )
     return _mesh(sections, _mirror_pad(field), region.lo, upsample)
 
@@ -538,9 +562,16 @@ def sdf_parts_mesh(
     EmptyMaskError
         If no part holds any inside sample.
     """
-    union, lo, _ = _parts_union(sections, boxes, upsample=upsample,
-                                extend_to_box=extend_to_box, hull=hull,
-                                interpolation=interpolation, carve=carve, cover=cover)
+    union, lo, _ = _parts_union(
+        sections,
+        boxes,
+        upsample=upsample,
+        extend_to_box=extend_to_box,
+        hull=hull,
+        interpolation=interpolation,
+        carve=carve,
+        cover=cover,
+    )
     return _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample)
 
 
@@ -571,8 +602,15 @@ def _parts_union(
     # largest padding value: there a neighbour's corner padding (small near
     # its own face) must not pull the surface beyond another part's face.
     if len(regions) == 1:
-        part = _box_field(sections, regions[0], bounded=True, upsample=upsample,
-                          extend_to_box=extend_to_box, hull=hull, interpolation=interpolation)
+        part = _box_field(
+            sections,
+            regions[0],
+            bounded=True,
+            upsample=upsample,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=interpolation,
+        )
         if not np.any(part < 0):
             raise EmptyMaskError("no part's box holds any section foreground")
         union = np.ascontiguousarray(np.moveaxis(_mirror_pad(part), 0, axis))
@@ -583,8 +621,15 @@ def _parts_union(
     padding = np.full(shape, -1.0, dtype=np.float32)
     far = np.float32(0.0)
     for region in regions:
-        part = _box_field(sections, region, bounded=True, upsample=upsample,
-                          extend_to_box=extend_to_box, hull=hull, interpolation=interpolation)
+        part = _box_field(
+            sections,
+            region,
+            bounded=True,
+            upsample=upsample,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=interpolation,
+        )
         if not np.any(part < 0):
             continue
         moved = np.moveaxis(part, 0, axis)
@@ -596,8 +641,7 @@ def _parts_union(
         np.minimum(inner[core], moved, out=inner[core])
         covered[core] = True
         padded = np.moveaxis(_mirror_pad(part), 0, axis)
-        where = tuple(slice(s0 - 1, s0 - 1 + n)
-                      for s0, n in zip(start, padded.shape, strict=True))
+        where = tuple(slice(s0 - 1, s0 - 1 + n) for s0, n in zip(start, padded.shape, strict=True))
         np.maximum(padding[where], padded, out=padding[where])
     if inner is None:
         raise EmptyMaskError("no part's box holds any section foreground")
@@ -672,17 +716,25 @@ def sdf_parts_surface(
     also returns the field itself (:class:`SdfField`), e.g. to resolve several
     structures jointly (:mod:`slicerecon.surface.joint`).
     """
-    union, lo, hi = _parts_union(sections, boxes, upsample=upsample,
-                                 extend_to_box=extend_to_box, hull=hull,
-                                 interpolation=interpolation, carve=carve, cover=cover)
+    union, lo, hi = _parts_union(
+        sections,
+        boxes,
+        upsample=upsample,
+        extend_to_box=extend_to_box,
+        hull=hull,
+        interpolation=interpolation,
+        carve=carve,
+        cover=cover,
+    )
     occupancy = None
     if upsample == 1:
         inside = union[1:-1, 1:-1, 1:-1] < 0
         affine = sections.affine.copy()
         affine[:3, 3] = sections.affine[:3, :3] @ np.asarray(lo, dtype=np.float64) + affine[:3, 3]
         occupancy = Volume(inside, affine)
-    mesh = _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample,
-                 checked=occupancy is not None)
+    mesh = _mesh(
+        sections, np.moveaxis(union, sections.axis, 0), lo, upsample, checked=occupancy is not None
+    )
     field = None
     if keep_field:
         affine = sections.affine @ _to_index(sections, lo, upsample, pad=1)
@@ -707,8 +759,12 @@ def _mirror_pad(field: NDArray[np.float32]) -> NDArray[np.float32]:
 
 
 def _mesh(
-    sections: CrossSections, padded: NDArray[np.float32], lo: tuple[int, ...], upsample: int,
-    *, checked: bool = False,
+    sections: CrossSections,
+    padded: NDArray[np.float32],
+    lo: tuple[int, ...],
+    upsample: int,
+    *,
+    checked: bool = False,
 ) -> trimesh.Trimesh:
     """Mesh a padded, axis-first field whose box starts at voxel ``lo``.
 

@@ -55,8 +55,9 @@ def hull_samples(
     start = [a - (low - 1) for a, low in zip(padded_lo, lo, strict=True)]
     inside[tuple(slice(s0, s0 + n) for s0, n in zip(start, crop.shape, strict=True))] = crop
     if upsample > 1:
-        core = np.repeat(np.take(inside, range(1, inside.shape[axis] - 1), axis=axis),
-                         upsample, axis=axis)
+        core = np.repeat(
+            np.take(inside, range(1, inside.shape[axis] - 1), axis=axis), upsample, axis=axis
+        )
         edge = [np.take(inside, [0], axis=axis), np.take(inside, [-1], axis=axis)]
         inside = np.concatenate([edge[0], core, edge[1]], axis=axis)
     return inside
@@ -108,8 +109,13 @@ def carve_field(
         np.maximum(union, level, out=union, where=~inside)
         if cover:
             core = (slice(1, -1),) * 3  # the padding stays positive: the surface stays closed
-            cover_silhouettes(union[core], inside[core], sections.axis, level,
-                               np.float32(COVER_DEPTH * float(np.min(sections.spacing))))
+            cover_silhouettes(
+                union[core],
+                inside[core],
+                sections.axis,
+                level,
+                np.float32(COVER_DEPTH * float(np.min(sections.spacing))),
+            )
         del inside
         if not union.min() < 0:
             raise EmptyMaskError(

@@ -74,6 +74,10 @@ def taubin_smooth(
     filter_taubin(out, lamb=lamb, nu=-mu, iterations=2 * int(iterations))
     logger.debug(
         "Taubin smoothing (%d pairs, lambda %.3g, mu %.3g): volume %.6g -> %.6g",
-        iterations, lamb, mu, before, float(out.volume),
+        iterations,
+        lamb,
+        mu,
+        before,
+        float(out.volume),
     )
     return out

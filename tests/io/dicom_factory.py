@@ -152,8 +152,11 @@ def _patient_study(ds: Dataset, study_uid: str, frame_of_reference_uid: str) -> 
 def read_uids(paths: Sequence[Path]) -> list[str]:
     """Return the SOPInstanceUID of each file, in the order given."""
     return [
-        str(pydicom.dcmread(p, stop_before_pixels=True, specific_tags=["SOPInstanceUID"])
-            .SOPInstanceUID)
+        str(
+            pydicom.dcmread(
+                p, stop_before_pixels=True, specific_tags=["SOPInstanceUID"]
+            ).SOPInstanceUID
+        )
         for p in paths
     ]
 
@@ -224,10 +227,14 @@ def write_series(
             raise ValueError("irregular_positions needs one value per slice")
         unit = step / np.linalg.norm(step)
         ipps = [aff[:3, 3] + float(d) * unit for d in irregular_positions]
-    numbers = list(instance_numbers) if instance_numbers is not None else list(
-        range(1, n_slices + 1))
-    names = list(file_names) if file_names is not None else [
-        f"slice_{k:04d}.dcm" for k in range(n_slices)]
+    numbers = (
+        list(instance_numbers) if instance_numbers is not None else list(range(1, n_slices + 1))
+    )
+    names = (
+        list(file_names)
+        if file_names is not None
+        else [f"slice_{k:04d}.dcm" for k in range(n_slices)]
+    )
     if len(numbers) != n_slices or len(names) != n_slices:
         raise ValueError("instance_numbers and file_names need one entry per slice")
     overrides = dict(orientation_overrides or {})
@@ -418,8 +425,10 @@ def write_seg(
     if dimension_index:
         organization = generate_uid()
         dimension_items = []
-        for index, group in (("ReferencedSegmentNumber", "SegmentIdentificationSequence"),
-                             ("ImagePositionPatient", "PlanePositionSequence")):
+        for index, group in (
+            ("ReferencedSegmentNumber", "SegmentIdentificationSequence"),
+            ("ImagePositionPatient", "PlanePositionSequence"),
+        ):
             item = Dataset()
             item.DimensionOrganizationUID = organization
             item.DimensionIndexPointer = tag_for_keyword(index)

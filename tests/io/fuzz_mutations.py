@@ -83,8 +83,28 @@ class Mutant:
 
 
 # ----------------------------------------------------------------------------- bytes
-_INTERESTING = (0, 1, -1, 2, 7, 8, 16, 127, 128, 255, 256, 0x7FFF, 0x8000, 0xFFFF, 0x10000,
-                0x7FFFFFFF, 0x80000000, 0xFFFFFFFF, 2**62, 2**63 - 1)
+_INTERESTING = (
+    0,
+    1,
+    -1,
+    2,
+    7,
+    8,
+    16,
+    127,
+    128,
+    255,
+    256,
+    0x7FFF,
+    0x8000,
+    0xFFFF,
+    0x10000,
+    0x7FFFFFFF,
+    0x80000000,
+    0xFFFFFFFF,
+    2**62,
+    2**63 - 1,
+)
 _Op = Callable[[np.random.Generator, bytes], tuple[bytes, str]]
 
 
@@ -140,8 +160,13 @@ def _integer(rng: np.random.Generator, data: bytes) -> tuple[bytes, str]:
 
 
 BYTE_OPS: dict[str, _Op] = {
-    "flip": _flip, "set": _set_bytes, "insert": _insert, "delete": _delete,
-    "truncate": _truncate, "duplicate": _duplicate, "int": _integer,
+    "flip": _flip,
+    "set": _set_bytes,
+    "insert": _insert,
+    "delete": _delete,
+    "truncate": _truncate,
+    "duplicate": _duplicate,
+    "int": _integer,
 }
 
 
@@ -153,23 +178,98 @@ def _byte_mutation(rng: np.random.Generator, path: Path) -> str:
 
 
 # ----------------------------------------------------------------------------- NIfTI
-_NIFTI_FLOATS = (0.0, -0.0, -1.0, 1e-30, 1e30, 3.4e38, float("nan"), float("inf"),
-                 float("-inf"), 0.5, 2.0)
-_NIFTI_DATATYPES = (0, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 768, 1024, 1280, 1536, 1792,
-                    2048, 2304, 999, -1)
-_NIFTI_FIELDS = ("dim", "dim", "dim", "pixdim", "pixdim", "datatype", "datatype", "bitpix",
-                 "vox_offset", "vox_offset", "scl_slope", "scl_inter", "qform_code",
-                 "sform_code", "quatern_b", "quatern_c", "quatern_d", "qoffset_x", "srow_x",
-                 "srow_y", "srow_z", "magic", "sizeof_hdr", "intent_code", "xyzt_units",
-                 "extension", "data")
+_NIFTI_FLOATS = (
+    0.0,
+    -0.0,
+    -1.0,
+    1e-30,
+    1e30,
+    3.4e38,
+    float("nan"),
+    float("inf"),
+    float("-inf"),
+    0.5,
+    2.0,
+)
+_NIFTI_DATATYPES = (
+    0,
+    1,
+    2,
+    4,
+    8,
+    16,
+    32,
+    64,
+    128,
+    256,
+    512,
+    768,
+    1024,
+    1280,
+    1536,
+    1792,
+    2048,
+    2304,
+    999,
+    -1,
+)
+_NIFTI_FIELDS = (
+    "dim",
+    "dim",
+    "dim",
+    "pixdim",
+    "pixdim",
+    "datatype",
+    "datatype",
+    "bitpix",
+    "vox_offset",
+    "vox_offset",
+    "scl_slope",
+    "scl_inter",
+    "qform_code",
+    "sform_code",
+    "quatern_b",
+    "quatern_c",
+    "quatern_d",
+    "qoffset_x",
+    "srow_x",
+    "srow_y",
+    "srow_z",
+    "magic",
+    "sizeof_hdr",
+    "intent_code",
+    "xyzt_units",
+    "extension",
+    "data",
+)
 
 
 def _nifti_value(rng: np.random.Generator, kind: str, itemsize: int, size: int):
     if kind == "f":
         return float(rng.choice(_NIFTI_FLOATS))
     bits = 8 * itemsize
-    pool = [0, 1, -1, 2, 3, 4, 5, 8, 9, 100, 1000, 32767, -32768, size, size + 1, size - 1,
-            2**31 - 1, -(2**31), 2**40, 2**62]
+    pool = [
+        0,
+        1,
+        -1,
+        2,
+        3,
+        4,
+        5,
+        8,
+        9,
+        100,
+        1000,
+        32767,
+        -32768,
+        size,
+        size + 1,
+        size - 1,
+        2**31 - 1,
+        -(2**31),
+        2**40,
+        2**62,
+    ]
     lo, hi = -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
     return int(np.clip(int(rng.choice(pool)), lo, hi))
 
@@ -187,7 +287,8 @@ def _nifti_struct(rng: np.random.Generator, data: bytes) -> tuple[bytes, str]:
     rest = data[size:]
     if field == "extension":
         ext = struct.pack("<4B", 1, 0, 0, 0) + struct.pack(
-            "<ii", int(rng.choice([0, 8, 16, 7, 2**31 - 1, -16])), int(rng.integers(0, 50)))
+            "<ii", int(rng.choice([0, 8, 16, 7, 2**31 - 1, -16])), int(rng.integers(0, 50))
+        )
         return bytes(buf) + ext + rest[4:], "nifti.extension"
     if field == "data":
         offset = int(header["vox_offset"]) if np.isfinite(header["vox_offset"]) else size + 4
@@ -195,8 +296,15 @@ def _nifti_struct(rng: np.random.Generator, data: bytes) -> tuple[bytes, str]:
         payload = bytearray(data[offset:])
         if payload:
             start = int(rng.integers(0, len(payload)))
-            fill = rng.choice([b"\xff\xff\xff\x7f", b"\x00\x00\xc0\x7f", b"\x00\x00\x80\x7f",
-                               b"\x00\x00\x00\x3f", b"\x01"])
+            fill = rng.choice(
+                [
+                    b"\xff\xff\xff\x7f",
+                    b"\x00\x00\xc0\x7f",
+                    b"\x00\x00\x80\x7f",
+                    b"\x00\x00\x00\x3f",
+                    b"\x01",
+                ]
+            )
             payload[start : start + len(fill)] = fill[: len(payload) - start]
         return data[:offset] + bytes(payload), "nifti.data"
     view = np.frombuffer(buf, dtype=dtype.newbyteorder("<"))
@@ -254,58 +362,203 @@ def _lenient_pydicom() -> Iterator[None]:
 
 _DICOM_KEYWORDS = {
     "dicom-series": (
-        "Rows", "Columns", "PixelSpacing", "ImagePositionPatient", "ImageOrientationPatient",
-        "SliceThickness", "BitsAllocated", "BitsStored", "HighBit", "PixelRepresentation",
-        "SamplesPerPixel", "PhotometricInterpretation", "RescaleSlope", "RescaleIntercept",
-        "SeriesInstanceUID", "Modality", "SOPClassUID", "PixelData", "SliceLocation",
-        "InstanceNumber", "SOPInstanceUID"),
+        "Rows",
+        "Columns",
+        "PixelSpacing",
+        "ImagePositionPatient",
+        "ImageOrientationPatient",
+        "SliceThickness",
+        "BitsAllocated",
+        "BitsStored",
+        "HighBit",
+        "PixelRepresentation",
+        "SamplesPerPixel",
+        "PhotometricInterpretation",
+        "RescaleSlope",
+        "RescaleIntercept",
+        "SeriesInstanceUID",
+        "Modality",
+        "SOPClassUID",
+        "PixelData",
+        "SliceLocation",
+        "InstanceNumber",
+        "SOPInstanceUID",
+    ),
     "dicom-seg": (
-        "NumberOfFrames", "Rows", "Columns", "BitsAllocated", "BitsStored", "SegmentationType",
-        "MaximumFractionalValue", "SegmentSequence", "SegmentNumber", "SegmentLabel",
-        "PerFrameFunctionalGroupsSequence", "ReferencedSegmentNumber", "ImagePositionPatient",
-        "ImageOrientationPatient", "PixelSpacing", "SliceThickness", "SpacingBetweenSlices",
-        "PixelData", "SharedFunctionalGroupsSequence", "PlanePositionSequence",
-        "PlaneOrientationSequence", "PixelMeasuresSequence", "SegmentIdentificationSequence",
-        "SOPClassUID"),
+        "NumberOfFrames",
+        "Rows",
+        "Columns",
+        "BitsAllocated",
+        "BitsStored",
+        "SegmentationType",
+        "MaximumFractionalValue",
+        "SegmentSequence",
+        "SegmentNumber",
+        "SegmentLabel",
+        "PerFrameFunctionalGroupsSequence",
+        "ReferencedSegmentNumber",
+        "ImagePositionPatient",
+        "ImageOrientationPatient",
+        "PixelSpacing",
+        "SliceThickness",
+        "SpacingBetweenSlices",
+        "PixelData",
+        "SharedFunctionalGroupsSequence",
+        "PlanePositionSequence",
+        "PlaneOrientationSequence",
+        "PixelMeasuresSequence",
+        "SegmentIdentificationSequence",
+        "SOPClassUID",
+    ),
     "rtstruct": (
-        "ContourData", "ContourData", "ContourData", "NumberOfContourPoints",
-        "ContourGeometricType", "ROINumber", "ReferencedROINumber", "ROIName",
-        "StructureSetROISequence", "ROIContourSequence", "ContourSequence",
-        "ReferencedSOPInstanceUID", "ContourImageSequence", "Modality", "SOPClassUID"),
+        "ContourData",
+        "ContourData",
+        "ContourData",
+        "NumberOfContourPoints",
+        "ContourGeometricType",
+        "ROINumber",
+        "ReferencedROINumber",
+        "ROIName",
+        "StructureSetROISequence",
+        "ROIContourSequence",
+        "ContourSequence",
+        "ReferencedSOPInstanceUID",
+        "ContourImageSequence",
+        "Modality",
+        "SOPClassUID",
+    ),
 }
 _DICOM_ADD = {  # elements a mutation may add where the seed has none
-    "dicom-series": ("NumberOfFrames", "SpacingBetweenSlices", "RescaleSlope",
-                     "ModalityLUTSequence", "PixelPaddingValue", "WindowCenter"),
-    "dicom-seg": ("SpacingBetweenSlices", "MaximumFractionalValue", "PixelSpacing",
-                  "ImagePositionPatient"),
+    "dicom-series": (
+        "NumberOfFrames",
+        "SpacingBetweenSlices",
+        "RescaleSlope",
+        "ModalityLUTSequence",
+        "PixelPaddingValue",
+        "WindowCenter",
+    ),
+    "dicom-seg": (
+        "SpacingBetweenSlices",
+        "MaximumFractionalValue",
+        "PixelSpacing",
+        "ImagePositionPatient",
+    ),
     "rtstruct": ("ContourData", "NumberOfFrames"),
 }
 _VALUES: dict[str, tuple[bytes, ...]] = {
-    "DS": (b"0", b"-1", b"nan", b"inf", b"-inf", b"1e308", b"-1e308", b"1e999", b"abc", b"",
-           b"1e-320", b"1,5", b"0\\0", b"1\\2\\3\\4\\5\\6\\7", b"-0", b"99999999999999"),
-    "IS": (b"0", b"-1", b"2147483647", b"-2147483648", b"99999999999", b"abc", b"", b"1.5",
-           b"1\\2", b"65536"),
-    "US": tuple(struct.pack("<H", v) for v in (0, 1, 2, 3, 7, 8, 12, 16, 32, 32767, 32768,
-                                                65535)) + (b"", b"\x01", b"\x01\x00\x02"),
+    "DS": (
+        b"0",
+        b"-1",
+        b"nan",
+        b"inf",
+        b"-inf",
+        b"1e308",
+        b"-1e308",
+        b"1e999",
+        b"abc",
+        b"",
+        b"1e-320",
+        b"1,5",
+        b"0\\0",
+        b"1\\2\\3\\4\\5\\6\\7",
+        b"-0",
+        b"99999999999999",
+    ),
+    "IS": (
+        b"0",
+        b"-1",
+        b"2147483647",
+        b"-2147483648",
+        b"99999999999",
+        b"abc",
+        b"",
+        b"1.5",
+        b"1\\2",
+        b"65536",
+    ),
+    "US": tuple(struct.pack("<H", v) for v in (0, 1, 2, 3, 7, 8, 12, 16, 32, 32767, 32768, 65535))
+    + (b"", b"\x01", b"\x01\x00\x02"),
     "SS": tuple(struct.pack("<h", v) for v in (0, -1, -32768, 32767)),
     "UL": tuple(struct.pack("<I", v) for v in (0, 1, 2**31 - 1, 2**32 - 1)),
     "SL": tuple(struct.pack("<i", v) for v in (0, -1, -(2**31))),
     "FL": tuple(struct.pack("<f", v) for v in (0.0, float("nan"), float("inf"), 3.4e38)),
     "FD": tuple(struct.pack("<d", v) for v in (0.0, float("nan"), float("inf"), 1e308)),
-    "UI": (b"", b"1.2.3\x00", b"1.2.840.10008.5.1.4.1.1.66.4\x00",
-           b"1.2.840.10008.5.1.4.1.1.481.3\x00", b"1.2.840.10008.5.1.4.1.1.2\x00",
-           b"\xff\xfe"),
-    "CS": (b"", b"LABELMAP", b"FRACTIONAL", b"BINARY", b"CLOSED_PLANAR", b"POINT",
-           b"OPEN_PLANAR", b"RTSTRUCT", b"SEG", b"CT", b"MONOCHROME1", b"RGB",
-           b"PALETTE COLOR", b"YBR_FULL", b"\\\\\\", b"X" * 300),
+    "UI": (
+        b"",
+        b"1.2.3\x00",
+        b"1.2.840.10008.5.1.4.1.1.66.4\x00",
+        b"1.2.840.10008.5.1.4.1.1.481.3\x00",
+        b"1.2.840.10008.5.1.4.1.1.2\x00",
+        b"\xff\xfe",
+    ),
+    "CS": (
+        b"",
+        b"LABELMAP",
+        b"FRACTIONAL",
+        b"BINARY",
+        b"CLOSED_PLANAR",
+        b"POINT",
+        b"OPEN_PLANAR",
+        b"RTSTRUCT",
+        b"SEG",
+        b"CT",
+        b"MONOCHROME1",
+        b"RGB",
+        b"PALETTE COLOR",
+        b"YBR_FULL",
+        b"\\\\\\",
+        b"X" * 300,
+    ),
     "text": (b"", b"X" * 300, b"\x00\xff\xfe", b"Ball\\Core", b"\x1b$B", b"1"),
 }
-_VRS = ("AE", "AS", "AT", "CS", "DA", "DS", "DT", "FL", "FD", "IS", "LO", "LT", "OB", "OD",
-        "OF", "OL", "OW", "PN", "SH", "SL", "SQ", "SS", "ST", "SV", "TM", "UC", "UI", "UL",
-        "UN", "UR", "US", "UT", "UV", "XX", "\x00\x00", "ob")
+_VRS = (
+    "AE",
+    "AS",
+    "AT",
+    "CS",
+    "DA",
+    "DS",
+    "DT",
+    "FL",
+    "FD",
+    "IS",
+    "LO",
+    "LT",
+    "OB",
+    "OD",
+    "OF",
+    "OL",
+    "OW",
+    "PN",
+    "SH",
+    "SL",
+    "SQ",
+    "SS",
+    "ST",
+    "SV",
+    "TM",
+    "UC",
+    "UI",
+    "UL",
+    "UN",
+    "UR",
+    "US",
+    "UT",
+    "UV",
+    "XX",
+    "\x00\x00",
+    "ob",
+)
 _TRANSFER_SYNTAXES = (
-    "1.2.840.10008.1.2", "1.2.840.10008.1.2.2", "1.2.840.10008.1.2.1.99",
-    "1.2.840.10008.1.2.4.50", "1.2.840.10008.1.2.5", "1.2.840.10008.1.2.4.90", "1.2.3", "")
+    "1.2.840.10008.1.2",
+    "1.2.840.10008.1.2.2",
+    "1.2.840.10008.1.2.1.99",
+    "1.2.840.10008.1.2.4.50",
+    "1.2.840.10008.1.2.5",
+    "1.2.840.10008.1.2.4.90",
+    "1.2.3",
+    "",
+)
 
 
 def _walk(ds: Dataset, parent: str = "") -> Iterator[tuple[Dataset, DataElement, str]]:
@@ -355,8 +608,13 @@ def _dicom_value(rng: np.random.Generator, ds: Dataset, elem, name: str) -> str:
     if not pool:  # OB / OW: pixel data and the like
         value = elem.value if isinstance(elem.value, bytes) else b""
         op = str(rng.choice(["truncate", "double", "empty", "random", "ones"]))
-        new = {"truncate": value[: len(value) // 2], "double": value * 2, "empty": b"",
-               "random": rng.bytes(len(value)), "ones": b"\xff" * len(value)}[op]
+        new = {
+            "truncate": value[: len(value) // 2],
+            "double": value * 2,
+            "empty": b"",
+            "random": rng.bytes(len(value)),
+            "ones": b"\xff" * len(value),
+        }[op]
         ds[elem.tag] = _raw(elem.tag, vr, new)
         return f"dicom.bytes:{name} {op}"
     if vr in ("DS", "IS") and elem.VM > 1 and rng.random() < 0.6:
@@ -511,11 +769,40 @@ def _series_mutation(rng: np.random.Generator, directory: Path, target: str | No
 
 # ----------------------------------------------------------------------------- JSON
 _JSON_TOKENS = (
-    "NaN", "Infinity", "-Infinity", "1e308", "-1e308", "1.7976931348623157e308", "1e309",
-    "5e-324", "-0.0", "1e-300", "0", "-1", "1e6", "1e12", "100000000000000000000",
-    "1" + "0" * 400, "9" * 5000, "-" + "9" * 400, "1.5", "true", "false", "null", '""',
-    '"1.0"', '"mm"', "[]", "{}", "[[]]", "[0, 0]", "[1, 2, 3, 4]", '{"a": 1}',
-    '"slicerecon-contours"', "2", "1.0",
+    "NaN",
+    "Infinity",
+    "-Infinity",
+    "1e308",
+    "-1e308",
+    "1.7976931348623157e308",
+    "1e309",
+    "5e-324",
+    "-0.0",
+    "1e-300",
+    "0",
+    "-1",
+    "1e6",
+    "1e12",
+    "100000000000000000000",
+    "1" + "0" * 400,
+    "9" * 5000,
+    "-" + "9" * 400,
+    "1.5",
+    "true",
+    "false",
+    "null",
+    '""',
+    '"1.0"',
+    '"mm"',
+    "[]",
+    "{}",
+    "[[]]",
+    "[0, 0]",
+    "[1, 2, 3, 4]",
+    '{"a": 1}',
+    '"slicerecon-contours"',
+    "2",
+    "1.0",
 )
 _PLACEHOLDER = "\u2603FUZZ\u2603"
 
@@ -544,8 +831,22 @@ def _json_struct(rng: np.random.Generator, text: str) -> tuple[str, str]:
     nodes = list(_json_nodes(doc))
     path = nodes[int(rng.integers(0, len(nodes)))]
     where = "".join(f"[{k!r}]" for k in path) or "<root>"
-    op = str(rng.choice(["token", "token", "token", "nest", "delete", "duplicate", "shift",
-                         "scale", "flatten", "unknown-key"]))
+    op = str(
+        rng.choice(
+            [
+                "token",
+                "token",
+                "token",
+                "nest",
+                "delete",
+                "duplicate",
+                "shift",
+                "scale",
+                "flatten",
+                "unknown-key",
+            ]
+        )
+    )
     token = None
     if op == "nest" or (op == "token" and not path):
         depth = int(rng.choice([50, 999, 5000, 100_000]))
@@ -608,9 +909,33 @@ def _json_mutation(rng: np.random.Generator, path: Path) -> str:
 
 # ----------------------------------------------------------------------------- CSV
 _CSV_CELLS = (
-    "", "abc", "nan", "inf", "-inf", "1e308", "-1e308", "1e309", "1e6", "1e12", "-1e12",
-    "1e-300", "0x10", "1_000", "\u0661\u0662", " 1 ", "9" * 400, "-0", "+5", "1.5", "2.5e2",
-    "99999999999999999999", "-1", '"1"', "1;2", "\x00", "\u00e9",
+    "",
+    "abc",
+    "nan",
+    "inf",
+    "-inf",
+    "1e308",
+    "-1e308",
+    "1e309",
+    "1e6",
+    "1e12",
+    "-1e12",
+    "1e-300",
+    "0x10",
+    "1_000",
+    "\u0661\u0662",
+    " 1 ",
+    "9" * 400,
+    "-0",
+    "+5",
+    "1.5",
+    "2.5e2",
+    "99999999999999999999",
+    "-1",
+    '"1"',
+    "1;2",
+    "\x00",
+    "\u00e9",
 )
 
 
@@ -621,9 +946,26 @@ def _csv_mutation(rng: np.random.Generator, path: Path) -> str:
     if not lines:
         return _byte_mutation(rng, path)
     i = int(rng.integers(1, len(lines))) if len(lines) > 1 else 0
-    op = str(rng.choice(["cell", "cell", "cell", "far-plane", "drop-column", "add-column",
-                         "drop-line", "duplicate-line", "swap-lines", "header", "long-line",
-                         "blank-comment", "bom-crlf", "single-point"]))
+    op = str(
+        rng.choice(
+            [
+                "cell",
+                "cell",
+                "cell",
+                "far-plane",
+                "drop-column",
+                "add-column",
+                "drop-line",
+                "duplicate-line",
+                "swap-lines",
+                "header",
+                "long-line",
+                "blank-comment",
+                "bom-crlf",
+                "single-point",
+            ]
+        )
+    )
     detail = op
     if op == "cell":
         cells = lines[i].split(",")
@@ -659,8 +1001,18 @@ def _csv_mutation(rng: np.random.Generator, path: Path) -> str:
         lines[i], lines[j] = lines[j], lines[i]
         detail = f"lines {i + 1}, {j + 1}"
     elif op == "header":
-        lines[0] = str(rng.choice(["x,y,z,plane,polygon", "plane,polygon,x,y", "PLANE,Polygon,X,"
-                                   "Y,Z", "plane,plane,x,y,z", "", "plane;polygon;x;y;z"]))
+        lines[0] = str(
+            rng.choice(
+                [
+                    "x,y,z,plane,polygon",
+                    "plane,polygon,x,y",
+                    "PLANE,Polygon,X,Y,Z",
+                    "plane,plane,x,y,z",
+                    "",
+                    "plane;polygon;x;y;z",
+                ]
+            )
+        )
         detail = repr(lines[0])
     elif op == "long-line":
         lines.insert(i, ",".join(["1"] * int(rng.choice([6, 1000, 100_000]))))
@@ -671,26 +1023,60 @@ def _csv_mutation(rng: np.random.Generator, path: Path) -> str:
         return "csv.bom-crlf"
     elif op == "single-point":
         plane, polygon = lines[i].split(",")[:2] if lines[i].count(",") >= 1 else ("0", "0")
-        lines = [line for k, line in enumerate(lines)
-                 if k == 0 or k == i or line.split(",")[:2] != [plane, polygon]]
+        lines = [
+            line
+            for k, line in enumerate(lines)
+            if k == 0 or k == i or line.split(",")[:2] != [plane, polygon]
+        ]
         detail = f"plane {plane} polygon {polygon} keeps one point"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return f"csv.{op}:{detail}"
 
 
 # ----------------------------------------------------------------------------- VTI
-_VTI_NUMBERS = ("abc", "nan", "inf", "-inf", "1e300", "-1e300", "1e-300", "0", "-5",
-                "99999999999", "1.5", "2147483647", "", "1e999", "0x10", "1,5")
+_VTI_NUMBERS = (
+    "abc",
+    "nan",
+    "inf",
+    "-inf",
+    "1e300",
+    "-1e300",
+    "1e-300",
+    "0",
+    "-5",
+    "99999999999",
+    "1.5",
+    "2147483647",
+    "",
+    "1e999",
+    "0x10",
+    "1,5",
+)
 _VTI_ATTRS: dict[str, tuple[str, ...]] = {
-    "WholeExtent": ("0 100000 0 100000 0 100000", "0 -5 0 3 0 3", "5 0 0 3 0 3", "0 0 0 0 0 0",
-                    "0 1e9 0 1 0 1", "0 2000 0 2000 0 2000"),
-    "Extent": ("0 100000 0 100000 0 100000", "0 -5 0 3 0 3", "0 8 0 7 0 6 0 1",
-               "0 1290 0 1290 0 1290", "0 0 0 0 0 0", "-2147483648 2147483647 0 1 0 1"),
+    "WholeExtent": (
+        "0 100000 0 100000 0 100000",
+        "0 -5 0 3 0 3",
+        "5 0 0 3 0 3",
+        "0 0 0 0 0 0",
+        "0 1e9 0 1 0 1",
+        "0 2000 0 2000 0 2000",
+    ),
+    "Extent": (
+        "0 100000 0 100000 0 100000",
+        "0 -5 0 3 0 3",
+        "0 8 0 7 0 6 0 1",
+        "0 1290 0 1290 0 1290",
+        "0 0 0 0 0 0",
+        "-2147483648 2147483647 0 1 0 1",
+    ),
     "Origin": ("1e308 0 0", "-1.7e308 1.7e308 0", "nan 0 0", "0 0"),
-    "Spacing": ("1e300 1 1", "0 0 0", "-1 1 1", "1e-300 1 1", "nan 1 1", "1 1",
-                "1e-9 1e-9 1e-9"),
-    "Direction": ("0 0 0 0 0 0 0 0 0", "1 0 0 1 0 0 0 0 1", "1e300 0 0 0 1 0 0 0 1",
-                  "1 0 0 0 1 0 0 0"),
+    "Spacing": ("1e300 1 1", "0 0 0", "-1 1 1", "1e-300 1 1", "nan 1 1", "1 1", "1e-9 1e-9 1e-9"),
+    "Direction": (
+        "0 0 0 0 0 0 0 0 0",
+        "1 0 0 1 0 0 0 0 1",
+        "1e300 0 0 0 1 0 0 0 1",
+        "1 0 0 0 1 0 0 0",
+    ),
     "type": ("Float16", "Int128", "Bit", "String", "", "Float64", "Int64", "UInt16", "Float32"),
     "NumberOfComponents": ("0", "3", "abc", "-1", "99999999999"),
     "format": ("ascii", "binary", "appended", "raw", ""),
@@ -708,8 +1094,11 @@ _VTI_ATTRS: dict[str, tuple[str, ...]] = {
 def _vti_attribute(rng: np.random.Generator, data: bytes) -> tuple[bytes, str]:
     head_end = data.find(b"<AppendedData")
     head = data if head_end < 0 else data[:head_end]
-    names = [m for m in re.finditer(rb'\b([A-Za-z_]+)="([^"]*)"', head)
-             if m.group(1).decode() in _VTI_ATTRS or m.group(1) == b"type"]
+    names = [
+        m
+        for m in re.finditer(rb'\b([A-Za-z_]+)="([^"]*)"', head)
+        if m.group(1).decode() in _VTI_ATTRS or m.group(1) == b"type"
+    ]
     if not names:
         return _flip(rng, data)
     m = names[int(rng.integers(0, len(names)))]
@@ -720,8 +1109,11 @@ def _vti_attribute(rng: np.random.Generator, data: bytes) -> tuple[bytes, str]:
     else:
         old = m.group(2).decode()
         numbers = old.split()
-        if (key in ("WholeExtent", "Extent", "Origin", "Spacing", "Direction")
-                and numbers and rng.random() < 0.5):
+        if (
+            key in ("WholeExtent", "Extent", "Origin", "Spacing", "Direction")
+            and numbers
+            and rng.random() < 0.5
+        ):
             k = int(rng.integers(0, len(numbers)))
             numbers[k] = str(rng.choice(_VTI_NUMBERS))
             value = " ".join(numbers)
@@ -739,8 +1131,11 @@ def _vti_payload_mutation(rng: np.random.Generator, data: bytes) -> tuple[bytes,
         if not words:
             return _flip(rng, data)
         k = int(rng.integers(0, len(words)))
-        token = str(rng.choice(["abc", "nan", "1e400", "-1", "300", "99999999999999999999",
-                                "1.5", "inf", "0x1"]))
+        token = str(
+            rng.choice(
+                ["abc", "nan", "1e400", "-1", "300", "99999999999999999999", "1.5", "inf", "0x1"]
+            )
+        )
         words[k] = token.encode()
         op = rng.random()
         if op < 0.2:
@@ -753,7 +1148,7 @@ def _vti_payload_mutation(rng: np.random.Generator, data: bytes) -> tuple[bytes,
         if rng.random() < 0.35:
             k = int(rng.integers(0, max(len(text), 1)))
             junk = rng.choice([b"!", b"=", b"==", b"A", b"", b"\xff", b"===="])
-            body = text[:k] + junk + text[k + (1 if junk == b"" else 0):]
+            body = text[:k] + junk + text[k + (1 if junk == b"" else 0) :]
             return data[: inline.start(2)] + body + data[inline.end(2) :], "vti.base64:corrupt"
         try:
             payload = base64.b64decode(text)
@@ -779,8 +1174,7 @@ def _vti_payload_mutation(rng: np.random.Generator, data: bytes) -> tuple[bytes,
     return data[: marker + 1] + payload + b"\n" + data[end:], detail
 
 
-def _vti_binary_header(rng: np.random.Generator, payload: bytes, data: bytes
-                       ) -> tuple[bytes, str]:
+def _vti_binary_header(rng: np.random.Generator, payload: bytes, data: bytes) -> tuple[bytes, str]:
     width = 8 if b'header_type="UInt64"' in data else 4
     order = ">" if b'byte_order="BigEndian"' in data else "<"
     code = order + ("u8" if width == 8 else "u4")
@@ -888,12 +1282,16 @@ def make_mutant(
             try:
                 mutations.append(_mutate(rng, origin, target))
             except Exception as exc:  # noqa: BLE001 - an earlier mutation broke the structure
-                victim = target if target.is_file() else next(
-                    (p for p in sorted(target.rglob("*")) if p.is_file()), None)
+                victim = (
+                    target
+                    if target.is_file()
+                    else next((p for p in sorted(target.rglob("*")) if p.is_file()), None)
+                )
                 if victim is None:
                     break
-                mutations.append(f"{_byte_mutation(rng, victim)} (structure unreadable: "
-                                 f"{type(exc).__name__})")
+                mutations.append(
+                    f"{_byte_mutation(rng, victim)} (structure unreadable: {type(exc).__name__})"
+                )
     method = "default" if rng.random() < default_method_fraction else "sdf"
     spacing = None
     if gridless and (method == "default" or rng.random() >= DEFAULT_SPACING_FRACTION):
@@ -903,5 +1301,9 @@ def make_mutant(
 
 def seed_cases(seeds: list[Seed]) -> list[Mutant]:
     """The seeds themselves as (unmutated) cases, numbered -1, -2, ..."""
-    return [Mutant(-1 - i, s.format, s.name, s.path, (), "sdf",
-                   GRIDLESS_SPACING if s.gridless else None) for i, s in enumerate(seeds)]
+    return [
+        Mutant(
+            -1 - i, s.format, s.name, s.path, (), "sdf", GRIDLESS_SPACING if s.gridless else None
+        )
+        for i, s in enumerate(seeds)
+    ]

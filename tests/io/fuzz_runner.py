@@ -59,8 +59,13 @@ KINDS = ("ok", "error", "escape", "memory", "timeout", "crash")
 FAILURES = ("escape", "memory", "timeout", "crash")
 """The outcome kinds that are failures."""
 _STARTUP_TIMEOUT = 120.0
-_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                     "NUMEXPR_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+_THREAD_VARIABLES = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+)
 
 
 class Outcome(NamedTuple):
@@ -123,8 +128,12 @@ def _describe(exc: BaseException) -> dict[str, str]:
     import traceback
 
     frames = traceback.extract_tb(exc.__traceback__)
-    ours = [f for f in frames if "/slicerecon/" in f.filename.replace(os.sep, "/")
-            and "/tests/" not in f.filename.replace(os.sep, "/")]
+    ours = [
+        f
+        for f in frames
+        if "/slicerecon/" in f.filename.replace(os.sep, "/")
+        and "/tests/" not in f.filename.replace(os.sep, "/")
+    ]
     text = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__, limit=-8))
     return {
         "error": type(exc).__name__,
@@ -157,8 +166,9 @@ def _run_one(request: dict[str, Any]) -> dict[str, Any]:
     start = time.perf_counter()
     result: dict[str, Any] = {"kind": "ok"}
     try:
-        _pipeline(request["path"], request["method"], request["pixel_spacing"],
-                  request["budget_gb"])
+        _pipeline(
+            request["path"], request["method"], request["pixel_spacing"], request["budget_gb"]
+        )
     except SlicereconError as exc:
         result = {"kind": "error", "error": type(exc).__name__, "message": str(exc)[:400]}
         cause = exc.__cause__ or exc.__context__
@@ -221,11 +231,15 @@ class _Worker:
 
         root = str(Path(slicerecon.__file__).resolve().parents[1])
         env["PYTHONPATH"] = os.pathsep.join(
-            [root, *([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])])
+            [root, *([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])]
+        )
         self.log = open(log_dir / f"worker-{number}.log", "ab")  # noqa: SIM115
         self.proc = subprocess.Popen(
             [sys.executable, str(Path(__file__).resolve()), "--worker", str(memory)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log, env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=self.log,
+            env=env,
         )
         self.buffer = b""
         self.budget_gb = budget_gb
@@ -242,8 +256,12 @@ class _Worker:
         assert self.proc.stdin is not None
         self.case = mutant
         self.since = time.monotonic()
-        request = {"path": str(mutant.path), "method": mutant.method,
-                   "pixel_spacing": mutant.pixel_spacing, "budget_gb": self.budget_gb}
+        request = {
+            "path": str(mutant.path),
+            "method": mutant.method,
+            "pixel_spacing": mutant.pixel_spacing,
+            "budget_gb": self.budget_gb,
+        }
         self.proc.stdin.write((json.dumps(request) + "\n").encode())
         self.proc.stdin.flush()
 
@@ -394,8 +412,9 @@ def run_mutants(
             if not pool:
                 break
             now = time.monotonic()
-            deadlines = [w.since + (timeout if w.ready else _STARTUP_TIMEOUT)
-                         for w in pool.values()]
+            deadlines = [
+                w.since + (timeout if w.ready else _STARTUP_TIMEOUT) for w in pool.values()
+            ]
             events = selector.select(max(0.0, min(deadlines) - now))
             for key, _ in events:
                 worker = pool[key.fd]
@@ -408,10 +427,15 @@ def run_mutants(
                         if failed_starts > 3:
                             raise RuntimeError(
                                 f"fuzz workers keep dying at start (last: {_signal_name(code)});"
-                                f" see {log_path}")
+                                f" see {log_path}"
+                            )
                     else:
-                        yield Outcome(case, "crash", _signal_name(code),
-                                      seconds=time.monotonic() - worker.since)
+                        yield Outcome(
+                            case,
+                            "crash",
+                            _signal_name(code),
+                            seconds=time.monotonic() - worker.since,
+                        )
                     if not exhausted:
                         start()
                     continue
@@ -431,10 +455,15 @@ def run_mutants(
                 case = worker.case
                 retire(worker)
                 if case is None:
-                    raise RuntimeError(f"a fuzz worker did not start in {limit:.0f} s; "
-                                       f"see {log_path}")
-                yield Outcome(case, "timeout", message=f"no answer in {timeout:g} s",
-                              seconds=now - worker.since)
+                    raise RuntimeError(
+                        f"a fuzz worker did not start in {limit:.0f} s; see {log_path}"
+                    )
+                yield Outcome(
+                    case,
+                    "timeout",
+                    message=f"no answer in {timeout:g} s",
+                    seconds=now - worker.since,
+                )
                 if not exhausted:
                     start()
     finally:
@@ -462,9 +491,13 @@ def table(outcomes: Iterable[Outcome], formats: Iterable[str]) -> list[list[str]
 
 def _text_table(rows: list[list[str]]) -> str:
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    return "\n".join("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                               for i, (c, w) in enumerate(zip(r, widths, strict=True)))
-                     for r in rows)
+    return "\n".join(
+        "  ".join(
+            c.ljust(w) if i == 0 else c.rjust(w)
+            for i, (c, w) in enumerate(zip(r, widths, strict=True))
+        )
+        for r in rows
+    )
 
 
 class FailureGroup(NamedTuple):
@@ -511,7 +544,8 @@ def failure_report(outcomes: list[Outcome], formats: Iterable[str]) -> str:
         example = group.example
         lines.append(
             f"{len(group.outcomes):4d} x {group.kind} {group.error or ''} at "
-            f"{group.where or example.raised_at or '?'} [{', '.join(group.formats)}]")
+            f"{group.where or example.raised_at or '?'} [{', '.join(group.formats)}]"
+        )
         lines.append(f"       {example.message.splitlines()[0][:200] if example.message else ''}")
         lines.append(f"       e.g. {example.mutant.path}  ({'; '.join(example.mutant.mutations)})")
     return "\n".join(lines)
@@ -520,21 +554,33 @@ def failure_report(outcomes: list[Outcome], formats: Iterable[str]) -> str:
 def markdown_summary(outcomes: list[Outcome], formats: Iterable[str], *, title: str) -> str:
     """A markdown snippet: the count table and the distinct failures."""
     rows = table(outcomes, formats)
-    legend = ("ok: reconstructed; error: refused with a SlicereconError; escape: any other "
-              "exception; memory: MemoryError under the address-space limit; timeout: no "
-              "answer in time (worker killed); crash: the worker died.")
-    out = [title, "", legend, "", "| " + " | ".join(rows[0]) + " |",
-           "|" + "|".join(["---"] + ["---:"] * (len(rows[0]) - 1)) + "|"]
+    legend = (
+        "ok: reconstructed; error: refused with a SlicereconError; escape: any other "
+        "exception; memory: MemoryError under the address-space limit; timeout: no "
+        "answer in time (worker killed); crash: the worker died."
+    )
+    out = [
+        title,
+        "",
+        legend,
+        "",
+        "| " + " | ".join(rows[0]) + " |",
+        "|" + "|".join(["---"] + ["---:"] * (len(rows[0]) - 1)) + "|",
+    ]
     out += ["| " + " | ".join(r) + " |" for r in rows[1:]]
     groups = failure_groups(outcomes)
     if groups:
-        out += ["",
-                "| failures | kind | exception | where (innermost slicerecon frame) | formats |",
-                "|---:|---|---|---|---|"]
+        out += [
+            "",
+            "| failures | kind | exception | where (innermost slicerecon frame) | formats |",
+            "|---:|---|---|---|---|",
+        ]
         for g in groups:
             where = g.where or g.example.raised_at or "?"
-            out.append(f"| {len(g.outcomes)} | {g.kind} | `{g.error}` | `{where}` | "
-                       f"{', '.join(g.formats)} |")
+            out.append(
+                f"| {len(g.outcomes)} | {g.kind} | `{g.error}` | `{where}` | "
+                f"{', '.join(g.formats)} |"
+            )
     return "\n".join(out) + "\n"
 
 

@@ -30,8 +30,15 @@ import numpy as np
 __all__ = ["FORMATS", "Seed", "write_edge_case", "write_seeds", "write_vti"]
 
 FORMATS: tuple[str, ...] = (
-    "nifti", "nifti-gz", "dicom-series", "dicom-seg", "rtstruct", "rtstruct-series",
-    "json", "csv", "vti",
+    "nifti",
+    "nifti-gz",
+    "dicom-series",
+    "dicom-seg",
+    "rtstruct",
+    "rtstruct-series",
+    "json",
+    "csv",
+    "vti",
 )
 """Input formats, in the order mutant indices cycle through them."""
 
@@ -63,7 +70,6 @@ class Seed(NamedTuple):
     gridless: bool = False
 
 
-
 # ----------------------------------------------------------------------------- seeds
 def _ball(shape: tuple[int, int, int], radii: tuple[float, float, float]) -> np.ndarray:
     grid = np.indices(shape, dtype=np.float64)
@@ -75,8 +81,9 @@ def _ball(shape: tuple[int, int, int], radii: tuple[float, float, float]) -> np.
 def _nifti_seeds(root: Path) -> list[Seed]:
     mask = _ball((12, 11, 9), (4.5, 4.0, 3.5))
     labels = mask.astype(np.int16) + (_ball((12, 11, 9), (2.0, 2.0, 2.0)) & mask)
-    oblique = np.array([[0.0, -0.9, 0.1, 10.0], [0.8, 0.0, 0.0, -20.0],
-                        [0.0, 0.05, 1.5, 5.0], [0, 0, 0, 1]])
+    oblique = np.array(
+        [[0.0, -0.9, 0.1, 10.0], [0.8, 0.0, 0.0, -20.0], [0.0, 0.05, 1.5, 5.0], [0, 0, 0, 1]]
+    )
     seeds = []
     specs = [
         ("uint8", nib.Nifti1Image(mask.astype(np.uint8), np.diag([1.0, 1.0, 2.0, 1.0]))),
@@ -95,29 +102,55 @@ def _nifti_seeds(root: Path) -> list[Seed]:
 
 def _dicom_seeds(root: Path) -> list[Seed]:
     mask = _ball((10, 9, 9), (3.5, 3.0, 4.0)).astype(np.uint16)
-    axial = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [0.8, 0.8], [0, 0, 2.0],
-                                         [-4.0, -3.6, 10.0])
+    axial = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [0.8, 0.8], [0, 0, 2.0], [-4.0, -3.6, 10.0]
+    )
     c, s = np.cos(0.3), np.sin(0.3)
-    oblique = factory.affine_from_geometry([c, s, 0], [0, 0, -1], [1.0, 0.9],
-                                           np.cross([c, s, 0], [0, 0, -1]) * 1.5,
-                                           [5.0, -2.0, 30.0])
+    oblique = factory.affine_from_geometry(
+        [c, s, 0], [0, 0, -1], [1.0, 0.9], np.cross([c, s, 0], [0, 0, -1]) * 1.5, [5.0, -2.0, 30.0]
+    )
     seeds = [
-        Seed("dicom-series", "axial",
-             factory.write_series(root / "series-axial", mask, axial)[0].parent),
-        Seed("dicom-series", "oblique-rescaled",
-             factory.write_series(root / "series-oblique", mask * 3, oblique, modality="CT",
-                                  rescale=(0.5, -1.0))[0].parent),
+        Seed(
+            "dicom-series",
+            "axial",
+            factory.write_series(root / "series-axial", mask, axial)[0].parent,
+        ),
+        Seed(
+            "dicom-series",
+            "oblique-rescaled",
+            factory.write_series(
+                root / "series-oblique", mask * 3, oblique, modality="CT", rescale=(0.5, -1.0)
+            )[0].parent,
+        ),
     ]
     seeds += [
-        Seed("dicom-seg", "binary",
-             factory.write_seg(root / "seg-binary.dcm", {1: mask > 0}, axial,
-                               labels={1: "Ball"})),
-        Seed("dicom-seg", "fractional",
-             factory.write_seg(root / "seg-fractional.dcm", {1: mask * 0.8}, oblique,
-                               labels={1: "Ball"}, fractional=True)),
-        Seed("dicom-seg", "every-frame",
-             factory.write_seg(root / "seg-every-frame.dcm", {1: mask > 0}, axial,
-                               labels={1: "Ball"}, omit_empty_frames=False)),
+        Seed(
+            "dicom-seg",
+            "binary",
+            factory.write_seg(root / "seg-binary.dcm", {1: mask > 0}, axial, labels={1: "Ball"}),
+        ),
+        Seed(
+            "dicom-seg",
+            "fractional",
+            factory.write_seg(
+                root / "seg-fractional.dcm",
+                {1: mask * 0.8},
+                oblique,
+                labels={1: "Ball"},
+                fractional=True,
+            ),
+        ),
+        Seed(
+            "dicom-seg",
+            "every-frame",
+            factory.write_seg(
+                root / "seg-every-frame.dcm",
+                {1: mask > 0},
+                axial,
+                labels={1: "Ball"},
+                omit_empty_frames=False,
+            ),
+        ),
     ]
     return seeds
 
@@ -129,37 +162,49 @@ def _rtstruct(path: Path, contours: list, *, preamble: bool = True) -> Path:
 
 def _ring(centre: np.ndarray, radius: float, z: float, n: int = 10) -> np.ndarray:
     t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    return np.c_[centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t),
-                 np.full(n, z)]
+    return np.c_[centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t), np.full(n, z)]
 
 
 def _rtstruct_seeds(root: Path) -> list[Seed]:
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0],
-                                          [-8.0, -8.0, 0.0])
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [-8.0, -8.0, 0.0]
+    )
     series = root / "rt-series"
     files = factory.write_series(series, np.zeros((16, 16, 8), np.uint16), affine)
     uids = factory.read_uids(files)
     centre = np.array([0.0, 0.0])
-    on_grid = [factory.contour_item(_ring(centre, 5.0 - abs(k - 3.5), 2.0 * k), image_uid=uids[k])
-               for k in range(1, 7)]
+    on_grid = [
+        factory.contour_item(_ring(centre, 5.0 - abs(k - 3.5), 2.0 * k), image_uid=uids[k])
+        for k in range(1, 7)
+    ]
     _rtstruct(series / "rtstruct.dcm", on_grid)
-    free = [factory.contour_item(_ring(centre + 1.5, 6.0 - abs(z - 7.0) / 2, z, n=12))
-            for z in (1.5, 4.0, 6.5, 9.0, 11.5)]
+    free = [
+        factory.contour_item(_ring(centre + 1.5, 6.0 - abs(z - 7.0) / 2, z, n=12))
+        for z in (1.5, 4.0, 6.5, 9.0, 11.5)
+    ]
     return [
-        Seed("rtstruct", "own-grid", _rtstruct(root / "rtstruct-alone.dcm", free),
-             gridless=True),
-        Seed("rtstruct", "on-grid", _rtstruct(root / "rtstruct-ongrid.dcm", on_grid),
-             gridless=True),
-        Seed("rtstruct", "no-preamble", _rtstruct(root / "rtstruct-bare.dcm", free,
-                                                  preamble=False), gridless=True),
+        Seed("rtstruct", "own-grid", _rtstruct(root / "rtstruct-alone.dcm", free), gridless=True),
+        Seed(
+            "rtstruct", "on-grid", _rtstruct(root / "rtstruct-ongrid.dcm", on_grid), gridless=True
+        ),
+        Seed(
+            "rtstruct",
+            "no-preamble",
+            _rtstruct(root / "rtstruct-bare.dcm", free, preamble=False),
+            gridless=True,
+        ),
         Seed("rtstruct-series", "with-series", series, target="rtstruct.dcm"),
     ]
 
 
 def _square(z: float, half: float, centre: tuple[float, float] = (0.0, 0.0)) -> list:
     cx, cy = centre
-    return [[cx - half, cy - half, z], [cx + half, cy - half, z],
-            [cx + half, cy + half, z], [cx - half, cy + half, z]]
+    return [
+        [cx - half, cy - half, z],
+        [cx + half, cy - half, z],
+        [cx + half, cy + half, z],
+        [cx - half, cy + half, z],
+    ]
 
 
 def _contour_seeds(root: Path) -> list[Seed]:
@@ -170,26 +215,34 @@ def _contour_seeds(root: Path) -> list[Seed]:
     volume = Volume(_ball((14, 12, 11), (5.0, 4.5, 4.0)), np.diag([1.0, 1.0, 2.0, 1.0]))
     sections, _, _ = prepare_inputs(volume, slices=5)
     seeds = [
-        Seed("json", "written", write_contours_json(sections, root / "written.json",
-                                                     label="Ball")),
-        Seed("csv", "written", write_contours_csv(sections, root / "written.csv"),
-             gridless=True),
+        Seed("json", "written", write_contours_json(sections, root / "written.json", label="Ball")),
+        Seed("csv", "written", write_contours_csv(sections, root / "written.csv"), gridless=True),
     ]
     planes: list[dict[str, Any]] = [
         {"position": z, "polygons": [_square(z, 4.0 - abs(z - 4.0) / 2)]}
         for z in (0.0, 2.0, 4.0, 6.0, 8.0)
     ]
     planes[2]["polygons"].append(_square(4.0, 0.8, (6.0, 6.0)))
-    minimal = {"format": "slicerecon-contours", "version": 1, "units": "mm",
-               "normal": [0.0, 0.0, 1.0],
-               "grid": {"affine": [[0.5, 0, 0, -8.0], [0, 0.5, 0, -8.0], [0, 0, 2.0, 0.0],
-                                   [0, 0, 0, 1]], "shape": [34, 34, 6]},
-               "planes": planes + [{"position": 10.0, "polygons": []}]}
+    minimal = {
+        "format": "slicerecon-contours",
+        "version": 1,
+        "units": "mm",
+        "normal": [0.0, 0.0, 1.0],
+        "grid": {
+            "affine": [[0.5, 0, 0, -8.0], [0, 0.5, 0, -8.0], [0, 0, 2.0, 0.0], [0, 0, 0, 1]],
+            "shape": [34, 34, 6],
+        },
+        "planes": planes + [{"position": 10.0, "polygons": []}],
+    }
     path = root / "minimal.json"
     path.write_text(json.dumps(minimal), encoding="utf-8")
     seeds.append(Seed("json", "hand-grid", path))
-    bare = {"format": "slicerecon-contours", "version": 1, "units": "mm",
-            "planes": [{"polygons": [_square(z, 3.0)]} for z in (0.0, 1.5, 3.0)]}
+    bare = {
+        "format": "slicerecon-contours",
+        "version": 1,
+        "units": "mm",
+        "planes": [{"polygons": [_square(z, 3.0)]} for z in (0.0, 1.5, 3.0)],
+    }
     path = root / "bare.json"
     path.write_text(json.dumps(bare), encoding="utf-8")
     seeds.append(Seed("json", "bare", path, gridless=True))
@@ -215,15 +268,26 @@ def _vti_payload(raw: bytes, *, compressor: str | None, header: str, block: int 
     return np.array(head, dtype=header).tobytes() + b"".join(packed)
 
 
-def write_vti(path: Path, values: np.ndarray, *, fmt: str, compressor: str | None = None,
-              header: str = "UInt32", big_endian: bool = False, cell: bool = False,
-              encoding: str = "raw", origin: str = "-3 2.5 10", spacing: str = "0.8 0.9 1.7",
-              direction: str = "0 1 0 -1 0 0 0 0 1") -> Path:
+def write_vti(
+    path: Path,
+    values: np.ndarray,
+    *,
+    fmt: str,
+    compressor: str | None = None,
+    header: str = "UInt32",
+    big_endian: bool = False,
+    cell: bool = False,
+    encoding: str = "raw",
+    origin: str = "-3 2.5 10",
+    spacing: str = "0.8 0.9 1.7",
+    direction: str = "0 1 0 -1 0 0 0 0 1",
+) -> Path:
     """Write a uint8 label map ``values`` (x, y, z) as a small ``.vti`` file."""
     order = ">" if big_endian else "<"
     raw = np.asarray(values, dtype=np.uint8).ravel(order="F").tobytes()
-    payload = _vti_payload(raw, compressor=compressor,
-                           header=order + ("u4" if header == "UInt32" else "u8"))
+    payload = _vti_payload(
+        raw, compressor=compressor, header=order + ("u4" if header == "UInt32" else "u8")
+    )
     counts = np.asarray(values.shape) + (1 if cell else 0)
     extent = " ".join(f"{s} {s + n - 1}" for s, n in zip((2, 0, -1), counts, strict=True))
     attrs = f'type="UInt8" Name="labels" format="{fmt}"'
@@ -236,22 +300,29 @@ def write_vti(path: Path, values: np.ndarray, *, fmt: str, compressor: str | Non
         attrs += ' offset="0"'
         body = ""
         data = base64.b64encode(payload) if encoding == "base64" else payload
-        appended = (f'  <AppendedData encoding="{encoding}">\n   _'.encode() + data
-                    + b"\n  </AppendedData>\n")
+        appended = (
+            f'  <AppendedData encoding="{encoding}">\n   _'.encode()
+            + data
+            + b"\n  </AppendedData>\n"
+        )
     group = "CellData" if cell else "PointData"
     comp = f' compressor="{compressor}"' if compressor else ""
     text = (
-        '<?xml version="1.0"?>\n'
-        f'<VTKFile type="ImageData" version="1.0" byte_order='
-        f'"{"BigEndian" if big_endian else "LittleEndian"}" header_type="{header}"{comp}>\n'
-        f'  <ImageData WholeExtent="{extent}" Origin="{origin}" Spacing="{spacing}" '
-        f'Direction="{direction}">\n'
-        f'    <Piece Extent="{extent}">\n'
-        f'      <{group} Scalars="labels">\n'
-        f"        <DataArray {attrs}>{body}</DataArray>\n"
-        f"      </{group}>\n"
-        "    </Piece>\n  </ImageData>\n"
-    ).encode() + appended + b"</VTKFile>\n"
+        (
+            '<?xml version="1.0"?>\n'
+            f'<VTKFile type="ImageData" version="1.0" byte_order='
+            f'"{"BigEndian" if big_endian else "LittleEndian"}" header_type="{header}"{comp}>\n'
+            f'  <ImageData WholeExtent="{extent}" Origin="{origin}" Spacing="{spacing}" '
+            f'Direction="{direction}">\n'
+            f'    <Piece Extent="{extent}">\n'
+            f'      <{group} Scalars="labels">\n'
+            f"        <DataArray {attrs}>{body}</DataArray>\n"
+            f"      </{group}>\n"
+            "    </Piece>\n  </ImageData>\n"
+        ).encode()
+        + appended
+        + b"</VTKFile>\n"
+    )
     path.write_bytes(text)
     return path
 
@@ -263,14 +334,22 @@ def _vti_seeds(root: Path) -> list[Seed]:
         ("binary", {"fmt": "binary"}),
         ("binary-zlib", {"fmt": "binary", "compressor": "vtkZLibDataCompressor"}),
         ("appended-raw", {"fmt": "appended"}),
-        ("appended-base64-lzma", {"fmt": "appended", "encoding": "base64",
-                                  "compressor": "vtkLZMADataCompressor"}),
-        ("appended-zlib-uint64-be", {"fmt": "appended", "header": "UInt64", "big_endian": True,
-                                     "compressor": "vtkZLibDataCompressor"}),
+        (
+            "appended-base64-lzma",
+            {"fmt": "appended", "encoding": "base64", "compressor": "vtkLZMADataCompressor"},
+        ),
+        (
+            "appended-zlib-uint64-be",
+            {
+                "fmt": "appended",
+                "header": "UInt64",
+                "big_endian": True,
+                "compressor": "vtkZLibDataCompressor",
+            },
+        ),
         ("cell-binary", {"fmt": "binary", "cell": True}),
     ]
-    return [Seed("vti", name, write_vti(root / f"{name}.vti", values, **kw))
-            for name, kw in specs]
+    return [Seed("vti", name, write_vti(root / f"{name}.vti", values, **kw)) for name, kw in specs]
 
 
 def write_seeds(directory: str | Path) -> list[Seed]:
@@ -283,21 +362,67 @@ def write_seeds(directory: str | Path) -> list[Seed]:
     """
     root = Path(directory)
     root.mkdir(parents=True, exist_ok=True)
-    seeds = (_nifti_seeds(root) + _dicom_seeds(root) + _rtstruct_seeds(root)
-             + _contour_seeds(root) + _vti_seeds(root))
+    seeds = (
+        _nifti_seeds(root)
+        + _dicom_seeds(root)
+        + _rtstruct_seeds(root)
+        + _contour_seeds(root)
+        + _vti_seeds(root)
+    )
     assert {s.format for s in seeds} == set(FORMATS)
     return seeds
 
 
 # ----------------------------------------------------------------------------- edge cases
-_EDGE_MASKS = ("empty", "one-voxel", "one-plane", "two-planes", "column", "full", "shell",
-               "noise", "every-other-plane", "two-blobs", "sheet-x", "tiny-grid", "long",
-               "big", "checker", "many-labels")
-_EDGE_AFFINES = ("identity", "flipped", "rotated", "anisotropic", "tiny", "huge", "tilted-slices",
-                 "permuted", "far-origin", "singular", "sheared")
-_EDGE_PLANES = ("single-plane", "collinear", "duplicate-points", "bowtie", "holes",
-                "many-points", "tiny", "huge", "close-planes", "far-planes", "uneven",
-                "many-planes", "disjoint", "touching", "triangles", "clockwise-mix")
+_EDGE_MASKS = (
+    "empty",
+    "one-voxel",
+    "one-plane",
+    "two-planes",
+    "column",
+    "full",
+    "shell",
+    "noise",
+    "every-other-plane",
+    "two-blobs",
+    "sheet-x",
+    "tiny-grid",
+    "long",
+    "big",
+    "checker",
+    "many-labels",
+)
+_EDGE_AFFINES = (
+    "identity",
+    "flipped",
+    "rotated",
+    "anisotropic",
+    "tiny",
+    "huge",
+    "tilted-slices",
+    "permuted",
+    "far-origin",
+    "singular",
+    "sheared",
+)
+_EDGE_PLANES = (
+    "single-plane",
+    "collinear",
+    "duplicate-points",
+    "bowtie",
+    "holes",
+    "many-points",
+    "tiny",
+    "huge",
+    "close-planes",
+    "far-planes",
+    "uneven",
+    "many-planes",
+    "disjoint",
+    "touching",
+    "triangles",
+    "clockwise-mix",
+)
 
 
 def _edge_mask(rng: np.random.Generator) -> tuple[str, np.ndarray]:
@@ -378,9 +503,11 @@ def _edge_affine(rng: np.random.Generator, *, square_pixels: bool) -> tuple[str,
 def _vti_geometry(affine: np.ndarray) -> dict[str, str]:
     spacing = np.linalg.norm(affine[:3, :3], axis=0)
     direction = affine[:3, :3] / np.where(spacing > 0, spacing, 1.0)
-    return {"spacing": " ".join(f"{v:.17g}" for v in spacing),
-            "direction": " ".join(f"{v:.17g}" for v in direction.ravel()),
-            "origin": " ".join(f"{v:.17g}" for v in affine[:3, 3])}
+    return {
+        "spacing": " ".join(f"{v:.17g}" for v in spacing),
+        "direction": " ".join(f"{v:.17g}" for v in direction.ravel()),
+        "origin": " ".join(f"{v:.17g}" for v in affine[:3, 3]),
+    }
 
 
 def _write_edge_volume(rng: np.random.Generator, seed: Seed, path: Path) -> str:
@@ -407,14 +534,25 @@ def _write_edge_volume(rng: np.random.Generator, seed: Seed, path: Path) -> str:
             aname += "+irregular"
         factory.write_series(path, mask, affine, irregular_positions=positions)
     elif seed.format == "dicom-seg":
-        factory.write_seg(path, {1: mask > 0}, affine, labels={1: "Edge"},
-                          fractional=bool(rng.random() < 0.3),
-                          omit_empty_frames=bool(mask.any() and rng.random() < 0.7))
+        factory.write_seg(
+            path,
+            {1: mask > 0},
+            affine,
+            labels={1: "Edge"},
+            fractional=bool(rng.random() < 0.3),
+            omit_empty_frames=bool(mask.any() and rng.random() < 0.7),
+        )
     else:
         fmt = str(rng.choice(["ascii", "binary", "appended"]))
         geometry = _vti_geometry(affine)
-        write_vti(path, np.minimum(mask, 255).astype(np.uint8), fmt=fmt, origin=geometry["origin"],
-                  spacing=geometry["spacing"], direction=geometry["direction"])
+        write_vti(
+            path,
+            np.minimum(mask, 255).astype(np.uint8),
+            fmt=fmt,
+            origin=geometry["origin"],
+            spacing=geometry["spacing"],
+            direction=geometry["direction"],
+        )
     return f"edge.{kind}:{aname}"
 
 
@@ -477,8 +615,13 @@ def _frame(rng: np.random.Generator) -> tuple[str, np.ndarray]:
     return "oblique", _rotation(axis, float(rng.uniform(0.1, 3.0)))
 
 
-def write_contour_file(path: Path, planes: list[tuple[float, list[np.ndarray]]],
-                       frame: np.ndarray, *, normal: bool = True) -> Path:
+def write_contour_file(
+    path: Path,
+    planes: list[tuple[float, list[np.ndarray]]],
+    frame: np.ndarray,
+    *,
+    normal: bool = True,
+) -> Path:
     """Write planes of in-plane polygons as a JSON or CSV contour file (by suffix)."""
     u, v, n = frame
     world = [(z, [p[:, :1] * u + p[:, 1:] * v + z * n for p in polys]) for z, polys in planes]
@@ -492,8 +635,10 @@ def write_contour_file(path: Path, planes: list[tuple[float, list[np.ndarray]]],
     doc: dict = {"format": "slicerecon-contours", "version": 1, "units": "mm"}
     if normal:
         doc["normal"] = n.tolist()
-    doc["planes"] = [{**({"position": z} if normal else {}),
-                      "polygons": [p.tolist() for p in polys]} for z, polys in world]
+    doc["planes"] = [
+        {**({"position": z} if normal else {}), "polygons": [p.tolist() for p in polys]}
+        for z, polys in world
+    ]
     path.write_text(json.dumps(doc), encoding="utf-8")
     return path
 
@@ -506,8 +651,11 @@ def _write_edge_contours(rng: np.random.Generator, seed: Seed, path: Path) -> st
         return f"edge.{kind}:{fname}"
     u, v, n = frame
     offset = np.array([0.0, 0.0, 3.0]) if seed.format == "rtstruct-series" else np.zeros(3)
-    items = [factory.contour_item(p[:, :1] * u + p[:, 1:] * v + z * n + offset)
-             for z, polys in planes for p in polys]
+    items = [
+        factory.contour_item(p[:, :1] * u + p[:, 1:] * v + z * n + offset)
+        for z, polys in planes
+        for p in polys
+    ]
     target = path / (seed.target or "rtstruct.dcm") if path.is_dir() else path
     _rtstruct(target, items)
     return f"edge.{kind}:{fname}"
@@ -524,5 +672,3 @@ def write_edge_case(rng: np.random.Generator, seed: Seed, path: Path) -> str:
     if seed.format in ("json", "csv", "rtstruct", "rtstruct-series"):
         return _write_edge_contours(rng, seed, path)
     return _write_edge_volume(rng, seed, path)
-
-

@@ -57,8 +57,10 @@ TRIANGLE = [[0.0, 0.0, 1.0], [4.0, 0.0, 1.0], [0.0, 4.0, 1.0]]
 
 def test_json_round_trip_is_exact(tmp_path):
     rotation = np.array([[0.0, -1.0, 0.0], [0.6, 0.0, -0.8], [0.8, 0.0, 0.6]])
-    for affine in (_affine(), _affine() @ np.block([[rotation, np.zeros((3, 1))],
-                                                     [np.zeros((1, 3)), np.ones((1, 1))]])):
+    for affine in (
+        _affine(),
+        _affine() @ np.block([[rotation, np.zeros((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]]),
+    ):
         original = _sections(affine)
         path = write_contours_json(original, tmp_path / "out" / "c.json", label="lesion")
         back = read_contours(path)
@@ -84,9 +86,13 @@ def test_json_with_pixel_spacing_resamples_instead_of_using_the_grid(tmp_path):
 
 def test_hole_is_empty_and_ring_area_is_analytic(tmp_path):
     outer, hole = _circle(20.0, (1.0, 2.0, 5.0)), _circle(7.5, (3.0, 1.0, 5.0))
-    doc = _json_doc([{"position": 5.0, "polygons": [outer.tolist(), hole.tolist()]},
-                     {"polygons": [(outer + [0, 0, 2]).tolist()]}],
-                    normal=[0, 0, 1])
+    doc = _json_doc(
+        [
+            {"position": 5.0, "polygons": [outer.tolist(), hole.tolist()]},
+            {"polygons": [(outer + [0, 0, 2]).tolist()]},
+        ],
+        normal=[0, 0, 1],
+    )
     cs = read_contours(_write_json(tmp_path, doc), pixel_spacing=0.1)
     n = 720
     ngon = 0.5 * n * np.sin(2.0 * np.pi / n)
@@ -98,8 +104,9 @@ def test_hole_is_empty_and_ring_area_is_analytic(tmp_path):
 
 def test_repeated_first_point_is_accepted(tmp_path):
     square = [[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0]]
-    cs = read_contours(_write_json(tmp_path, _json_doc([{"polygons": [square]}])),
-                       pixel_spacing=1.0)
+    cs = read_contours(
+        _write_json(tmp_path, _json_doc([{"polygons": [square]}])), pixel_spacing=1.0
+    )
     assert cs.area_mm2(0) == pytest.approx(100.0)
 
 
@@ -120,8 +127,10 @@ def test_csv_round_trip_gives_the_same_pixels_in_world_space(tmp_path):
 
 def test_csv_columns_in_any_order_with_comments(tmp_path):
     path = tmp_path / "c.csv"
-    path.write_text("# made by hand\nx, y, z, polygon, plane\n0,0,2,7,3\n10,0,2,7,3\n"
-                    "\n10,10,2,7,3\n0,10,2,7,3\n")
+    path.write_text(
+        "# made by hand\nx, y, z, polygon, plane\n0,0,2,7,3\n10,0,2,7,3\n"
+        "\n10,10,2,7,3\n0,10,2,7,3\n"
+    )
     cs = read_contours(path, pixel_spacing=1.0)
     assert cs.n_planes == 1 and cs.area_mm2(0) == pytest.approx(100.0)
 
@@ -147,31 +156,56 @@ def test_non_parallel_planes_raise_geometry_error(tmp_path):
         (_json_doc({"polygons": []}), "planes: expected a list of planes"),
         (_json_doc([{"polygons": [TRIANGLE]}, {"poly": []}]), r"planes\[1\]: unknown key 'poly'"),
         (_json_doc([{"position": 1.0}]), r"planes\[0\]: missing key 'polygons'"),
-        (_json_doc([{"polygons": [TRIANGLE, TRIANGLE[:2]]}]),
-         r"planes\[0\]\.polygons\[1\]: needs at least 3 points \(got 2\)"),
-        (_json_doc([{"polygons": [[[0, 0, 1], [1, 0], [0, 1, 1]]]}]),
-         r"planes\[0\]\.polygons\[0\]\[1\]: expected \[x, y, z\] \(got a list of length 2\)"),
-        (_json_doc([{"polygons": [[[0, 0, 1], [1, 0, "1"], [0, 1, 1]]]}]),
-         r"planes\[0\]\.polygons\[0\]\[1\]\[2\]: expected a number \(got a string\)"),
-        (_json_doc([{"polygons": [[[0, 0, 1], [1, 0, float("nan")], [0, 1, 1]]]}]),
-         r"planes\[0\]\.polygons\[0\]\[1\]\[2\]: must be finite \(got nan\)"),
-        (_json_doc([{"polygons": [[[0, 0, 1], [1, 0, True], [0, 1, 1]]]}]),
-         r"\[1\]\[2\]: expected a number \(got true/false\)"),
-        (_json_doc([{"position": "1", "polygons": [TRIANGLE]}]),
-         r"planes\[0\]\.position: expected a number"),
-        (_json_doc([{"position": 3.0, "polygons": [TRIANGLE]}], normal=[0, 0, 1]),
-         r"planes\[0\]\.polygons\[0\]: lies at 1 mm along the normal but the plane's position"),
+        (
+            _json_doc([{"polygons": [TRIANGLE, TRIANGLE[:2]]}]),
+            r"planes\[0\]\.polygons\[1\]: needs at least 3 points \(got 2\)",
+        ),
+        (
+            _json_doc([{"polygons": [[[0, 0, 1], [1, 0], [0, 1, 1]]]}]),
+            r"planes\[0\]\.polygons\[0\]\[1\]: expected \[x, y, z\] \(got a list of length 2\)",
+        ),
+        (
+            _json_doc([{"polygons": [[[0, 0, 1], [1, 0, "1"], [0, 1, 1]]]}]),
+            r"planes\[0\]\.polygons\[0\]\[1\]\[2\]: expected a number \(got a string\)",
+        ),
+        (
+            _json_doc([{"polygons": [[[0, 0, 1], [1, 0, float("nan")], [0, 1, 1]]]}]),
+            r"planes\[0\]\.polygons\[0\]\[1\]\[2\]: must be finite \(got nan\)",
+        ),
+        (
+            _json_doc([{"polygons": [[[0, 0, 1], [1, 0, True], [0, 1, 1]]]}]),
+            r"\[1\]\[2\]: expected a number \(got true/false\)",
+        ),
+        (
+            _json_doc([{"position": "1", "polygons": [TRIANGLE]}]),
+            r"planes\[0\]\.position: expected a number",
+        ),
+        (
+            _json_doc([{"position": 3.0, "polygons": [TRIANGLE]}], normal=[0, 0, 1]),
+            r"planes\[0\]\.polygons\[0\]: lies at 1 mm along the normal but the plane's position",
+        ),
         (_json_doc([{"polygons": []}]), r"planes\[0\]: a plane without polygons needs"),
         (_json_doc([{"polygons": [TRIANGLE]}], normal=[0, 0, 0]), "normal: must not be the zero"),
-        (_json_doc([{"polygons": [TRIANGLE]}], grid={"affine": np.eye(4).tolist()}),
-         "grid: missing key 'shape'"),
-        (_json_doc([{"polygons": [TRIANGLE]}], grid={"affine": np.eye(4).tolist(),
-                                                      "shape": [4, 0, 4]}),
-         r"grid\.shape: expected 3 positive integers"),
-        (_json_doc([{"polygons": [TRIANGLE]}, {"polygons": [[[5, 5, 1], [9, 5, 1], [5, 9, 1]]]}]),
-         "lists 2 planes but its polygons lie at 1 distinct positions"),
-        (_json_doc([{"polygons": [TRIANGLE, [[0, 0, 3], [4, 0, 3], [0, 4, 3]]]}]),
-         "lists 1 planes but its polygons lie at 2 distinct positions"),
+        (
+            _json_doc([{"polygons": [TRIANGLE]}], grid={"affine": np.eye(4).tolist()}),
+            "grid: missing key 'shape'",
+        ),
+        (
+            _json_doc(
+                [{"polygons": [TRIANGLE]}], grid={"affine": np.eye(4).tolist(), "shape": [4, 0, 4]}
+            ),
+            r"grid\.shape: expected 3 positive integers",
+        ),
+        (
+            _json_doc(
+                [{"polygons": [TRIANGLE]}, {"polygons": [[[5, 5, 1], [9, 5, 1], [5, 9, 1]]]}]
+            ),
+            "lists 2 planes but its polygons lie at 1 distinct positions",
+        ),
+        (
+            _json_doc([{"polygons": [TRIANGLE, [[0, 0, 3], [4, 0, 3], [0, 4, 3]]]}]),
+            "lists 1 planes but its polygons lie at 2 distinct positions",
+        ),
     ],
 )
 def test_malformed_json_raises_format_error(tmp_path, doc, message):
@@ -191,10 +225,15 @@ def test_malformed_json_raises_format_error(tmp_path, doc, message):
         ("plane,polygon,x,y,z\n0,a,0,0,1\n", "line 2: polygon must be an integer id"),
         ("plane,polygon,x,y,z\n0,0,0,zero,1\n", "line 2: y must be a number"),
         ("plane,polygon,x,y,z\n0,0,0,0,nan\n", "line 2: z must be finite"),
-        ("plane,polygon,x,y,z\n0,0,0,0,1\n0,0,1,0,1\n0,1,0,0,1\n0,1,1,0,1\n0,1,0,1,1\n"
-         "0,0,1,1,1\n", "line 7: the rows of plane 0, polygon 0 are not contiguous"),
-        ("plane,polygon,x,y,z\n0,0,0,0,1\n0,0,1,0,1\n",
-         r"line 2 \(plane 0, polygon 0\): needs at least 3 points"),
+        (
+            "plane,polygon,x,y,z\n0,0,0,0,1\n0,0,1,0,1\n0,1,0,0,1\n0,1,1,0,1\n0,1,0,1,1\n"
+            "0,0,1,1,1\n",
+            "line 7: the rows of plane 0, polygon 0 are not contiguous",
+        ),
+        (
+            "plane,polygon,x,y,z\n0,0,0,0,1\n0,0,1,0,1\n",
+            r"line 2 \(plane 0, polygon 0\): needs at least 3 points",
+        ),
     ],
 )
 def test_malformed_csv_raises_format_error(tmp_path, text, message):
@@ -232,20 +271,37 @@ def test_writers_refuse_empty_sections(tmp_path):
 @pytest.mark.parametrize(
     ("doc", "message"),
     [
-        (_json_doc([{"polygons": [TRIANGLE]}], label=None),
-         r"label: expected a string \(got null\)"),
-        (_json_doc([{"position": None, "polygons": [TRIANGLE]}]),
-         r"planes\[0\]\.position: expected a number \(got null\)"),
-        (_json_doc([{"polygons": [[[0, 0, 10**400], [1, 0, 1], [0, 1, 1]]]}]),
-         r"planes\[0\]\.polygons\[0\]\[0\]\[2\]: must be finite \(got an integer of 401 digits\)"),
-        (_json_doc([{"polygons": [TRIANGLE]}], grid={"affine": np.eye(4).tolist(),
-                                                      "shape": [4, 4, 4], "origin": [0, 0, 0]}),
-         r"grid: unknown key 'origin' \(allowed: affine, shape\)"),
-        (_json_doc([{"polygons": [TRIANGLE]}], grid={"affine": np.zeros((4, 4)).tolist(),
-                                                      "shape": [4, 4, 4]}),
-         r"grid\.affine: the last row must be \[0, 0, 0, 1\]"),
-        (_json_doc([{"polygons": [TRIANGLE]}], version="1"),
-         "version: expected an integer \\(got a string\\)"),
+        (
+            _json_doc([{"polygons": [TRIANGLE]}], label=None),
+            r"label: expected a string \(got null\)",
+        ),
+        (
+            _json_doc([{"position": None, "polygons": [TRIANGLE]}]),
+            r"planes\[0\]\.position: expected a number \(got null\)",
+        ),
+        (
+            _json_doc([{"polygons": [[[0, 0, 10**400], [1, 0, 1], [0, 1, 1]]]}]),
+            r"planes\[0\]\.polygons\[0\]\[0\]\[2\]: must be finite "
+            r"\(got an integer of 401 digits\)",
+        ),
+        (
+            _json_doc(
+                [{"polygons": [TRIANGLE]}],
+                grid={"affine": np.eye(4).tolist(), "shape": [4, 4, 4], "origin": [0, 0, 0]},
+            ),
+            r"grid: unknown key 'origin' \(allowed: affine, shape\)",
+        ),
+        (
+            _json_doc(
+                [{"polygons": [TRIANGLE]}],
+                grid={"affine": np.zeros((4, 4)).tolist(), "shape": [4, 4, 4]},
+            ),
+            r"grid\.affine: the last row must be \[0, 0, 0, 1\]",
+        ),
+        (
+            _json_doc([{"polygons": [TRIANGLE]}], version="1"),
+            "version: expected an integer \\(got a string\\)",
+        ),
         (_json_doc([{"polygons": [TRIANGLE]}, 5]), r"planes\[1\]: expected an object \(got int\)"),
     ],
 )

@@ -97,8 +97,9 @@ def test_single_frame_single_segment_is_read_without_a_choice(tmp_path):
     # one plane: the grid holds only that plane, at the frame's position
     assert volume.shape == (6, 5, 1)
     np.testing.assert_array_equal(volume.mask[:, :, 0], mask[:, :, 2])
-    np.testing.assert_allclose(volume.index_to_world([0, 0, 0]),
-                               affine[:3, 3] + 2 * affine[:3, 2], atol=1e-6)
+    np.testing.assert_allclose(
+        volume.index_to_world([0, 0, 0]), affine[:3, 3] + 2 * affine[:3, 2], atol=1e-6
+    )
     np.testing.assert_allclose(volume.spacing, [0.7, 1.2, 3.0], atol=1e-6)
 
 
@@ -111,8 +112,9 @@ def test_omitted_empty_frames_leave_empty_planes(tmp_path):
     volume = read_dicom_seg(path)
 
     np.testing.assert_array_equal(volume.mask, mask[:, :, 1:6])
-    np.testing.assert_allclose(volume.index_to_world([0, 0, 0]),
-                               affine[:3, 3] + affine[:3, 2], atol=1e-6)
+    np.testing.assert_allclose(
+        volume.index_to_world([0, 0, 0]), affine[:3, 3] + affine[:3, 2], atol=1e-6
+    )
 
 
 def test_frames_off_the_regular_grid_are_refused(tmp_path):
@@ -143,16 +145,18 @@ def test_fractional_segmentation_is_thresholded_at_half(tmp_path):
 def test_empty_segment_raises_empty_mask_error(tmp_path):
     liver, _ = _two_segments()
     path = factory.write_seg(
-        tmp_path / "seg.dcm", {1: liver, 2: np.zeros_like(liver)}, _oblique_affine(),
-        labels={1: "Liver", 2: "Nothing"}, omit_empty_frames=False,
+        tmp_path / "seg.dcm",
+        {1: liver, 2: np.zeros_like(liver)},
+        _oblique_affine(),
+        labels={1: "Liver", 2: "Nothing"},
+        omit_empty_frames=False,
     )
     with pytest.raises(EmptyMaskError, match="Nothing"):
         read_dicom_seg(path, segment=2)
 
 
 def test_non_seg_files_are_refused(tmp_path):
-    paths = factory.write_series(tmp_path / "series", np.ones((3, 3, 2), bool),
-                                 _oblique_affine())
+    paths = factory.write_series(tmp_path / "series", np.ones((3, 3, 2), bool), _oblique_affine())
     with pytest.raises(InputError, match="not a DICOM SEG"):
         read_dicom_seg(paths[0])
     with pytest.raises(InputError, match="not found"):
@@ -232,8 +236,13 @@ def test_highdicom_and_the_frame_reader_give_the_same_volume(tmp_path, monkeypat
 def test_seg_without_dimension_index_is_read_as_before(tmp_path, two_segment_seg, monkeypatch):
     """Older exporters leave out DimensionIndexSequence; highdicom refuses them, we do not."""
     _, affine, liver, tumour = two_segment_seg
-    path = factory.write_seg(tmp_path / "legacy.dcm", {1: liver, 2: tumour}, affine,
-                             labels={1: "Liver", 2: "Tumour"}, dimension_index=False)
+    path = factory.write_seg(
+        tmp_path / "legacy.dcm",
+        {1: liver, 2: tumour},
+        affine,
+        labels={1: "Liver", 2: "Tumour"},
+        dimension_index=False,
+    )
     assert "DimensionIndexSequence" not in pydicom.dcmread(path)
 
     volume = read_dicom_seg(path, segment="Tumour")
@@ -244,8 +253,9 @@ def test_seg_without_dimension_index_is_read_as_before(tmp_path, two_segment_seg
 
 def test_seg_stacked_along_a_tilted_line_keeps_the_shear(tmp_path):
     """Frames of a gantry-tilted CT step sideways: highdicom cannot stack them, we can."""
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [0.8, 0.8],
-                                          [0.0, 0.9, 2.5], [-10.0, -12.0, 4.0])
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [0.8, 0.8], [0.0, 0.9, 2.5], [-10.0, -12.0, 4.0]
+    )
     mask = np.zeros((8, 9, 5), bool)
     mask[2:6, 3:7, 1:4] = True
     path = factory.write_seg(tmp_path / "tilt.dcm", {1: mask}, affine, labels={1: "Tilted"})
@@ -259,8 +269,9 @@ def test_seg_stacked_along_a_tilted_line_keeps_the_shear(tmp_path):
 
 def test_two_frames_of_one_segment_at_one_position_are_refused(tmp_path):
     liver, _ = _two_segments()
-    path = factory.write_seg(tmp_path / "seg.dcm", {1: liver}, _oblique_affine(),
-                             labels={1: "Liver"})
+    path = factory.write_seg(
+        tmp_path / "seg.dcm", {1: liver}, _oblique_affine(), labels={1: "Liver"}
+    )
     ds = pydicom.dcmread(path)
     frames = ds.PerFrameFunctionalGroupsSequence
     frames[1].PlanePositionSequence[0].ImagePositionPatient = (
@@ -274,8 +285,9 @@ def test_two_frames_of_one_segment_at_one_position_are_refused(tmp_path):
 
 def test_labelmap_segmentation_is_refused(tmp_path):
     liver, _ = _two_segments()
-    path = factory.write_seg(tmp_path / "seg.dcm", {1: liver}, _oblique_affine(),
-                             labels={1: "Liver"})
+    path = factory.write_seg(
+        tmp_path / "seg.dcm", {1: liver}, _oblique_affine(), labels={1: "Liver"}
+    )
     ds = pydicom.dcmread(path)
     ds.SegmentationType = "LABELMAP"
     ds.save_as(path)
@@ -289,8 +301,9 @@ def test_seg_grid_over_the_memory_budget_is_refused_before_decoding(tmp_path, mo
     from slicerecon.io.dicom import seg as seg_module
 
     liver, _ = _two_segments()
-    path = factory.write_seg(tmp_path / "seg.dcm", {1: liver}, _oblique_affine(),
-                             labels={1: "Liver"})
+    path = factory.write_seg(
+        tmp_path / "seg.dcm", {1: liver}, _oblique_affine(), labels={1: "Liver"}
+    )
     ds = pydicom.dcmread(path)
     ds.Rows, ds.Columns = 60000, 60000  # declared, never decoded
     ds.save_as(path)

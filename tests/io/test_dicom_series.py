@@ -86,9 +86,7 @@ def test_sorted_by_position_not_instance_number_or_file_name(tmp_path):
     rng = np.random.default_rng(5)
     names = [f"img{n:03d}.dcm" for n in rng.permutation(8)]
     numbers = list(rng.permutation(8) + 1)
-    paths = factory.write_series(
-        tmp_path, mask, affine, file_names=names, instance_numbers=numbers
-    )
+    paths = factory.write_series(tmp_path, mask, affine, file_names=names, instance_numbers=numbers)
     assert sorted(p.name for p in paths) != [p.name for p in paths]
 
     volume = read_dicom_series(tmp_path)
@@ -156,9 +154,7 @@ def test_label_selects_one_value_and_missing_label_is_named(tmp_path):
 
 
 def test_irregular_spacing_is_refused_with_a_pointer_to_allow_irregular(tmp_path):
-    factory.write_series(
-        tmp_path, _blob(), _oblique_affine(), irregular_positions=[0, 2, 4, 7, 9]
-    )
+    factory.write_series(tmp_path, _blob(), _oblique_affine(), irregular_positions=[0, 2, 4, 7, 9])
     with pytest.raises(GeometryError, match="allow-irregular"):
         read_dicom_series(tmp_path)
     with pytest.raises(GeometryError, match="irregular"):
@@ -197,9 +193,7 @@ def test_non_parallel_slices_are_refused(tmp_path):
     angle = np.deg2rad(5.0)
     normal = np.cross(row, col)
     tilted_col = np.cos(angle) * col + np.sin(angle) * normal
-    factory.write_series(
-        tmp_path, _blob(), affine, orientation_overrides={2: [*row, *tilted_col]}
-    )
+    factory.write_series(tmp_path, _blob(), affine, orientation_overrides={2: [*row, *tilted_col]})
     with pytest.raises(GeometryError, match="not parallel"):
         read_dicom_series(tmp_path)
 
@@ -216,8 +210,9 @@ def test_differing_image_sizes_are_refused(tmp_path):
     factory.write_series(tmp_path, _blob(shape=(7, 9, 3)), affine, series_uid=uid)
     shifted = affine.copy()
     shifted[:3, 3] += 3 * affine[:3, 2]
-    factory.write_series(tmp_path, _blob(shape=(7, 8, 2)), shifted, series_uid=uid,
-                         file_names=["b0.dcm", "b1.dcm"])
+    factory.write_series(
+        tmp_path, _blob(shape=(7, 8, 2)), shifted, series_uid=uid, file_names=["b0.dcm", "b1.dcm"]
+    )
     with pytest.raises(GeometryError, match="differ in size"):
         read_dicom_series(tmp_path)
 
@@ -225,8 +220,13 @@ def test_differing_image_sizes_are_refused(tmp_path):
 def test_two_series_in_one_directory_are_named(tmp_path):
     affine = _oblique_affine()
     factory.write_series(tmp_path, _blob(), affine, series_uid="1.2.3.4.100")
-    factory.write_series(tmp_path, _blob(), affine, series_uid="1.2.3.4.200",
-                         file_names=[f"other{k}.dcm" for k in range(5)])
+    factory.write_series(
+        tmp_path,
+        _blob(),
+        affine,
+        series_uid="1.2.3.4.200",
+        file_names=[f"other{k}.dcm" for k in range(5)],
+    )
     with pytest.raises(InputError, match=r"1\.2\.3\.4\.100.*1\.2\.3\.4\.200|1\.2\.3\.4\.200.*100"):
         read_dicom_series(tmp_path)
 
@@ -295,8 +295,9 @@ def test_single_slice_takes_its_thickness_as_step(tmp_path):
 def test_info_and_dispatcher(tmp_path):
     mask = _blob()
     factory.write_series(tmp_path / "a", mask, _oblique_affine(), modality="CT")
-    factory.write_series(tmp_path / "b", mask, _oblique_affine(),
-                         irregular_positions=[0, 2, 4, 7, 9])
+    factory.write_series(
+        tmp_path / "b", mask, _oblique_affine(), irregular_positions=[0, 2, 4, 7, 9]
+    )
 
     info = dicom_info(tmp_path / "a")
     assert info["kind"] == "dicom-series" and info["modality"] == "CT"

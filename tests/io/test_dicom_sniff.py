@@ -27,8 +27,7 @@ def files(tmp_path):
     image = factory.write_series(tmp_path / "series", mask, AXIAL)[0]
     seg = factory.write_seg(tmp_path / "seg.dcm", {1: mask}, AXIAL, labels={1: "A"})
     rtstruct = factory.write_rtstruct(tmp_path / "rs.dcm", {(1, "Ball"): None})
-    bare = factory.write_rtstruct(tmp_path / "bare_rtstruct", {(1, "Ball"): None},
-                                  preamble=False)
+    bare = factory.write_rtstruct(tmp_path / "bare_rtstruct", {(1, "Ball"): None}, preamble=False)
     plan = tmp_path / "plan.dcm"
     ds = pydicom.dcmread(image)
     ds.Modality = "RTPLAN"
@@ -39,8 +38,16 @@ def files(tmp_path):
     notes.write_text("plain text")
     torn = tmp_path / "torn"  # the DICM marker, then an element pydicom cannot parse
     torn.write_bytes(bytes(128) + b"DICM" + b"\x02\x00\x10\x00ZZ\xff\xff" + b"x" * 20)
-    return {"image": image, "seg": seg, "rtstruct": rtstruct, "bare": bare, "plan": plan,
-            "garbage": garbage, "notes": notes, "torn": torn}
+    return {
+        "image": image,
+        "seg": seg,
+        "rtstruct": rtstruct,
+        "bare": bare,
+        "plan": plan,
+        "garbage": garbage,
+        "notes": notes,
+        "torn": torn,
+    }
 
 
 def test_content_decides_not_the_name(files):

@@ -54,8 +54,13 @@ def _labels() -> np.ndarray:
 
 
 def _space_header(affine: np.ndarray, space: str = "left-posterior-superior") -> dict:
-    return {"space": space, "space directions": affine[:3, :3].T,
-            "space origin": affine[:3, 3], "kinds": ["domain"] * 3, "encoding": "gzip"}
+    return {
+        "space": space,
+        "space directions": affine[:3, :3].T,
+        "space origin": affine[:3, 3],
+        "kinds": ["domain"] * 3,
+        "encoding": "gzip",
+    }
 
 
 def _write(path: Path, data: np.ndarray, header: dict) -> Path:
@@ -85,20 +90,27 @@ def test_plain_label_map_keeps_values_and_lps_oblique_geometry(tmp_path: Path) -
     np.testing.assert_allclose(label_map.affine, affine, rtol=0, atol=1e-12)
     assert label_map.coordinates == "LPS"
     assert [(s.value, s.name, s.colour) for s in label_map.structures] == [
-        (1, "", None), (2, "", None), (5, "", None)]
+        (1, "", None),
+        (2, "", None),
+        (5, "", None),
+    ]
     # the voxel (i, j, k) of the file is at origin + i d0 + j d1 + k d2
     world = label_map.affine @ [4, 6, 5, 1]
     np.testing.assert_allclose(world[:3], affine[:3, 3] + affine[:3, :3] @ [4, 6, 5])
 
 
-@pytest.mark.parametrize(("space", "frame", "flip"), [
-    ("right-anterior-superior", "RAS", np.eye(4)),
-    ("RAS", "RAS", np.eye(4)),
-    ("LPS", "LPS", np.eye(4)),
-    ("left-anterior-superior", "RAS", np.diag([-1.0, 1.0, 1.0, 1.0])),
-])
-def test_space_field_gives_the_frame(tmp_path: Path, space: str, frame: str,
-                                     flip: np.ndarray) -> None:
+@pytest.mark.parametrize(
+    ("space", "frame", "flip"),
+    [
+        ("right-anterior-superior", "RAS", np.eye(4)),
+        ("RAS", "RAS", np.eye(4)),
+        ("LPS", "LPS", np.eye(4)),
+        ("left-anterior-superior", "RAS", np.diag([-1.0, 1.0, 1.0, 1.0])),
+    ],
+)
+def test_space_field_gives_the_frame(
+    tmp_path: Path, space: str, frame: str, flip: np.ndarray
+) -> None:
     affine = _oblique_affine()
     path = _write(tmp_path / "l.nrrd", _labels(), _space_header(affine, space))
     info = nrrd_info(path)
@@ -107,12 +119,15 @@ def test_space_field_gives_the_frame(tmp_path: Path, space: str, frame: str,
 
 
 def test_no_space_fields_gives_spacings_and_axis_mins(tmp_path: Path) -> None:
-    path = _write(tmp_path / "l.nrrd", _labels(),
-                  {"spacings": [0.5, 0.75, 3.0], "axis mins": [10.0, -4.0, 2.0],
-                   "encoding": "raw"})
+    path = _write(
+        tmp_path / "l.nrrd",
+        _labels(),
+        {"spacings": [0.5, 0.75, 3.0], "axis mins": [10.0, -4.0, 2.0], "encoding": "raw"},
+    )
     info = nrrd_info(path)
-    np.testing.assert_allclose(info.affine, [[0.5, 0, 0, 10], [0, 0.75, 0, -4],
-                                             [0, 0, 3.0, 2.0], [0, 0, 0, 1]])
+    np.testing.assert_allclose(
+        info.affine, [[0.5, 0, 0, 10], [0, 0.75, 0, -4], [0, 0, 3.0, 2.0], [0, 0, 0, 1]]
+    )
     assert info.coordinates == "RAS"
     bare = nrrd_info(_write(tmp_path / "bare.nrrd", _labels(), {"encoding": "raw"}))
     np.testing.assert_array_equal(bare.affine, np.eye(4))
@@ -148,27 +163,38 @@ def test_float_label_map_with_whole_values_is_read(tmp_path: Path) -> None:
 def _segmentation(tmp_path: Path, *, four_d: bool = True, extra: dict | None = None) -> Path:
     """Three segments in two layers (as Slicer writes overlapping segments)."""
     data = np.zeros((2, 10, 9, 8), dtype=np.uint8)
-    data[0, 1:5, 1:5, 1:4] = 1          # liver, layer 0, value 1
-    data[0, 6:9, 6:8, 4:7] = 2          # spleen, layer 0, value 2
-    data[1, 3:7, 3:6, 2:5] = 1          # tumour, layer 1, value 1: overlaps the liver
+    data[0, 1:5, 1:5, 1:4] = 1  # liver, layer 0, value 1
+    data[0, 6:9, 6:8, 4:7] = 2  # spleen, layer 0, value 2
+    data[1, 3:7, 3:6, 2:5] = 1  # tumour, layer 1, value 1: overlaps the liver
     affine = _oblique_affine()
     directions = np.vstack([np.full(3, np.nan), affine[:3, :3].T])
     header = {
-        "space": "left-posterior-superior", "space directions": directions,
-        "space origin": affine[:3, 3], "kinds": ["list", "domain", "domain", "domain"],
+        "space": "left-posterior-superior",
+        "space directions": directions,
+        "space origin": affine[:3, 3],
+        "kinds": ["list", "domain", "domain", "domain"],
         "encoding": "gzip",
         "Segmentation_MasterRepresentation": "Binary labelmap",
         "Segmentation_ContainedRepresentationNames": "Binary labelmap|",
         "Segmentation_ReferenceImageExtentOffset": "0 0 0",
-        "Segment0_ID": "Segment_1", "Segment0_Name": "liver",
-        "Segment0_Color": "0.866667 0.509804 0.396078", "Segment0_LabelValue": "1",
-        "Segment0_Layer": "0", "Segment0_Extent": "1 4 1 4 1 3",
-        "Segment1_ID": "Segment_2", "Segment1_Name": "spleen",
-        "Segment1_Color": "0.615686 0.423529 0.635294", "Segment1_LabelValue": "2",
-        "Segment1_Layer": "0", "Segment1_Extent": "6 8 6 7 4 6",
-        "Segment2_ID": "Segment_3", "Segment2_Name": "tumour",
-        "Segment2_Color": "1 1 0", "Segment2_LabelValue": "1",
-        "Segment2_Layer": "1", "Segment2_Extent": "3 6 3 5 2 4",
+        "Segment0_ID": "Segment_1",
+        "Segment0_Name": "liver",
+        "Segment0_Color": "0.866667 0.509804 0.396078",
+        "Segment0_LabelValue": "1",
+        "Segment0_Layer": "0",
+        "Segment0_Extent": "1 4 1 4 1 3",
+        "Segment1_ID": "Segment_2",
+        "Segment1_Name": "spleen",
+        "Segment1_Color": "0.615686 0.423529 0.635294",
+        "Segment1_LabelValue": "2",
+        "Segment1_Layer": "0",
+        "Segment1_Extent": "6 8 6 7 4 6",
+        "Segment2_ID": "Segment_3",
+        "Segment2_Name": "tumour",
+        "Segment2_Color": "1 1 0",
+        "Segment2_LabelValue": "1",
+        "Segment2_Layer": "1",
+        "Segment2_Extent": "3 6 3 5 2 4",
         **(extra or {}),
     }
     if not four_d:
@@ -186,8 +212,10 @@ def test_segmentation_layers_are_flattened_later_layer_wins(tmp_path: Path, capl
     assert "share label values" in caplog.text
     assert "overlap on 8 voxels" in caplog.text  # liver ∩ tumour: 2 x 2 x 2
     assert [(s.value, s.name, s.colour) for s in label_map.structures] == [
-        (1, "liver", (221, 130, 101)), (2, "spleen", (157, 108, 162)),
-        (3, "tumour", (255, 255, 0))]
+        (1, "liver", (221, 130, 101)),
+        (2, "spleen", (157, 108, 162)),
+        (3, "tumour", (255, 255, 0)),
+    ]
     liver = np.zeros((10, 9, 8), bool)
     liver[1:5, 1:5, 1:4] = True
     tumour = np.zeros_like(liver)
@@ -207,7 +235,10 @@ def test_unique_label_values_are_kept(tmp_path: Path) -> None:
     _write(path, data, header)
     label_map = read_nrrd_label_map(path)
     assert [(s.value, s.name) for s in label_map.structures] == [
-        (1, "liver"), (2, "spleen"), (7, "tumour")]
+        (1, "liver"),
+        (2, "spleen"),
+        (7, "tumour"),
+    ]
 
 
 def test_three_d_segmentation_keeps_label_values(tmp_path: Path) -> None:
@@ -216,10 +247,17 @@ def test_three_d_segmentation_keeps_label_values(tmp_path: Path) -> None:
 
 
 def test_zero_and_empty_segments_are_skipped_with_a_warning(tmp_path: Path, caplog) -> None:
-    extra = {"Segment3_ID": "bg", "Segment3_Name": "background", "Segment3_LabelValue": "0",
-             "Segment3_Layer": "0",
-             "Segment4_ID": "e", "Segment4_Name": "empty", "Segment4_LabelValue": "9",
-             "Segment4_Layer": "1", "Segment4_Extent": "0 -1 0 -1 0 -1"}
+    extra = {
+        "Segment3_ID": "bg",
+        "Segment3_Name": "background",
+        "Segment3_LabelValue": "0",
+        "Segment3_Layer": "0",
+        "Segment4_ID": "e",
+        "Segment4_Name": "empty",
+        "Segment4_LabelValue": "9",
+        "Segment4_Layer": "1",
+        "Segment4_Extent": "0 -1 0 -1 0 -1",
+    }
     with caplog.at_level(logging.WARNING, logger="slicerecon.io.nrrd"):
         label_map = read_nrrd_label_map(_segmentation(tmp_path, extra=extra))
     assert "segment 3 (background) has label value 0" in caplog.text
@@ -269,10 +307,15 @@ def test_describe_lists_every_segment_with_name_and_colour(tmp_path: Path) -> No
     details = describe_input(_segmentation(tmp_path))
     assert details["format"] == "nrrd" and details["coordinates"] == "LPS"
     assert [(s["value"], s["name"], s["colour"]) for s in details["structures"]] == [
-        (1, "liver", [221, 130, 101]), (2, "spleen", [157, 108, 162]),
-        (3, "tumour", [255, 255, 0])]
+        (1, "liver", [221, 130, 101]),
+        (2, "spleen", [157, 108, 162]),
+        (3, "tumour", [255, 255, 0]),
+    ]
     assert [(s["name"], s["layer"], s["label_value"]) for s in details["segments"]] == [
-        ("liver", 0, 1), ("spleen", 0, 2), ("tumour", 1, 1)]
+        ("liver", 0, 1),
+        ("spleen", 0, 2),
+        ("tumour", 1, 1),
+    ]
     json.dumps(details)
 
 
@@ -283,10 +326,14 @@ def test_describe_lists_every_segment_with_name_and_colour(tmp_path: Path) -> No
 def test_seg_nrrd_round_trip(tmp_path: Path, coordinates: str) -> None:
     labels = _labels().astype(np.int16)
     affine = _oblique_affine()
-    structures = [Structure(1, "left kidney", (200, 10, 30)), Structure(2, "spleen", (0, 0, 255)),
-                  Structure(5, "GTV", (1, 2, 3))]
-    path = write_seg_nrrd(labels, affine, structures, tmp_path / "out" / "labels.seg.nrrd",
-                          coordinates=coordinates)
+    structures = [
+        Structure(1, "left kidney", (200, 10, 30)),
+        Structure(2, "spleen", (0, 0, 255)),
+        Structure(5, "GTV", (1, 2, 3)),
+    ]
+    path = write_seg_nrrd(
+        labels, affine, structures, tmp_path / "out" / "labels.seg.nrrd", coordinates=coordinates
+    )
     assert [p.name for p in path.parent.iterdir()] == ["labels.seg.nrrd"]  # no temp left
     back = read_nrrd_label_map(path)
     np.testing.assert_array_equal(back.labels, labels)
@@ -298,8 +345,13 @@ def test_seg_nrrd_round_trip(tmp_path: Path, coordinates: str) -> None:
 
 def test_seg_nrrd_header_is_what_slicer_writes(tmp_path: Path) -> None:
     labels = _labels()
-    path = write_seg_nrrd(labels, np.eye(4), [Structure(1, "a", (255, 0, 0)), Structure(2)],
-                          tmp_path / "labels.seg.nrrd", coordinates="RAS")
+    path = write_seg_nrrd(
+        labels,
+        np.eye(4),
+        [Structure(1, "a", (255, 0, 0)), Structure(2)],
+        tmp_path / "labels.seg.nrrd",
+        coordinates="RAS",
+    )
     header = nrrd.read_header(str(path))
     assert header["dimension"] == 3 and header["space"] == "left-posterior-superior"
     assert header["kinds"] == ["domain"] * 3 and header["encoding"] == "gzip"
@@ -319,9 +371,12 @@ def test_seg_nrrd_header_is_what_slicer_writes(tmp_path: Path) -> None:
 
 
 def test_seg_nrrd_empty_structure_is_an_empty_segment(tmp_path: Path, caplog) -> None:
-    path = write_seg_nrrd(_labels(), np.eye(4), [Structure(1), Structure(2), Structure(5),
-                                                 Structure(9, "missed")],
-                          tmp_path / "labels.seg.nrrd")
+    path = write_seg_nrrd(
+        _labels(),
+        np.eye(4),
+        [Structure(1), Structure(2), Structure(5), Structure(9, "missed")],
+        tmp_path / "labels.seg.nrrd",
+    )
     assert nrrd.read_header(str(path))["Segment3_Extent"] == "0 -1 0 -1 0 -1"
     with caplog.at_level(logging.WARNING, logger="slicerecon.io.nrrd"):
         back = read_nrrd_label_map(path)
@@ -334,53 +389,87 @@ def test_seg_nrrd_opens_in_itk_with_the_geometry_slicer_sees(tmp_path: Path) -> 
     itk = pytest.importorskip("itk")
     affine = _oblique_affine()
     labels = _labels()
-    path = write_seg_nrrd(labels, affine, [Structure(1, "a"), Structure(2, "b"),
-                                           Structure(5, "c")],
-                          tmp_path / "labels.seg.nrrd", coordinates="RAS")
+    path = write_seg_nrrd(
+        labels,
+        affine,
+        [Structure(1, "a"), Structure(2, "b"), Structure(5, "c")],
+        tmp_path / "labels.seg.nrrd",
+        coordinates="RAS",
+    )
     image = itk.imread(str(path))
     lps = LPS_TO_RAS @ affine
     spacing = np.linalg.norm(lps[:3, :3], axis=0)
     np.testing.assert_allclose(np.asarray(itk.origin(image)), lps[:3, 3], atol=1e-9)
     np.testing.assert_allclose(np.asarray(itk.spacing(image)), spacing, rtol=1e-12)
-    np.testing.assert_allclose(itk.array_from_matrix(image.GetDirection()),
-                               lps[:3, :3] / spacing, atol=1e-12)
+    np.testing.assert_allclose(
+        itk.array_from_matrix(image.GetDirection()), lps[:3, :3] / spacing, atol=1e-12
+    )
     np.testing.assert_array_equal(itk.array_view_from_image(image).T, labels)
     keys = set(image.GetMetaDataDictionary().GetKeys())
-    assert {"Segment2_Name", "Segment2_LabelValue", "Segment2_Extent",
-            "Segmentation_MasterRepresentation"} <= keys
+    assert {
+        "Segment2_Name",
+        "Segment2_LabelValue",
+        "Segment2_Extent",
+        "Segmentation_MasterRepresentation",
+    } <= keys
 
 
-@pytest.mark.parametrize(("kwargs", "match"), [
-    ({"path": "labels.nii.gz"}, "seg.nrrd"),
-    ({"coordinates": "RAI"}, "RAS"),
-    ({"labels": np.zeros((3, 3), np.uint8)}, "3-D integer"),
-    ({"labels": np.zeros((3, 3, 3), np.float32)}, "3-D integer"),
-    ({"structures": [Structure(1), Structure(1)]}, "distinct"),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"path": "labels.nii.gz"}, "seg.nrrd"),
+        ({"coordinates": "RAI"}, "RAS"),
+        ({"labels": np.zeros((3, 3), np.uint8)}, "3-D integer"),
+        ({"labels": np.zeros((3, 3, 3), np.float32)}, "3-D integer"),
+        ({"structures": [Structure(1), Structure(1)]}, "distinct"),
+    ],
+)
 def test_seg_nrrd_writer_refuses_bad_arguments(tmp_path: Path, kwargs: dict, match: str) -> None:
-    arguments = {"labels": _labels(), "affine": np.eye(4), "structures": [Structure(1)],
-                 "path": "labels.seg.nrrd", "coordinates": "RAS", **kwargs}
+    arguments = {
+        "labels": _labels(),
+        "affine": np.eye(4),
+        "structures": [Structure(1)],
+        "path": "labels.seg.nrrd",
+        "coordinates": "RAS",
+        **kwargs,
+    }
     arguments["path"] = tmp_path / arguments["path"]
     with pytest.raises(OptionError, match=match):
-        write_seg_nrrd(arguments.pop("labels"), arguments.pop("affine"),
-                       arguments.pop("structures"), arguments.pop("path"), **arguments)
+        write_seg_nrrd(
+            arguments.pop("labels"),
+            arguments.pop("affine"),
+            arguments.pop("structures"),
+            arguments.pop("path"),
+            **arguments,
+        )
 
 
 # --------------------------------------------------------------------------- clear errors
 
 
 def test_declared_grid_over_budget_is_refused_before_reading(tmp_path: Path) -> None:
-    path = _raw_file(tmp_path / "huge.nrrd", [
-        "type: unsigned char", "dimension: 3", "sizes: 4096 4096 4096", "encoding: raw",
-        "space: left-posterior-superior", "space directions: (1,0,0) (0,1,0) (0,0,1)"])
+    path = _raw_file(
+        tmp_path / "huge.nrrd",
+        [
+            "type: unsigned char",
+            "dimension: 3",
+            "sizes: 4096 4096 4096",
+            "encoding: raw",
+            "space: left-posterior-superior",
+            "space directions: (1,0,0) (0,1,0) (0,0,1)",
+        ],
+    )
     with pytest.raises(MemoryBudgetError, match="4096 x 4096 x 4096"):
         load_input(path)
 
 
 def test_more_data_than_declared_is_refused_without_expanding_it(tmp_path: Path) -> None:
     bomb = gzip.compress(bytes(64 * 2**20))  # 64 MiB of zeros in ~64 KiB
-    path = _raw_file(tmp_path / "bomb.nrrd", [
-        "type: unsigned char", "dimension: 3", "sizes: 4 4 4", "encoding: gzip"], bomb)
+    path = _raw_file(
+        tmp_path / "bomb.nrrd",
+        ["type: unsigned char", "dimension: 3", "sizes: 4 4 4", "encoding: gzip"],
+        bomb,
+    )
     with pytest.raises(FormatError, match="more voxel data than its header declares"):
         read_nrrd_label_map(path)
 
@@ -390,55 +479,167 @@ def test_truncated_data_is_a_format_error(tmp_path: Path, compress) -> None:
     data = bytes(range(60))
     encoding = {gzip.compress: "gzip", bz2.compress: "bzip2", None: "raw"}[compress]
     body = data if compress is None else compress(data)
-    path = _raw_file(tmp_path / "short.nrrd", [
-        "type: unsigned char", "dimension: 3", "sizes: 4 4 4", f"encoding: {encoding}"],
-        body if compress is None else body[: len(body) // 2])
+    path = _raw_file(
+        tmp_path / "short.nrrd",
+        ["type: unsigned char", "dimension: 3", "sizes: 4 4 4", f"encoding: {encoding}"],
+        body if compress is None else body[: len(body) // 2],
+    )
     with pytest.raises(FormatError):
         load_input(path)
 
 
-@pytest.mark.parametrize(("lines", "error", "match"), [
-    (["type: unsigned char", "dimension: 2", "sizes: 4 4", "encoding: raw"],
-     InputError, "2-D NRRD"),
-    (["type: float", "dimension: 3", "sizes: 1 1 2", "encoding: ascii"],
-     LabelError, "non-integer"),
-    (["type: block", "block size: 2", "dimension: 3", "sizes: 1 1 1", "encoding: raw"],
-     LabelError, "not a label map"),
-    (["type: short", "dimension: 3", "sizes: 1 1 1", "encoding: raw"],
-     FormatError, "endian"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "space: left-posterior-superior", "space directions: (1e300,0,0) (0,1,0) (0,0,1)"],
-     GeometryError, "corrupt"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "space: left-posterior-superior", "space directions: (0.00000001,0,0) (0,1,0) (0,0,1)"],
-     GeometryError, "spacing"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "space: right-anterior-superior-time",
-      "space directions: (1,0,0,0) (0,1,0,0) (0,0,1,0)"],
-     GeometryError, "not a 3-D space"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "space: left-posterior-superior", "space directions: (1,0,0) (0,1,0) (0,0,1)",
-      "space units: \"furlong\" \"mm\" \"mm\""],
-     GeometryError, "space units"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "data file: /etc/hostname"], FormatError, "separate file"),
-    (["type: unsigned char", "dimension: 4", "sizes: 2 1 1 1", "encoding: raw",
-      "kinds: domain domain domain domain"], FormatError, "list"),
-    (["type: unsigned char", "dimension: 4", "sizes: 2 1 1 1", "encoding: raw",
-      "kinds: list domain domain domain"], InputError, "holding 2 volumes"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "Segment0_ID:=a", "Segment0_Layer:=1"], FormatError, "Segment0_Layer is 1"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "Segment0_ID:=a", "Segment0_Extent:=0 1 2"], FormatError, "Segment0_Extent"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: raw",
-      "Segment0_ID:=a", "Segment0_LabelValue:=one"], FormatError, "Segment0_LabelValue"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: rot13"],
-     FormatError, "cannot read"),
-    (["type: unsigned char", "dimension: 3", "sizes: 1 1", "encoding: raw"],
-     FormatError, "sizes"),
-])
-def test_bad_headers_give_one_clear_error(tmp_path: Path, lines: list[str], error: type,
-                                          match: str) -> None:
+@pytest.mark.parametrize(
+    ("lines", "error", "match"),
+    [
+        (
+            ["type: unsigned char", "dimension: 2", "sizes: 4 4", "encoding: raw"],
+            InputError,
+            "2-D NRRD",
+        ),
+        (
+            ["type: float", "dimension: 3", "sizes: 1 1 2", "encoding: ascii"],
+            LabelError,
+            "non-integer",
+        ),
+        (
+            ["type: block", "block size: 2", "dimension: 3", "sizes: 1 1 1", "encoding: raw"],
+            LabelError,
+            "not a label map",
+        ),
+        (["type: short", "dimension: 3", "sizes: 1 1 1", "encoding: raw"], FormatError, "endian"),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "space: left-posterior-superior",
+                "space directions: (1e300,0,0) (0,1,0) (0,0,1)",
+            ],
+            GeometryError,
+            "corrupt",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "space: left-posterior-superior",
+                "space directions: (0.00000001,0,0) (0,1,0) (0,0,1)",
+            ],
+            GeometryError,
+            "spacing",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "space: right-anterior-superior-time",
+                "space directions: (1,0,0,0) (0,1,0,0) (0,0,1,0)",
+            ],
+            GeometryError,
+            "not a 3-D space",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "space: left-posterior-superior",
+                "space directions: (1,0,0) (0,1,0) (0,0,1)",
+                'space units: "furlong" "mm" "mm"',
+            ],
+            GeometryError,
+            "space units",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "data file: /etc/hostname",
+            ],
+            FormatError,
+            "separate file",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 4",
+                "sizes: 2 1 1 1",
+                "encoding: raw",
+                "kinds: domain domain domain domain",
+            ],
+            FormatError,
+            "list",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 4",
+                "sizes: 2 1 1 1",
+                "encoding: raw",
+                "kinds: list domain domain domain",
+            ],
+            InputError,
+            "holding 2 volumes",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "Segment0_ID:=a",
+                "Segment0_Layer:=1",
+            ],
+            FormatError,
+            "Segment0_Layer is 1",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "Segment0_ID:=a",
+                "Segment0_Extent:=0 1 2",
+            ],
+            FormatError,
+            "Segment0_Extent",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "Segment0_ID:=a",
+                "Segment0_LabelValue:=one",
+            ],
+            FormatError,
+            "Segment0_LabelValue",
+        ),
+        (
+            ["type: unsigned char", "dimension: 3", "sizes: 1 1 1", "encoding: rot13"],
+            FormatError,
+            "cannot read",
+        ),
+        (
+            ["type: unsigned char", "dimension: 3", "sizes: 1 1", "encoding: raw"],
+            FormatError,
+            "sizes",
+        ),
+    ],
+)
+def test_bad_headers_give_one_clear_error(
+    tmp_path: Path, lines: list[str], error: type, match: str
+) -> None:
     data = b"0.5 1\n" if "type: float" in lines else bytes(2)
     path = _raw_file(tmp_path / "bad.nrrd", lines, data)
     with pytest.raises(error, match=match):
@@ -453,8 +654,7 @@ def test_not_nrrd_and_empty_files(tmp_path: Path) -> None:
         load_input(fake)
     with pytest.raises(InputError, match="not found"):
         read_nrrd_label_map(tmp_path / "missing.nrrd")
-    empty = _write(tmp_path / "zero.nrrd", np.zeros((3, 3, 3), np.uint8),
-                   _space_header(np.eye(4)))
+    empty = _write(tmp_path / "zero.nrrd", np.zeros((3, 3, 3), np.uint8), _space_header(np.eye(4)))
     with pytest.raises(EmptyMaskError):
         load_input(empty)
     with pytest.raises(EmptyMaskError):
@@ -475,9 +675,13 @@ def _ellipse(cx: float, cy: float, rx: float, ry: float) -> np.ndarray:
 
 
 PLANES = (3, 14)
-MCI_HEADER = {"space": "left-posterior-superior", "space directions": np.diag([0.6, 0.6, 1.5]),
-              "space origin": np.array([-14.0, -14.0, 2.0]), "kinds": ["domain"] * 3,
-              "encoding": "gzip"}
+MCI_HEADER = {
+    "space": "left-posterior-superior",
+    "space directions": np.diag([0.6, 0.6, 1.5]),
+    "space origin": np.array([-14.0, -14.0, 2.0]),
+    "kinds": ["domain"] * 3,
+    "encoding": "gzip",
+}
 
 
 @pytest.fixture(scope="module")
@@ -491,23 +695,30 @@ def mci_examples(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     many = np.zeros((48, 48, 18), np.uint8)  # two bars across, then two bars along:
     many[:, :, PLANES[0]][_ellipse(24, 15, 17, 4.5) | _ellipse(24, 33, 17, 4.5)] = 1
     many[:, :, PLANES[1]][_ellipse(15, 24, 4.5, 17) | _ellipse(33, 24, 4.5, 17)] = 1
-    return {"SevenLabels": _write(root / "SevenLabels.nrrd", seven, MCI_HEADER),
-            "ManyToMany": _write(root / "ManyToMany.nrrd", many, MCI_HEADER)}
+    return {
+        "SevenLabels": _write(root / "SevenLabels.nrrd", seven, MCI_HEADER),
+        "ManyToMany": _write(root / "ManyToMany.nrrd", many, MCI_HEADER),
+    }
 
 
 def _run_meshes(path: Path, out: Path) -> list[trimesh.Trimesh]:
     assert main(["run", str(path), "-o", str(out)]) == 0
     written = nib.load(out / "labels.nii.gz")
     assert written.shape == (48, 48, 18)
-    np.testing.assert_allclose(written.affine, LPS_TO_RAS @ np.array(
-        [[0.6, 0, 0, -14.0], [0, 0.6, 0, -14.0], [0, 0, 1.5, 2.0], [0, 0, 0, 1]]), atol=1e-6)
+    np.testing.assert_allclose(
+        written.affine,
+        LPS_TO_RAS
+        @ np.array([[0.6, 0, 0, -14.0], [0, 0.6, 0, -14.0], [0, 0, 1.5, 2.0], [0, 0, 0, 1]]),
+        atol=1e-6,
+    )
     files = sorted((out / "meshes").glob("*.stl")) or [out / "mesh.stl"]
     return [trimesh.load(f) for f in files]
 
 
 @pytest.mark.parametrize(("name", "count"), [("SevenLabels", 7), ("ManyToMany", 1)])
-def test_mci_examples_reconstruct(mci_examples: dict[str, Path], tmp_path: Path, name: str,
-                                  count: int) -> None:
+def test_mci_examples_reconstruct(
+    mci_examples: dict[str, Path], tmp_path: Path, name: str, count: int
+) -> None:
     meshes = _run_meshes(mci_examples[name], tmp_path / name)
     assert len(meshes) == count
     for mesh in meshes:

@@ -18,8 +18,11 @@ from slicerecon.sections import CrossSections, Volume
 def circle(radius, centre, *, n=720, u=(1.0, 0.0, 0.0), v=(0.0, 1.0, 0.0)):
     """Counter-clockwise regular n-gon inscribed in a circle, in the plane spanned by u, v."""
     t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    return (np.asarray(centre, float) + radius * np.cos(t)[:, None] * np.asarray(u, float)
-            + radius * np.sin(t)[:, None] * np.asarray(v, float))
+    return (
+        np.asarray(centre, float)
+        + radius * np.cos(t)[:, None] * np.asarray(u, float)
+        + radius * np.sin(t)[:, None] * np.asarray(v, float)
+    )
 
 
 def ngon_area(radius, n=720):
@@ -58,7 +61,7 @@ def test_default_pixel_spacing_is_extent_over_256():
 
 def test_nested_polygons_fill_even_odd_whatever_their_winding():
     outer = square(0.0, 30.0, 0.0)
-    hole = square(5.0, 25.0, 0.0)          # same winding as the outer one
+    hole = square(5.0, 25.0, 0.0)  # same winding as the outer one
     island = square(10.0, 20.0, 0.0)[::-1]  # opposite winding
     cs = sections_from_polygons([outer, hole, island], pixel_spacing=1.0)
     assert cs.area_mm2(0) == pytest.approx(900 - 400 + 100, abs=1e-9)
@@ -105,9 +108,7 @@ def test_axis_aligned_contours_give_an_axis_aligned_right_handed_grid(normal, in
 
 def test_given_normal_fixes_direction_and_empty_planes():
     polys = [circle(6.0, (0, 0, z)) for z in (2.0, 4.0)]
-    cs = sections_from_polygons(
-        polys, normal=(0, 0, -1), empty_positions=[-8.0], pixel_spacing=0.5
-    )
+    cs = sections_from_polygons(polys, normal=(0, 0, -1), empty_positions=[-8.0], pixel_spacing=0.5)
     np.testing.assert_allclose(cs.normal, [0, 0, -1], atol=1e-12)
     # positions along -z: z = 8 (empty), 4, 2
     np.testing.assert_allclose(cs.positions, [-8.0, -4.0, -2.0], atol=1e-9)

@@ -25,8 +25,6 @@ TUMOUR_SLICES = range(3, 11)
 HOLE_SLICES = (5, 6)
 
 
-
-
 def _ds(values) -> list[str]:
     return [f"{v:.10g}" for v in np.asarray(values, dtype=np.float64).ravel()]
 
@@ -101,7 +99,8 @@ def case(tmp_path_factory):
     """An MR series on an axial LPS grid and an RTSTRUCT with three ROIs drawn on it."""
     root = tmp_path_factory.mktemp("rt")
     affine = factory.affine_from_geometry(
-        [1, 0, 0], [0, 1, 0], [0.7, 0.7], [0, 0, 2.0], [-40.0, -35.0, -20.0])
+        [1, 0, 0], [0, 1, 0], [0.7, 0.7], [0, 0, 2.0], [-40.0, -35.0, -20.0]
+    )
     shape = (120, 110, 16)
     files = factory.write_series(root / "series", np.zeros(shape, np.uint16), affine)
     uids = factory.read_uids(files)
@@ -114,12 +113,20 @@ def case(tmp_path_factory):
     tumour.append(_contour_item(_ring(1.0, centre, affine, 12, n=1), kind="POINT"))
     tumour.append(_contour_item(_ring(3.0, centre, affine, 13, n=5), kind="OPEN_PLANAR"))
     lo, hi = -20.05, -14.05
-    cord = [_contour_item(np.array([[lo, lo, z], [hi, lo, z], [hi, hi, z], [lo, hi, z]]))
-            for z in (-16.0, -14.0, -12.0)]
+    cord = [
+        _contour_item(np.array([[lo, lo, z], [hi, lo, z], [hi, hi, z], [lo, hi, z]]))
+        for z in (-16.0, -14.0, -12.0)
+    ]
     rois = {(7, "Tumour"): tumour, (2, "Cord"): cord, (9, "Empty"): None}
     path = write_rtstruct(root / "series" / "rtstruct.dcm", rois)
-    return {"path": path, "series": root / "series", "affine": affine, "shape": shape,
-            "root": root, "files": files}
+    return {
+        "path": path,
+        "series": root / "series",
+        "affine": affine,
+        "shape": shape,
+        "root": root,
+        "files": files,
+    }
 
 
 def _expected(affine, shape, k):
@@ -214,18 +221,28 @@ def test_roi_errors(case):
 
 def test_only_non_closed_contours_is_empty(tmp_path):
     affine = np.eye(4)
-    path = write_rtstruct(tmp_path / "rt.dcm", {
-        (1, "Marker"): [_contour_item(_ring(1.0, [0, 0], affine, 0, n=1), kind="POINT")]})
+    path = write_rtstruct(
+        tmp_path / "rt.dcm",
+        {(1, "Marker"): [_contour_item(_ring(1.0, [0, 0], affine, 0, n=1), kind="POINT")]},
+    )
     with pytest.raises(EmptyMaskError, match="no closed planar contour"):
         read_rtstruct(path)
 
 
 def test_contours_not_parallel_to_the_image_grid(case, tmp_path):
     c, s = np.cos(np.deg2rad(30.0)), np.sin(np.deg2rad(30.0))
-    tilted = np.array([[-10, -10 * c, -10 * s], [10, -10 * c, -10 * s],
-                       [10, 10 * c, 10 * s], [-10, 10 * c, 10 * s]])
-    path = write_rtstruct(tmp_path / "rt.dcm", {
-        (1, "Tilted"): [_contour_item(tilted + [0, 0, z]) for z in (0.0, 3.0)]})
+    tilted = np.array(
+        [
+            [-10, -10 * c, -10 * s],
+            [10, -10 * c, -10 * s],
+            [10, 10 * c, 10 * s],
+            [-10, 10 * c, 10 * s],
+        ]
+    )
+    path = write_rtstruct(
+        tmp_path / "rt.dcm",
+        {(1, "Tilted"): [_contour_item(tilted + [0, 0, z]) for z in (0.0, 3.0)]},
+    )
     with pytest.raises(GeometryError, match="not parallel to any slice direction .* 30°"):
         read_rtstruct(path, image_dir=case["series"], roi=1)
     cs = read_rtstruct(path, pixel_spacing=1.0)  # on their own grid they are fine

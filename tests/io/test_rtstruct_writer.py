@@ -23,8 +23,13 @@ def _oblique_affine(spacing=(0.7, 1.2, 3.0), origin=(55.0, -80.5, 12.25), tilt=0
     rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
     rx = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
     rot = rx @ rz
-    return factory.affine_from_geometry(rot[:, 0], rot[:, 1], (spacing[1], spacing[0]),
-                                        rot[:, 2] * spacing[2] + tilt * rot[:, 1], origin)
+    return factory.affine_from_geometry(
+        rot[:, 0],
+        rot[:, 1],
+        (spacing[1], spacing[0]),
+        rot[:, 2] * spacing[2] + tilt * rot[:, 1],
+        origin,
+    )
 
 
 def _labels(shape=(30, 26, 10)):
@@ -41,8 +46,11 @@ def _labels(shape=(30, 26, 10)):
     return labels
 
 
-STRUCTURES = [Structure(4, "Body", (200, 160, 120)), Structure(9, "GTV", (255, 0, 0)),
-              Structure(2, "")]
+STRUCTURES = [
+    Structure(4, "Body", (200, 160, 120)),
+    Structure(9, "GTV", (255, 0, 0)),
+    Structure(2, ""),
+]
 
 
 @pytest.fixture
@@ -80,8 +88,10 @@ def test_read_back_into_the_same_structures(ct_series, tmp_path):
     assert list_rois(path) == [(4, "Body"), (9, "GTV"), (2, "Structure 2")]
     _assert_same_structures(path, series_dir, affine, labels, STRUCTURES)
     ds = pydicom.dcmread(path)
-    colours = {int(i.ReferencedROINumber): [int(c) for c in i.ROIDisplayColor]
-               for i in ds.ROIContourSequence}
+    colours = {
+        int(i.ReferencedROINumber): [int(c) for c in i.ROIDisplayColor]
+        for i in ds.ROIContourSequence
+    }
     assert colours == {4: [200, 160, 120], 9: [255, 0, 0], 2: list(DEFAULT_COLOURS[2])}
 
 
@@ -98,8 +108,10 @@ def test_oblique_and_gantry_tilted_series_round_trip(tmp_path, tilt):
 
 def test_contours_are_closed_planar_on_their_images(ct_series, tmp_path):
     series_dir, paths, affine, labels = ct_series
-    images = {str(ds.SOPInstanceUID): ds
-              for ds in (pydicom.dcmread(p, stop_before_pixels=True) for p in paths)}
+    images = {
+        str(ds.SOPInstanceUID): ds
+        for ds in (pydicom.dcmread(p, stop_before_pixels=True) for p in paths)
+    }
     first = next(iter(images.values()))
 
     path = write_rtstruct(labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm")
@@ -115,8 +127,10 @@ def test_contours_are_closed_planar_on_their_images(ct_series, tmp_path):
     assert referenced.SeriesInstanceUID == first.SeriesInstanceUID
     assert {i.ReferencedSOPInstanceUID for i in referenced.ContourImageSequence} == set(images)
     assert {int(i.ROINumber) for i in ds.StructureSetROISequence} == {4, 9, 2}
-    assert all(i.ReferencedFrameOfReferenceUID == first.FrameOfReferenceUID
-               for i in ds.StructureSetROISequence)
+    assert all(
+        i.ReferencedFrameOfReferenceUID == first.FrameOfReferenceUID
+        for i in ds.StructureSetROISequence
+    )
     normal = np.cross(affine[:3, 0], affine[:3, 1])
     normal /= np.linalg.norm(normal)
     holes = 0
@@ -145,15 +159,21 @@ def _reference(tmp_path, paths):
     """An input RTSTRUCT as a planning system writes it, with its own identifiers."""
     image = pydicom.dcmread(paths[0], stop_before_pixels=True)
     ring = factory.circle(3.0, image.ImagePositionPatient[:2], float(image.ImagePositionPatient[2]))
-    path = factory.write_rtstruct(tmp_path / "input_rt.dcm", {
-        (4, "BODY"): [factory.contour_item(ring)], (9, "GTV_1"): [factory.contour_item(ring)],
-        (12, "Cord"): [factory.contour_item(ring)]})
+    path = factory.write_rtstruct(
+        tmp_path / "input_rt.dcm",
+        {
+            (4, "BODY"): [factory.contour_item(ring)],
+            (9, "GTV_1"): [factory.contour_item(ring)],
+            (12, "Cord"): [factory.contour_item(ring)],
+        },
+    )
     ds = pydicom.dcmread(path)
     ds.PatientName, ds.PatientID = "Doe^Jane", "MRN-0042"
     ds.StudyInstanceUID = image.StudyInstanceUID
     ds.StudyID, ds.AccessionNumber = "S17", "ACC-9"
-    for item, colour in zip(ds.ROIContourSequence, ([10, 20, 30], [255, 255, 0], [0, 0, 255]),
-                            strict=True):
+    for item, colour in zip(
+        ds.ROIContourSequence, ([10, 20, 30], [255, 255, 0], [0, 0, 255]), strict=True
+    ):
         item.ROIDisplayColor = colour
     observations = []
     for number, kind in ((4, "EXTERNAL"), (9, "GTV"), (12, "ORGAN")):
@@ -172,22 +192,31 @@ def test_reference_keeps_identifiers_names_colours_and_numbers(ct_series, tmp_pa
     reference = _reference(tmp_path, paths)
     structures = [Structure(4, "whatever"), Structure(9, ""), Structure(2, "Bar")]
 
-    path = write_rtstruct(labels, affine, structures, series_dir, tmp_path / "rt.dcm",
-                          reference=reference)
+    path = write_rtstruct(
+        labels, affine, structures, series_dir, tmp_path / "rt.dcm", reference=reference
+    )
 
     ds = pydicom.dcmread(path)
     assert (str(ds.PatientName), ds.PatientID, ds.StudyID, ds.AccessionNumber) == (
-        "Doe^Jane", "MRN-0042", "S17", "ACC-9")
+        "Doe^Jane",
+        "MRN-0042",
+        "S17",
+        "ACC-9",
+    )
     assert ds.StudyInstanceUID == reference.StudyInstanceUID
     assert list_rois(path) == [(4, "BODY"), (9, "GTV_1"), (2, "Bar")]  # Cord was not written
-    colours = {int(i.ReferencedROINumber): [int(c) for c in i.ROIDisplayColor]
-               for i in ds.ROIContourSequence}
+    colours = {
+        int(i.ReferencedROINumber): [int(c) for c in i.ROIDisplayColor]
+        for i in ds.ROIContourSequence
+    }
     assert colours == {4: [10, 20, 30], 9: [255, 255, 0], 2: list(DEFAULT_COLOURS[2])}
-    kinds = {int(i.ReferencedROINumber): i.RTROIInterpretedType
-             for i in ds.RTROIObservationsSequence}
+    kinds = {
+        int(i.ReferencedROINumber): i.RTROIInterpretedType for i in ds.RTROIObservationsSequence
+    }
     assert kinds == {4: "EXTERNAL", 9: "GTV", 2: ""}
-    assert ds.PredecessorStructureSetSequence[0].ReferencedSOPInstanceUID == \
-        reference.SOPInstanceUID
+    assert (
+        ds.PredecessorStructureSetSequence[0].ReferencedSOPInstanceUID == reference.SOPInstanceUID
+    )
     _assert_same_structures(path, series_dir, affine, labels, structures)
 
 
@@ -196,13 +225,15 @@ def test_reference_given_as_a_path(ct_series, tmp_path):
     reference = _reference(tmp_path, paths)
     reference.save_as(tmp_path / "ref.dcm")
 
-    path = write_rtstruct(labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm",
-                          reference=tmp_path / "ref.dcm")
+    path = write_rtstruct(
+        labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm", reference=tmp_path / "ref.dcm"
+    )
 
     assert pydicom.dcmread(path).PatientID == "MRN-0042"
     with pytest.raises(InputError, match="not an RTSTRUCT"):
-        write_rtstruct(labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm",
-                       reference=paths[0])
+        write_rtstruct(
+            labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm", reference=paths[0]
+        )
 
 
 def test_an_empty_structure_is_an_roi_without_contours(ct_series, tmp_path, caplog):
@@ -239,20 +270,24 @@ def test_rt_utils_reads_it(tmp_path):
     rt_utils = pytest.importorskip("rt_utils")
     # rt-utils assumes square pixels and an axial series; give it one
     labels = _labels(shape=(28, 28, 10))
-    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [0.8, 0.8], [0, 0, 2.0],
-                                          [-11.0, -11.0, 5.0])
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [0.8, 0.8], [0, 0, 2.0], [-11.0, -11.0, 5.0]
+    )
     factory.write_series(tmp_path / "ct", np.zeros(labels.shape), affine, modality="CT")
     path = write_rtstruct(labels, affine, STRUCTURES, tmp_path / "ct", tmp_path / "rt.dcm")
 
-    rtstruct = rt_utils.RTStructBuilder.create_from(dicom_series_path=str(tmp_path / "ct"),
-                                                    rt_struct_path=str(path))
+    rtstruct = rt_utils.RTStructBuilder.create_from(
+        dicom_series_path=str(tmp_path / "ct"), rt_struct_path=str(path)
+    )
 
     assert rtstruct.get_roi_names() == ["Body", "GTV", "Structure 2"]
     for structure in STRUCTURES[:2]:
         # rt-utils rounds vertices to pixel centres and fills the boundary: about a half
         # pixel more all round; masks are (row, column, slice)
-        mask = np.transpose(rtstruct.get_roi_mask_by_name(
-            structure.name or f"Structure {structure.value}"), (1, 0, 2))
+        mask = np.transpose(
+            rtstruct.get_roi_mask_by_name(structure.name or f"Structure {structure.value}"),
+            (1, 0, 2),
+        )
         truth = labels == structure.value
         assert 2 * np.sum(mask & truth) / (mask.sum() + truth.sum()) > 0.85
 
@@ -263,20 +298,28 @@ def test_irregular_series_contours_lie_on_their_own_images(tmp_path):
     from slicerecon.io.dicom import dicom_series_geometry
 
     positions = [0.0, 2.0, 4.0, 7.0, 9.0]
-    base = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [0.8, 0.8], [0, 0, 2.0],
-                                        [-8.0, -7.2, 0.0])
-    paths = factory.write_series(tmp_path / "ct", np.zeros((20, 18, 5)), base, modality="CT",
-                                 irregular_positions=positions)
+    base = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [0.8, 0.8], [0, 0, 2.0], [-8.0, -7.2, 0.0]
+    )
+    paths = factory.write_series(
+        tmp_path / "ct", np.zeros((20, 18, 5)), base, modality="CT", irregular_positions=positions
+    )
     with pytest.raises(GeometryError, match="irregular"):
-        write_rtstruct(np.zeros((20, 18, 5), np.uint8), base, STRUCTURES[:1], tmp_path / "ct",
-                       tmp_path / "rt.dcm")
+        write_rtstruct(
+            np.zeros((20, 18, 5), np.uint8),
+            base,
+            STRUCTURES[:1],
+            tmp_path / "ct",
+            tmp_path / "rt.dcm",
+        )
     affine, shape, uids = dicom_series_geometry(tmp_path / "ct", allow_irregular=True)
     labels = np.zeros(shape, np.uint8)
     for k in range(shape[2]):
-        labels[3 + k:12, 4:10 + k, k] = 4  # a different mask on every plane
+        labels[3 + k : 12, 4 : 10 + k, k] = 4  # a different mask on every plane
 
-    path = write_rtstruct(labels, affine, STRUCTURES[:1], tmp_path / "ct", tmp_path / "rt.dcm",
-                          allow_irregular=True)
+    path = write_rtstruct(
+        labels, affine, STRUCTURES[:1], tmp_path / "ct", tmp_path / "rt.dcm", allow_irregular=True
+    )
 
     z_by_uid = dict(zip(factory.read_uids(paths), positions, strict=True))
     ds = pydicom.dcmread(path)

@@ -27,8 +27,9 @@ def _oblique_affine(spacing=(0.7, 1.2, 3.0), origin=(55.0, -80.5, 12.25), tilt=N
     rx = np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
     rot = rx @ rz
     step = rot[:, 2] * spacing[2] + (0.0 if tilt is None else tilt * rot[:, 1])
-    return factory.affine_from_geometry(rot[:, 0], rot[:, 1], (spacing[1], spacing[0]), step,
-                                        origin)
+    return factory.affine_from_geometry(
+        rot[:, 0], rot[:, 1], (spacing[1], spacing[0]), step, origin
+    )
 
 
 def _labels(shape=(24, 20, 10)):
@@ -42,8 +43,11 @@ def _labels(shape=(24, 20, 10)):
     return labels
 
 
-STRUCTURES = [Structure(1, "Liver", (220, 120, 60)), Structure(2, "Tumour", (40, 200, 90)),
-              Structure(3, "")]
+STRUCTURES = [
+    Structure(1, "Liver", (220, 120, 60)),
+    Structure(2, "Tumour", (40, 200, 90)),
+    Structure(3, ""),
+]
 
 
 def _place(values, source_affine, affine, shape):
@@ -82,7 +86,8 @@ def test_highdicom_reads_the_same_segments_labels_and_colours(ct_series, tmp_pat
     for number in (1, 2, 3):
         description = seg.get_segment_description(number)
         colour = hd.color.CIELabColor.from_dicom_value(
-            description.RecommendedDisplayCIELabValue).to_rgb()
+            description.RecommendedDisplayCIELabValue
+        ).to_rgb()
         got[number] = (description.segment_label, colour, description.SegmentDescription)
         assert description.segmented_property_category.meaning == "Tissue"
         assert description.segmented_property_type.meaning == "Tissue"
@@ -122,17 +127,21 @@ def test_frames_refer_to_their_source_images_in_the_same_frame_of_reference(ct_s
     referenced = seg.ReferencedSeriesSequence[0]  # the source series, every image of it
     assert referenced.SeriesInstanceUID == first.SeriesInstanceUID
     assert {i.ReferencedSOPInstanceUID for i in referenced.ReferencedInstanceSequence} == {
-        str(ds.SOPInstanceUID) for ds in images}
+        str(ds.SOPInstanceUID) for ds in images
+    }
     by_uid = {str(ds.SOPInstanceUID): k for k, ds in enumerate(images)}
-    expected = {(v, k) for v in (1, 2, 3) for k in range(labels.shape[2])
-                if np.any(labels[:, :, k] == v)}
+    expected = {
+        (v, k) for v in (1, 2, 3) for k in range(labels.shape[2]) if np.any(labels[:, :, k] == v)
+    }
     frames = set()
     for item in seg.PerFrameFunctionalGroupsSequence:
         source = item.DerivationImageSequence[0].SourceImageSequence[0]
         k = by_uid[str(source.ReferencedSOPInstanceUID)]
         np.testing.assert_allclose(
             [float(v) for v in item.PlanePositionSequence[0].ImagePositionPatient],
-            [float(v) for v in images[k].ImagePositionPatient], atol=1e-4)
+            [float(v) for v in images[k].ImagePositionPatient],
+            atol=1e-4,
+        )
         frames.add((int(item.SegmentIdentificationSequence[0].ReferencedSegmentNumber), k))
     assert frames == expected  # one frame per segment and slice it covers, no empty frame
     assert int(seg.NumberOfFrames) == len(expected)
@@ -146,12 +155,17 @@ def test_slicerecon_reads_the_same_masks(ct_series, tmp_path):
     for structure in STRUCTURES:
         volume = read_dicom_seg(path, segment=structure.value)
         np.testing.assert_array_equal(
-            _place(volume.mask, volume.affine, affine, labels.shape), labels == structure.value)
+            _place(volume.mask, volume.affine, affine, labels.shape), labels == structure.value
+        )
     label_map = read_label_map(path)
     assert [(s.value, s.name) for s in label_map.structures] == [
-        (1, "Liver"), (2, "Tumour"), (3, "Structure 3")]
+        (1, "Liver"),
+        (2, "Tumour"),
+        (3, "Structure 3"),
+    ]
     np.testing.assert_array_equal(
-        _place(label_map.labels, label_map.affine, affine, labels.shape), labels)
+        _place(label_map.labels, label_map.affine, affine, labels.shape), labels
+    )
 
 
 def test_values_are_numbered_in_order_and_recorded(ct_series, tmp_path):
@@ -162,14 +176,20 @@ def test_values_are_numbered_in_order_and_recorded(ct_series, tmp_path):
     path = write_seg(renumbered, affine, structures, series_dir, tmp_path / "seg.dcm")
 
     seg = hd.seg.segread(path)
-    described = [(d.segment_number, d.segment_label, d.SegmentDescription)
-                 for d in (seg.get_segment_description(n) for n in (1, 2, 3))]
-    assert described == [(1, "Ball", "label value 2"), (2, "Box", "label value 7"),
-                         (3, "Bar", "label value 40")]
+    described = [
+        (d.segment_number, d.segment_label, d.SegmentDescription)
+        for d in (seg.get_segment_description(n) for n in (1, 2, 3))
+    ]
+    assert described == [
+        (1, "Ball", "label value 2"),
+        (2, "Box", "label value 7"),
+        (3, "Bar", "label value 40"),
+    ]
     for number, value in ((1, 2), (2, 7), (3, 40)):
         volume = read_dicom_seg(path, segment=number)
         np.testing.assert_array_equal(
-            _place(volume.mask, volume.affine, affine, labels.shape), renumbered == value)
+            _place(volume.mask, volume.affine, affine, labels.shape), renumbered == value
+        )
 
 
 def test_source_images_as_datasets_or_paths_in_any_order(ct_series, tmp_path):
@@ -180,8 +200,7 @@ def test_source_images_as_datasets_or_paths_in_any_order(ct_series, tmp_path):
 
     by_dir = write_seg(labels, affine, STRUCTURES, series_dir, tmp_path / "a.dcm")
     by_datasets = write_seg(labels, affine, STRUCTURES, datasets, tmp_path / "b.dcm")
-    by_paths = write_seg(labels, affine, STRUCTURES, [str(p) for p in shuffled],
-                         tmp_path / "c.dcm")
+    by_paths = write_seg(labels, affine, STRUCTURES, [str(p) for p in shuffled], tmp_path / "c.dcm")
 
     reference = read_label_map(by_dir).labels
     for other in (by_datasets, by_paths):
@@ -198,7 +217,8 @@ def test_gantry_tilt_keeps_every_frame_on_its_image(tmp_path):
     for structure in STRUCTURES:
         volume = read_dicom_seg(path, segment=structure.value)
         np.testing.assert_array_equal(
-            _place(volume.mask, volume.affine, affine, labels.shape), labels == structure.value)
+            _place(volume.mask, volume.affine, affine, labels.shape), labels == structure.value
+        )
 
 
 def test_a_label_map_on_some_slices_of_the_series_is_placed_on_them(ct_series, tmp_path):
@@ -213,7 +233,8 @@ def test_a_label_map_on_some_slices_of_the_series_is_placed_on_them(ct_series, t
 
     label_map = read_label_map(path)
     np.testing.assert_array_equal(
-        _place(label_map.labels, label_map.affine, affine, labels.shape), labels)
+        _place(label_map.labels, label_map.affine, affine, labels.shape), labels
+    )
 
 
 def test_labels_on_series_takes_the_nearest_label_plane(ct_series):
@@ -264,6 +285,8 @@ def test_an_empty_structure_becomes_a_segment_without_frames(ct_series, tmp_path
     assert "structure 3 () holds no voxel" in caplog.text
     seg = pydicom.dcmread(path)
     assert len(seg.SegmentSequence) == 3
-    numbers = {int(i.SegmentIdentificationSequence[0].ReferencedSegmentNumber)
-               for i in seg.PerFrameFunctionalGroupsSequence}
+    numbers = {
+        int(i.SegmentIdentificationSequence[0].ReferencedSegmentNumber)
+        for i in seg.PerFrameFunctionalGroupsSequence
+    }
     assert numbers == {1, 2}

@@ -22,15 +22,15 @@ def _blocks(raw: bytes, block: int) -> tuple[list[int], list[bytes]]:
     return [len(c) for c in chunks], packed
 
 
-def _payload(raw: bytes, *, compressed: bool, header: str, order: str, block: int
-             ) -> tuple[bytes, bytes]:
+def _payload(
+    raw: bytes, *, compressed: bool, header: str, order: str, block: int
+) -> tuple[bytes, bytes]:
     """(header bytes, data bytes) of one array as VTK writes them."""
     code = order + ("u4" if header == "UInt32" else "u8")
     if not compressed:
         return np.array([len(raw)], dtype=code).tobytes(), raw
     sizes, packed = _blocks(raw, block)
-    head = [len(packed), block, sizes[-1] if sizes[-1] != block else 0,
-            *[len(p) for p in packed]]
+    head = [len(packed), block, sizes[-1] if sizes[-1] != block else 0, *[len(p) for p in packed]]
     return np.array(head, dtype=code).tobytes(), b"".join(packed)
 
 
@@ -59,28 +59,41 @@ def write_vti(
     ext = " ".join(f"{s} {s + n - 1}" for s, n in zip(extent_start, counts, strict=True))
     vtk_type = {np.uint8: "UInt8", np.int16: "Int16", np.float32: "Float32"}[data.dtype.type]
     attrs = f'type="{vtk_type}" Name="{name}"'
-    arrays: list[tuple[str, bytes, bytes]] = [(attrs, *_payload(raw, compressed=compressed,
-                                              header=header, order=order, block=block))]
+    arrays: list[tuple[str, bytes, bytes]] = [
+        (attrs, *_payload(raw, compressed=compressed, header=header, order=order, block=block))
+    ]
     if extra_array:
         other = np.zeros_like(data).ravel(order="F").tobytes()
-        arrays.append((f'type="{vtk_type}" Name="zeros"',
-                       *_payload(other, compressed=compressed, header=header, order=order,
-                                 block=block)))
+        arrays.append(
+            (
+                f'type="{vtk_type}" Name="zeros"',
+                *_payload(other, compressed=compressed, header=header, order=order, block=block),
+            )
+        )
     elements, appended, offset = [], b"", 0
     for attr, head, body in arrays:
         if fmt == "ascii":
-            text = " ".join(str(v) for v in data.ravel(order="F")) if "zeros" not in attr \
+            text = (
+                " ".join(str(v) for v in data.ravel(order="F"))
+                if "zeros" not in attr
                 else " ".join("0" for _ in range(data.size))
+            )
             elements.append(f'<DataArray {attr} format="ascii">{text}</DataArray>')
         elif fmt in ("binary", "binary_joint"):
             # VTK encodes header and data separately; some writers encode them together
-            text = (base64.b64encode(head + body).decode() if fmt == "binary_joint" else
-                    base64.b64encode(head).decode() + base64.b64encode(body).decode())
+            text = (
+                base64.b64encode(head + body).decode()
+                if fmt == "binary_joint"
+                else base64.b64encode(head).decode() + base64.b64encode(body).decode()
+            )
             elements.append(f'<DataArray {attr} format="binary">\n  {text}\n</DataArray>')
         else:
             elements.append(f'<DataArray {attr} format="appended" offset="{offset}"/>')
-            chunk = head + body if fmt == "appended" else (
-                base64.b64encode(head) + base64.b64encode(body))  # offsets count characters
+            chunk = (
+                head + body
+                if fmt == "appended"
+                else (base64.b64encode(head) + base64.b64encode(body))
+            )  # offsets count characters
             appended += chunk
             offset += len(chunk)
     assoc = "CellData" if cell else "PointData"
@@ -89,10 +102,11 @@ def write_vti(
         '<?xml version="1.0"?>\n'
         f'<VTKFile type="ImageData" version="1.0" '
         f'byte_order="{"BigEndian" if big_endian else "LittleEndian"}" header_type="{header}"'
-        f'{" compressor=" + chr(34) + "vtkZLibDataCompressor" + chr(34) if compressed else ""}>\n'
+        f"{' compressor=' + chr(34) + 'vtkZLibDataCompressor' + chr(34) if compressed else ''}>\n"
         f'<ImageData WholeExtent="{ext}" Origin="{" ".join(map(str, origin))}" '
         f'Spacing="{" ".join(map(str, spacing))}"{direction_attr}>\n'
-        f'<Piece Extent="{ext}">\n<{assoc} Scalars="{name}">\n' + "\n".join(elements)
+        f'<Piece Extent="{ext}">\n<{assoc} Scalars="{name}">\n'
+        + "\n".join(elements)
         + f"\n</{assoc}>\n</Piece>\n</ImageData>\n"
     )
     body = xml.encode()
@@ -107,19 +121,35 @@ def write_vti(
 
 @pytest.mark.parametrize(
     ("fmt", "compressed"),
-    [("appended", False), ("appended", True), ("appended_base64", False),
-     ("appended_base64", True), ("binary", False), ("binary", True),
-     ("binary_joint", False), ("binary_joint", True), ("ascii", False)],
+    [
+        ("appended", False),
+        ("appended", True),
+        ("appended_base64", False),
+        ("appended_base64", True),
+        ("binary", False),
+        ("binary", True),
+        ("binary_joint", False),
+        ("binary_joint", True),
+        ("ascii", False),
+    ],
 )
 def test_round_trip_every_encoding(tmp_path: Path, fmt: str, compressed: bool) -> None:
-    path = write_vti(tmp_path / "a.vti", LABELS, fmt=fmt, compressed=compressed,
-                     spacing=(0.5, 0.75, 2.0), origin=(10.0, -4.0, 3.0), extra_array=True)
+    path = write_vti(
+        tmp_path / "a.vti",
+        LABELS,
+        fmt=fmt,
+        compressed=compressed,
+        spacing=(0.5, 0.75, 2.0),
+        origin=(10.0, -4.0, 3.0),
+        extra_array=True,
+    )
     image = read_vti(path)
     np.testing.assert_array_equal(image.values, LABELS)
     assert image.values.dtype == np.uint8 and image.name == "labels"
     assert image.association == "point"
-    np.testing.assert_allclose(image.affine, [[0.5, 0, 0, 10], [0, 0.75, 0, -4],
-                                              [0, 0, 2, 3], [0, 0, 0, 1]])
+    np.testing.assert_allclose(
+        image.affine, [[0.5, 0, 0, 10], [0, 0.75, 0, -4], [0, 0, 2, 3], [0, 0, 0, 1]]
+    )
     zeros = read_vti(path, array="zeros")
     assert zeros.values.shape == LABELS.shape and not zeros.values.any()
 
@@ -127,14 +157,21 @@ def test_round_trip_every_encoding(tmp_path: Path, fmt: str, compressed: bool) -
 @pytest.mark.parametrize("block", [7, 32, 1000])
 def test_multi_block_zlib_uint64_big_endian(tmp_path: Path, block: int) -> None:
     values = RNG.integers(-300, 300, size=(6, 4, 5)).astype(np.int16)
-    path = write_vti(tmp_path / "b.vti", values, compressed=True, header="UInt64",
-                     big_endian=True, block=block)
+    path = write_vti(
+        tmp_path / "b.vti", values, compressed=True, header="UInt64", big_endian=True, block=block
+    )
     np.testing.assert_array_equal(read_vti(path).values, values)
 
 
 def test_cell_data_direction_and_extent_offset(tmp_path: Path) -> None:
-    path = write_vti(tmp_path / "c.vti", LABELS, cell=True, spacing=(1.0, 2.0, 3.0),
-                     direction="0 -1 0 1 0 0 0 0 1", extent_start=(2, 0, 1))
+    path = write_vti(
+        tmp_path / "c.vti",
+        LABELS,
+        cell=True,
+        spacing=(1.0, 2.0, 3.0),
+        direction="0 -1 0 1 0 0 0 0 1",
+        extent_start=(2, 0, 1),
+    )
     image = read_vti(path)
     assert image.association == "cell"
     np.testing.assert_array_equal(image.values, LABELS)
@@ -182,8 +219,11 @@ def test_clear_errors(tmp_path: Path) -> None:
         read_vti(garbage)
 
     vectors = tmp_path / "vectors.vti"
-    vectors.write_bytes(write_vti(tmp_path / "v.vti", LABELS, fmt="ascii").read_bytes()
-                        .replace(b'Name="labels"', b'Name="labels" NumberOfComponents="3"'))
+    vectors.write_bytes(
+        write_vti(tmp_path / "v.vti", LABELS, fmt="ascii")
+        .read_bytes()
+        .replace(b'Name="labels"', b'Name="labels" NumberOfComponents="3"')
+    )
     with pytest.raises(FormatError, match="3 components"):
         read_vti(vectors)
 

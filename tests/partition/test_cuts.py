@@ -196,8 +196,11 @@ def test_batched_snapping_is_the_single_action_rule_per_row() -> None:
 
 
 def test_line_sides_are_side_image_per_row_and_ignore_end_point_order() -> None:
-    cuts = [Cut(2, (0.5, 0.5), (4.5, 4.5)), Cut(2, (4.5, 12.5), (4.5, 4.5)),
-            Cut(2, (10.5, -0.5), (0.5, 3.5))]
+    cuts = [
+        Cut(2, (0.5, 0.5), (4.5, 4.5)),
+        Cut(2, (4.5, 12.5), (4.5, 4.5)),
+        Cut(2, (10.5, -0.5), (0.5, 3.5)),
+    ]
     p1 = np.array([c.p1 for c in cuts])
     p2 = np.array([c.p2 for c in cuts])
     sides = line_sides(p1, p2, (16, 14))

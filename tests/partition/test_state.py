@@ -143,8 +143,9 @@ def test_batched_rules_are_the_states_rules() -> None:
     np.testing.assert_array_equal(count_iou([0, 3, 2], [0, 6, 8]), [1.0, 0.5, 0.25])
     np.testing.assert_allclose(part_rewards([0.5, 0.25], [1.0, 0.5], lam=0.5), [1.0, 0.5])
     np.testing.assert_array_equal(part_rewards([0.5, 0.25], None, lam=0.5), [0.5, 0.25])
-    done = episode_done([0, 5, 100, 100], [100, 100, 100, 100], [1, 1, 1, 3],
-                        max_steps=3, min_remaining=0.06)
+    done = episode_done(
+        [0, 5, 100, 100], [100, 100, 100, 100], [1, 1, 1, 3], max_steps=3, min_remaining=0.06
+    )
     assert done.tolist() == [True, True, False, True]
     # PartitionState's reward and end are these functions of its counts
     state = PartitionState(_l_shape(), reconstruct=_full_box, lam=0.3, min_remaining=0.7)

@@ -125,8 +125,10 @@ def test_discovery_kinds_order_and_unique_names(tmp_path):
     factory.write_series(indir / "p1", ball.mask.astype(np.uint16), affine)
     files = factory.write_series(indir / "p2", np.zeros((30, 30, 8), np.uint16), affine)
     uids = factory.read_uids(files)
-    rings = [rt._contour_item(rt._ring(6.0, [15.0, 15.0], affine, k), image_uid=uids[k])
-             for k in range(2, 6)]
+    rings = [
+        rt._contour_item(rt._ring(6.0, [15.0, 15.0], affine, k), image_uid=uids[k])
+        for k in range(2, 6)
+    ]
     rt.write_rtstruct(indir / "p2" / "rtstruct.dcm", {(1, "Lesion"): rings})
     factory.write_seg(indir / "seg.dcm", {1: ball.mask}, affine, labels={1: "ball"})
     for name in ("a.nii.gz", "A.nii", "x.nii", "report_assets.nii.gz", ".hidden.nii.gz"):
@@ -141,8 +143,15 @@ def test_discovery_kinds_order_and_unique_names(tmp_path):
     by_input = {c.relpath: c for c in cases}
     assert [c.relpath for c in cases] == sorted(by_input)
     assert set(by_input) == {
-        "A.nii", "a.nii.gz", "broken.dcm", "p1", "p2/rtstruct.dcm", "report_assets.nii.gz",
-        "seg.dcm", "x.json", "x.nii",
+        "A.nii",
+        "a.nii.gz",
+        "broken.dcm",
+        "p1",
+        "p2/rtstruct.dcm",
+        "report_assets.nii.gz",
+        "seg.dcm",
+        "x.json",
+        "x.nii",
     }
     kinds = {rel: c.kind for rel, c in by_input.items()}
     assert kinds["p1"] == "dicom-series" and kinds["p2/rtstruct.dcm"] == "rtstruct"
@@ -167,14 +176,19 @@ def test_dicom_series_and_rtstruct_beside_its_images_reconstruct(tmp_path):
     factory.write_series(tmp_path / "in" / "mask", ball.mask.astype(np.uint16), affine)
     files = factory.write_series(tmp_path / "in" / "ct", np.zeros((40, 40, 12), np.uint16), affine)
     uids = factory.read_uids(files)
-    rings = [rt._contour_item(rt._ring(8.0 - abs(k - 6), [20.0, 20.0], affine, k),
-                              image_uid=uids[k]) for k in range(3, 10)]
+    rings = [
+        rt._contour_item(rt._ring(8.0 - abs(k - 6), [20.0, 20.0], affine, k), image_uid=uids[k])
+        for k in range(3, 10)
+    ]
     rt.write_rtstruct(tmp_path / "in" / "ct" / "rs.dcm", {(1, "Lesion"): rings})
 
-    result = run_batch(tmp_path / "in", tmp_path / "out",
-                       ReconstructConfig(n_points=5000), workers=0, report=False)
+    result = run_batch(
+        tmp_path / "in", tmp_path / "out", ReconstructConfig(n_points=5000), workers=0, report=False
+    )
     assert [(c.case, c.kind, c.status) for c in result.cases] == [
-        ("ct__rs", "rtstruct", "ok"), ("mask", "dicom-series", "ok")]
+        ("ct__rs", "rtstruct", "ok"),
+        ("mask", "dicom-series", "ok"),
+    ]
     plan = json.loads((tmp_path / "out" / "ct__rs" / "plan.json").read_text())
     assert plan["sections"]["plane_indices"] == list(range(3, 10))  # on the CT's slice grid
     assert result.cases[1].metrics["volume_iou"] > 0.7
@@ -189,18 +203,34 @@ def first_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("batch")
     paths = _write_cases(root / "in")
     outdir = root / "out"
-    code = main(["batch", str(root / "in"), "-o", str(outdir), "--workers", "2",
-                 "--slices", "8", "--no-report"])
-    return {"root": root, "in": root / "in", "out": outdir, "code": code, "paths": paths,
-            "config": ReconstructConfig(slices=8)}
+    code = main(
+        [
+            "batch",
+            str(root / "in"),
+            "-o",
+            str(outdir),
+            "--workers",
+            "2",
+            "--slices",
+            "8",
+            "--no-report",
+        ]
+    )
+    return {
+        "root": root,
+        "in": root / "in",
+        "out": outdir,
+        "code": code,
+        "paths": paths,
+        "config": ReconstructConfig(slices=8),
+    }
 
 
 def test_batch_records_failures_and_finishes_every_good_case(first_run):
     assert first_run["code"] == 1  # one case failed
     outdir = first_run["out"]
     rows = _summary(outdir)
-    assert sorted(rows) == sorted(["ball_small", "ball_large", "branch", "egg", "brick",
-                                   "corrupt"])
+    assert sorted(rows) == sorted(["ball_small", "ball_large", "branch", "egg", "brick", "corrupt"])
     for name, volume in _shapes().items():
         row = rows[name]
         assert row["status"] == "ok" and row["error"] == ""
@@ -212,8 +242,8 @@ def test_batch_records_failures_and_finishes_every_good_case(first_run):
         assert mesh.volume == pytest.approx(volume.volume_mm3, rel=0.3)
         done = json.loads((outdir / name / "done.json").read_text())
         assert done["key"] == case_key(
-            next(c for c in discover_cases(first_run["in"]) if c.name == name),
-            first_run["config"])
+            next(c for c in discover_cases(first_run["in"]) if c.name == name), first_run["config"]
+        )
     bad = rows["corrupt"]
     assert bad["status"] == "failed" and bad["error_type"] == "FormatError"
     assert "corrupt.nii.gz" in bad["error"] and "corrupt" in bad["error"]
@@ -239,8 +269,19 @@ def test_second_run_recomputes_nothing(first_run):
 def test_force_recomputes_and_exit_code_is_zero_when_every_case_is_done(tmp_path, capsys):
     write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "ball.nii.gz")
     out = tmp_path / "out"
-    args = ["batch", str(tmp_path / "in"), "-o", str(out), "--workers", "0", "--slices", "6",
-            "--format", "ply", "--no-report"]
+    args = [
+        "batch",
+        str(tmp_path / "in"),
+        "-o",
+        str(out),
+        "--workers",
+        "0",
+        "--slices",
+        "6",
+        "--format",
+        "ply",
+        "--no-report",
+    ]
     assert main(args) == 0
     assert "1 cases: 1 ok, 0 failed, 0 skipped" in capsys.readouterr().out
     mesh = out / "ball" / "mesh.ply"
@@ -261,10 +302,12 @@ def test_key_changes_with_input_bytes_and_options_only(tmp_path):
     (case,) = discover_cases(tmp_path / "a")
     key = case_key(case, CONFIG)
     assert case_key(case, ReconstructConfig(n_points=5000, slices=8)) == key
-    for other in (ReconstructConfig(n_points=5000, slices=6),
-                  ReconstructConfig(n_points=5000, slices=8, method="loft"),
-                  ReconstructConfig(n_points=5000, slices=8, seed=1),
-                  ReconstructConfig(n_points=5000, slices=8, mesh_format="obj")):
+    for other in (
+        ReconstructConfig(n_points=5000, slices=6),
+        ReconstructConfig(n_points=5000, slices=8, method="loft"),
+        ReconstructConfig(n_points=5000, slices=8, seed=1),
+        ReconstructConfig(n_points=5000, slices=8, mesh_format="obj"),
+    ):
         assert case_key(case, other) != key
     (tmp_path / "a" / "ball.nii.gz").rename(tmp_path / "a" / "renamed.nii.gz")
     (renamed,) = discover_cases(tmp_path / "a")
@@ -310,17 +353,21 @@ def test_a_killed_worker_is_replaced_and_nothing_is_half_written(tmp_path):
     (out / ".crash_me.partial-stale").mkdir(parents=True)  # a leftover of an earlier crash
     (out / ".crash_me.partial-stale" / ".mesh.x.tmp.stl").write_bytes(b"half")
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):  # 2nd death is final
-        cluster = LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                               dashboard_address=None)
+        cluster = LocalCluster(
+            n_workers=2, processes=True, threads_per_worker=1, dashboard_address=None
+        )
     with cluster, Client(cluster) as client:
         client.register_plugin(Crash())
-        result = run_batch(indir, out, CONFIG, scheduler=cluster.scheduler_address,
-                           report=False)
-        doomed = run_batch(doomed_dir, tmp_path / "out2", CONFIG,
-                           scheduler=cluster.scheduler_address, report=False)
+        result = run_batch(indir, out, CONFIG, scheduler=cluster.scheduler_address, report=False)
+        doomed = run_batch(
+            doomed_dir, tmp_path / "out2", CONFIG, scheduler=cluster.scheduler_address, report=False
+        )
     assert os.path.exists(marker)  # the worker really died once
     assert [(c.case, c.status) for c in result.cases] == [
-        ("a", "ok"), ("b", "ok"), ("crash_me", "ok")]
+        ("a", "ok"),
+        ("b", "ok"),
+        ("crash_me", "ok"),
+    ]
     assert trimesh.load(out / "crash_me" / "mesh.stl").is_watertight
     crashed_at = os.stat(marker).st_mtime_ns + 300_000_000
     assert (out / "crash_me" / "done.json").stat().st_mtime_ns > crashed_at  # made after it
@@ -392,8 +439,11 @@ def test_named_configurations_run_every_case_into_a_folder_each(tmp_path):
     out = tmp_path / "out"
     result = run_batch(tmp_path / "in", out, configs, workers=0, report=False)
     assert [(c.case, c.status, c.method) for c in result.cases] == [
-        ("bad/loft", "failed", "loft"), ("bad/sdf", "failed", "sdf"),
-        ("ball/loft", "ok", "loft"), ("ball/sdf", "ok", "sdf")]
+        ("bad/loft", "failed", "loft"),
+        ("bad/sdf", "failed", "sdf"),
+        ("ball/loft", "ok", "loft"),
+        ("ball/sdf", "ok", "sdf"),
+    ]
     assert trimesh.load(out / "ball" / "loft" / "mesh.stl").is_watertight
     assert set(_summary(out)) == {"bad/loft", "bad/sdf", "ball/loft", "ball/sdf"}
     # what the runner returns is what a reader of the folders gets back
@@ -402,12 +452,29 @@ def test_named_configurations_run_every_case_into_a_folder_each(tmp_path):
     for case in result.cases:
         again = stored[case.case]
         assert (again.status, again.method, again.error, again.error_type) == (
-            case.status, case.method, case.error, case.error_type)
+            case.status,
+            case.method,
+            case.error,
+            case.error_type,
+        )
         if case.ok:
-            assert (again.metrics, again.planes, again.parts, again.watertight, again.seconds,
-                    again.input, again.kind) == (case.metrics, case.planes, case.parts,
-                                                 case.watertight, case.seconds, case.input,
-                                                 case.kind)
+            assert (
+                again.metrics,
+                again.planes,
+                again.parts,
+                again.watertight,
+                again.seconds,
+                again.input,
+                again.kind,
+            ) == (
+                case.metrics,
+                case.planes,
+                case.parts,
+                case.watertight,
+                case.seconds,
+                case.input,
+                case.kind,
+            )
     rerun = run_batch(tmp_path / "in", out, configs, workers=0, report=False)
     assert [c.status for c in rerun.cases] == ["failed", "failed", "skipped", "skipped"]
     assert rerun.cases[2].metrics == result.cases[2].metrics
@@ -424,8 +491,9 @@ def test_bad_invocations(tmp_path, capsys):
     (tmp_path / "empty" / "readme.txt").write_text("no cases here")
     assert main(["batch", str(tmp_path / "empty"), "-o", str(tmp_path / "o")]) == 2
     assert "no cases found" in capsys.readouterr().err
-    assert main(["batch", str(tmp_path / "empty"), "-o", str(tmp_path / "o"),
-                 "--workers", "-1"]) == 2
+    assert (
+        main(["batch", str(tmp_path / "empty"), "-o", str(tmp_path / "o"), "--workers", "-1"]) == 2
+    )
     with pytest.raises(InputError, match="no cases found"):
         run_batch(tmp_path / "empty", tmp_path / "o", CONFIG)
     with pytest.raises(OptionError, match="workers"):
@@ -492,8 +560,14 @@ def _linked_tree(tmp_path: Path) -> tuple[Path, Path]:
 def test_links_outside_indir_are_not_followed_but_reported(tmp_path):
     indir, outside = _linked_tree(tmp_path)
     cases = {c.relpath: c for c in discover_cases(indir)}
-    assert set(cases) == {"real.nii.gz", "inside.nii.gz", "stolen.nii.gz", "cohort",
-                          "gone.nii.gz", "series"}
+    assert set(cases) == {
+        "real.nii.gz",
+        "inside.nii.gz",
+        "stolen.nii.gz",
+        "cohort",
+        "gone.nii.gz",
+        "series",
+    }
     assert cases["inside.nii.gz"].kind == "nifti" and not cases["inside.nii.gz"].error
     assert cases["real.nii.gz"].kind == "nifti"
     for rel in ("stolen.nii.gz", "cohort", "gone.nii.gz", "series"):
@@ -513,8 +587,14 @@ def test_links_outside_indir_are_not_followed_but_reported(tmp_path):
 def test_follow_symlinks_reads_outside_targets_without_looping(tmp_path):
     indir, _ = _linked_tree(tmp_path)
     cases = {c.relpath: c for c in discover_cases(indir, follow_symlinks=True)}
-    assert set(cases) == {"real.nii.gz", "inside.nii.gz", "stolen.nii.gz", "cohort/p1.nii.gz",
-                          "gone.nii.gz", "series"}
+    assert set(cases) == {
+        "real.nii.gz",
+        "inside.nii.gz",
+        "stolen.nii.gz",
+        "cohort/p1.nii.gz",
+        "gone.nii.gz",
+        "series",
+    }
     assert cases["stolen.nii.gz"].kind == "nifti" and not cases["stolen.nii.gz"].error
     assert cases["cohort/p1.nii.gz"].kind == "nifti"
     assert cases["series"].kind == "dicom-series"
@@ -524,24 +604,29 @@ def test_follow_symlinks_reads_outside_targets_without_looping(tmp_path):
 def test_batch_records_unfollowed_links_as_failed_without_reading_them(tmp_path, capsys):
     indir, _ = _linked_tree(tmp_path)
     out = tmp_path / "out"
-    args = ["batch", str(indir), "-o", str(out), "--workers", "0", "--slices", "6",
-            "--no-report"]
+    args = ["batch", str(indir), "-o", str(out), "--workers", "0", "--slices", "6", "--no-report"]
     assert main(args) == 1
     captured = capsys.readouterr()
     assert "6 cases: 2 ok, 4 failed" in captured.out
     assert "failed stolen: InputError" in " ".join(captured.err.split())
     rows = _summary(out)
     assert {k: r["status"] for k, r in rows.items()} == {
-        "real": "ok", "inside": "ok", "stolen": "failed", "cohort": "failed",
-        "gone": "failed", "series": "failed"}
+        "real": "ok",
+        "inside": "ok",
+        "stolen": "failed",
+        "cohort": "failed",
+        "gone": "failed",
+        "series": "failed",
+    }
     assert rows["stolen"]["kind"] == "symlink" and "outside INDIR" in rows["stolen"]["error"]
     # the target is a good mask: had it been read, the case would have succeeded
     assert sorted(p.name for p in (out / "stolen").iterdir()) == ["error.json"]
     error = json.loads((out / "stolen" / "error.json").read_text())
     assert error["type"] == "InputError" and "--follow-symlinks" in error["error"]
 
-    followed = run_batch(indir, tmp_path / "out2", CONFIG, workers=0, report=False,
-                         follow_symlinks=True)
+    followed = run_batch(
+        indir, tmp_path / "out2", CONFIG, workers=0, report=False, follow_symlinks=True
+    )
     status = {c.case: c.status for c in followed.cases}
     assert status["stolen"] == "ok" and status["cohort__p1"] == "ok"
     assert status["gone"] == "failed"
@@ -552,8 +637,17 @@ def test_follow_symlinks_option_of_the_batch_command(tmp_path, capsys):
     write_nifti(make_shape("sphere", radius=5.0), outside / "p1.nii.gz")
     indir.mkdir()
     (indir / "p1.nii.gz").symlink_to(outside / "p1.nii.gz")
-    args = ["batch", str(indir), "-o", str(tmp_path / "out"), "--workers", "0", "--slices", "6",
-            "--no-report"]
+    args = [
+        "batch",
+        str(indir),
+        "-o",
+        str(tmp_path / "out"),
+        "--workers",
+        "0",
+        "--slices",
+        "6",
+        "--no-report",
+    ]
     assert main(args) == 1
     assert "1 cases: 0 ok, 1 failed" in capsys.readouterr().out
     assert main([*args, "--follow-symlinks"]) == 0
@@ -610,7 +704,10 @@ def test_interrupted_in_process_batch_keeps_finished_cases_and_resumes(tmp_path,
     monkeypatch.setattr(reconstruct, "run_case", real_run_case)
     result = run_batch(indir, out, CONFIG, workers=0, report=False)
     assert [(c.case, c.status) for c in result.cases] == [
-        ("a", "skipped"), ("b", "ok"), ("c", "ok")]
+        ("a", "skipped"),
+        ("b", "ok"),
+        ("c", "ok"),
+    ]
     assert not _hidden_or_temporary(out)
 
 
@@ -626,11 +723,13 @@ def test_ctrl_c_prints_one_line_exits_130_and_a_rerun_resumes(tmp_path):
     indir, out = tmp_path / "in", tmp_path / "out"
     for name, radius in (("a", 18.0), ("b", 20.0), ("c", 22.0)):
         write_nifti(make_shape("sphere", radius=radius), indir / f"{name}.nii.gz")
-    args = ["batch", str(indir), "-o", str(out), "--workers", "2", "--slices", "8",
-            "--no-report"]
+    args = ["batch", str(indir), "-o", str(out), "--workers", "2", "--slices", "8", "--no-report"]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "slicerecon.cli", *args], stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE, text=True, start_new_session=True,
+        [sys.executable, "-m", "slicerecon.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
     )
     try:
         deadline = time.monotonic() + 180
@@ -656,5 +755,6 @@ def test_ctrl_c_prints_one_line_exits_130_and_a_rerun_resumes(tmp_path):
 
     result = run_batch(indir, out, ReconstructConfig(slices=8), workers=0, report=False)
     assert {c.case: c.status for c in result.cases} == {
-        n: ("skipped" if n in finished else "ok") for n in ("a", "b", "c")}
+        n: ("skipped" if n in finished else "ok") for n in ("a", "b", "c")
+    }
     assert not _hidden_or_temporary(out)

@@ -46,8 +46,12 @@ def test_train_command_writes_outputs_and_resumes(
     assert main(["train", "--config", str(cfg), "--out", str(out), "--threads", "1"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["updates"] == 6 and 0 < summary["eval_iou"] <= 1
-    assert {p.name for p in out.iterdir()} >= {"log.csv", "checkpoint.pt", "actor.safetensors",
-                                              "config.json"}
+    assert {p.name for p in out.iterdir()} >= {
+        "log.csv",
+        "checkpoint.pt",
+        "actor.safetensors",
+        "config.json",
+    }
     args = ["train", "--config", str(cfg), "--out", str(out), "--resume", "--steps", "9"]
     assert main(args) == 0
     assert json.loads(capsys.readouterr().out)["updates"] == 9

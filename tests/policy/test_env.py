@@ -26,15 +26,17 @@ def pool() -> ShapePool:
 
 @pytest.fixture(scope="module")
 def big_pool() -> ShapePool:
-    return ShapePool.build(FAMILIES + ("table", "lamp", "genus2", "vessel_tree"), [0, 1],
-                           grid=24)
+    return ShapePool.build(FAMILIES + ("table", "lamp", "genus2", "vessel_tree"), [0, 1], grid=24)
 
 
 def _reference(env: CutEnv, i: int, surface: str) -> PartitionState:
     """A numpy episode on the same shape with the same reconstruction as slot ``i``."""
     occ, sections, hull = env.episode(i)
-    make = (surrogate_reconstruction(sections, hull) if surface == "surrogate"
-            else (lambda box: part_surface_voxels(sections, hull, box)))
+    make = (
+        surrogate_reconstruction(sections, hull)
+        if surface == "surrogate"
+        else (lambda box: part_surface_voxels(sections, hull, box))
+    )
     memo: dict[Box, np.ndarray] = {}
 
     def recon(box: Box) -> np.ndarray:  # memoised: the final IoU reuses the parts' S_i
@@ -42,8 +44,14 @@ def _reference(env: CutEnv, i: int, surface: str) -> PartitionState:
             memo[box] = make(box)
         return memo[box]
 
-    state = PartitionState(occ, reconstruct=recon, lam=env.lam, max_steps=env.max_steps,
-                           min_remaining=env.min_remaining, max_corners=env.max_corners)
+    state = PartitionState(
+        occ,
+        reconstruct=recon,
+        lam=env.lam,
+        max_steps=env.max_steps,
+        min_remaining=env.min_remaining,
+        max_corners=env.max_corners,
+    )
     state.recon_fn = recon  # type: ignore[attr-defined]
     return state
 
@@ -76,8 +84,9 @@ def _run_contract(env: CutEnv, steps: int, seed: int, surface: str) -> dict[str,
     for _ in range(steps):
         actions = _actions(env, rng)
         befores = [s.remaining for s in states]
-        snapped = [snap_action(actions[i], s.corners(), s.image_shapes)
-                   for i, s in enumerate(states)]
+        snapped = [
+            snap_action(actions[i], s.corners(), s.image_shapes) for i, s in enumerate(states)
+        ]
         out = env.step(actions)
         rec = env.last_step
         assert rec is not None
@@ -97,7 +106,8 @@ def _run_contract(env: CutEnv, steps: int, seed: int, surface: str) -> dict[str,
                 assert Box(tuple(rec.lo[i]), tuple(rec.hi[i])) == result.part.box
                 assert rec.iou_part[i] == pytest.approx(result.info["iou_part"], abs=1e-12)
                 assert rec.iou_reconstruction[i] == pytest.approx(
-                    result.info["iou_reconstruction"], abs=1e-12)
+                    result.info["iou_reconstruction"], abs=1e-12
+                )
                 assert rec.reward[i] == pytest.approx(result.reward, abs=1e-12)
                 assert out.reward[i].item() == pytest.approx(result.reward, abs=1e-6)
                 seen["cuts"] += 1
@@ -106,7 +116,8 @@ def _run_contract(env: CutEnv, steps: int, seed: int, surface: str) -> dict[str,
                 assert out.final_iou[i].item() == pytest.approx(_final_iou(state), abs=1e-6)
                 assert int(out.n_parts[i]) == len(state.parts)
                 assert out.episode_return[i].item() == pytest.approx(
-                    sum(p.reward for p in state.parts if p.cut is not None), abs=1e-5)
+                    sum(p.reward for p in state.parts if p.cut is not None), abs=1e-5
+                )
                 states[i] = _reference(env, i, surface)  # the env started a new episode
                 seen["ends"] += 1
             else:
@@ -117,8 +128,17 @@ def _run_contract(env: CutEnv, steps: int, seed: int, surface: str) -> dict[str,
 
 def test_env_follows_the_partition_rules(big_pool: ShapePool) -> None:
     """Thousands of random actions: same snapped cuts, parts W_i, no-ops, rewards and ends."""
-    env = CutEnv(big_pool, n_envs=12, resolution=32, max_corners=12, max_steps=6, lam=0.7,
-                 augment=True, reward_surface="surrogate", seed=5)
+    env = CutEnv(
+        big_pool,
+        n_envs=12,
+        resolution=32,
+        max_corners=12,
+        max_steps=6,
+        lam=0.7,
+        augment=True,
+        reward_surface="surrogate",
+        seed=5,
+    )
     env.reset(seed=5)
     seen = _run_contract(env, steps=170, seed=11, surface="surrogate")
     assert sum(seen.values()) - seen["ends"] == 12 * 170 >= 2000
@@ -128,8 +148,15 @@ def test_env_follows_the_partition_rules(big_pool: ShapePool) -> None:
 
 def test_env_reward_equals_partition_state_with_the_exact_surface(pool: ShapePool) -> None:
     """reward_surface="exact": the reward is PartitionState's with inference's part surface."""
-    env = CutEnv(pool, n_envs=len(pool), resolution=32, max_corners=12, max_steps=5,
-                 augment=False, reward_surface="exact")
+    env = CutEnv(
+        pool,
+        n_envs=len(pool),
+        resolution=32,
+        max_corners=12,
+        max_steps=5,
+        augment=False,
+        reward_surface="exact",
+    )
     env.load(list(pool.occupancies), n_planes=[9] * len(pool))
     seen = _run_contract(env, steps=12, seed=3, surface="exact")
     assert seen["cuts"] >= 15
@@ -162,8 +189,7 @@ def test_expert_action_matches_numpy(pool: ShapePool) -> None:
 
 def test_observation_matches_observe_state(pool: ShapePool) -> None:
     """The planner's encoding of a numpy state equals the env's observation."""
-    env = CutEnv(pool, n_envs=len(pool), resolution=32, max_corners=12, max_steps=5,
-                 augment=False)
+    env = CutEnv(pool, n_envs=len(pool), resolution=32, max_corners=12, max_steps=5, augment=False)
     env.load(list(pool.occupancies))
     actions, _ = env.expert_actions()
     obs = env.step(actions).obs
@@ -196,8 +222,10 @@ def test_episode_statistics_and_bad_actions(pool: ShapePool) -> None:
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_gpu_env_matches_cpu_env(pool: ShapePool) -> None:
     n = len(pool)
-    envs = [CutEnv(pool, n_envs=n, resolution=32, max_corners=12, max_steps=4, augment=False,
-                   device=d) for d in ("cpu", "cuda")]
+    envs = [
+        CutEnv(pool, n_envs=n, resolution=32, max_corners=12, max_steps=4, augment=False, device=d)
+        for d in ("cpu", "cuda")
+    ]
     for env in envs:
         env.load(list(pool.occupancies), n_planes=[9] * n)
     rng = np.random.default_rng(3)

@@ -36,8 +36,9 @@ def test_policy_plan_covers_the_occupancy() -> None:
     assert plan.covers(occ)
     assert sum(p.voxels for p in plan.parts) == int(occ.sum())
     for part in plan.parts:
-        assert all(0 <= lo < hi <= n for lo, hi, n in
-                   zip(part.box.lo, part.box.hi, occ.shape, strict=True))
+        assert all(
+            0 <= lo < hi <= n for lo, hi, n in zip(part.box.lo, part.box.hi, occ.shape, strict=True)
+        )
 
 
 def test_policy_with_reconstructor_and_other_weights() -> None:
@@ -45,17 +46,17 @@ def test_policy_with_reconstructor_and_other_weights() -> None:
 
     occ = make_shape("two_spheres", seed=12346, spacing=3.0).mask
     recon, _, _ = episode_reconstruction(occ, 10)
-    plan = plan_partition(occ, planner="policy", reconstruct=recon,
-                          weights=shipped_weights("il"))
+    plan = plan_partition(occ, planner="policy", reconstruct=recon, weights=shipped_weights("il"))
     assert plan.covers(occ)
     with pytest.raises(OptionError):
         plan_partition(occ, planner="heuristic", weights=shipped_weights("il"))
 
 
 def test_geometry_does_not_import_torch() -> None:
-    code = ("import sys, slicerecon.partition.planner as p, slicerecon.reconstruct;"
-            "assert 'policy' in p.PLANNERS; print('torch' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True)
+    code = (
+        "import sys, slicerecon.partition.planner as p, slicerecon.reconstruct;"
+        "assert 'policy' in p.PLANNERS; print('torch' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
     assert "policy" in PLANNERS and np is not None

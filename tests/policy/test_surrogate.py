@@ -26,8 +26,9 @@ def pool() -> ShapePool:
     return ShapePool.build(("chair", "two_spheres", "y_branch", "lamp", "torus"), [4], grid=28)
 
 
-def _random_parts(occ: np.ndarray, rng: np.random.Generator, episodes: int = 2
-                  ) -> list[tuple[Box, np.ndarray]]:
+def _random_parts(
+    occ: np.ndarray, rng: np.random.Generator, episodes: int = 2
+) -> list[tuple[Box, np.ndarray]]:
     """(box, W) of the parts of random episodes, leftovers included."""
     parts = []
     for _ in range(episodes):
@@ -45,7 +46,10 @@ def _random_parts(occ: np.ndarray, rng: np.random.Generator, episodes: int = 2
 def test_the_reward_surface_is_inference_default() -> None:
     config = ReconstructConfig()
     assert (config.method, config.interpolation, config.carve) == (
-        SURFACE_METHOD, SURFACE_INTERPOLATION, True)
+        SURFACE_METHOD,
+        SURFACE_INTERPOLATION,
+        True,
+    )
 
 
 def test_part_surface_is_part_voxels_carved_by_the_hull(pool: ShapePool) -> None:
@@ -63,8 +67,7 @@ def test_surrogate_equals_the_library_on_the_whole_shape(pool: ShapePool) -> Non
         for n in (2, 7, 12):
             recon, sections, hull = episode_reconstruction(occ, n)
             box = Box.of_mask(occ)
-            np.testing.assert_array_equal(surrogate_reconstruction(sections, hull)(box),
-                                          recon(box))
+            np.testing.assert_array_equal(surrogate_reconstruction(sections, hull)(box), recon(box))
 
 
 def test_surrogate_differs_from_prism_extensions_only_by_outside_distances(
@@ -109,8 +112,12 @@ def test_surrogate_handles_empty_planes_and_boxes_between_planes() -> None:
     surrogate = surrogate_reconstruction(sections, hull)
     gaps = np.diff(sections.indices)
     z = int(sections.indices[int(np.argmax(gaps))]) + 1  # a z-range holding no plane
-    boxes = [Box.of_mask(occ), Box((2, 2, 1), (14, 14, 12)), Box((0, 0, z), (16, 16, z + 1)),
-             Box((5, 4, 10), (13, 12, 23))]
+    boxes = [
+        Box.of_mask(occ),
+        Box((2, 2, 1), (14, 14, 12)),
+        Box((0, 0, z), (16, 16, z + 1)),
+        Box((5, 4, 10), (13, 12, 23)),
+    ]
     for box in boxes:
         prism = part_voxels(sections, box, hull=None, interpolation="pchip") & hull[box.slices]
         np.testing.assert_array_equal(surrogate(box), prism)

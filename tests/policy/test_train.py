@@ -18,23 +18,54 @@ from slicerecon.policy.train import TrainConfig, config_path, load_config, train
 from slicerecon.policy.weights import load_actor
 
 TINY = dict(
-    shapes=("box", "two_spheres", "torus"), train_shapes=2, eval_shapes=1, grid=24,
-    resolution=32, max_corners=8, max_steps=4, n_envs=4, channels=4, hidden=32,
-    batch_size=32, buffer_size=2000, log_every=10, eval_every=50, checkpoint_every=50,
+    shapes=("box", "two_spheres", "torus"),
+    train_shapes=2,
+    eval_shapes=1,
+    grid=24,
+    resolution=32,
+    max_corners=8,
+    max_steps=4,
+    n_envs=4,
+    channels=4,
+    hidden=32,
+    batch_size=32,
+    buffer_size=2000,
+    log_every=10,
+    eval_every=50,
+    checkpoint_every=50,
 )
 
 
 def _il(**changes: object) -> TrainConfig:
-    base = dict(TINY, name="il", demo_episodes=12, explore=False, rl_weight=0.0,
-                bc_weight=1.0, q_filter=False, bc_on_agent=False, actor_lr=3e-3,
-                total_updates=100)
+    base = dict(
+        TINY,
+        name="il",
+        demo_episodes=12,
+        explore=False,
+        rl_weight=0.0,
+        bc_weight=1.0,
+        q_filter=False,
+        bc_on_agent=False,
+        actor_lr=3e-3,
+        total_updates=100,
+    )
     base.update(changes)
     return TrainConfig(**base)  # type: ignore[arg-type]
 
 
 def _il_rl(**changes: object) -> TrainConfig:
-    base = dict(TINY, name="il_rl", demo_episodes=6, pretrain_updates=4, total_updates=10,
-                explore=True, rl_weight=1.0, bc_weight=1.0, q_filter=True, bc_on_agent=True)
+    base = dict(
+        TINY,
+        name="il_rl",
+        demo_episodes=6,
+        pretrain_updates=4,
+        total_updates=10,
+        explore=True,
+        rl_weight=1.0,
+        bc_weight=1.0,
+        q_filter=True,
+        bc_on_agent=True,
+    )
     base.update(changes)
     return TrainConfig(**base)  # type: ignore[arg-type]
 

@@ -83,9 +83,10 @@ def test_baseline_is_closed_outward_and_resembles_the_shape(
     mesh = BASELINES[method](sections, projections)
     _closed_outward(mesh)
     # World mm, inside the reference grid (plus one voxel).
-    corners = np.array(list(np.ndindex(2, 2, 2)), dtype=float) * (
-        np.asarray(sections.grid_shape) + 1.0
-    ) - 1.0
+    corners = (
+        np.array(list(np.ndindex(2, 2, 2)), dtype=float) * (np.asarray(sections.grid_shape) + 1.0)
+        - 1.0
+    )
     world = corners @ sections.affine[:3, :3].T + sections.affine[:3, 3]
     assert np.all(mesh.bounds[0] >= world.min(axis=0) - 1e-6)
     assert np.all(mesh.bounds[1] <= world.max(axis=0) + 1e-6)
@@ -163,12 +164,12 @@ def test_contour_normals_point_out_of_an_anisotropic_ball() -> None:
     radial = points[:, :2] / np.linalg.norm(points[:, :2], axis=1, keepdims=True)
     assert np.all(np.einsum("ij,ij->i", normals[:, :2], radial) > 0.5)
     with_caps, cap_normals = contour_samples(sections, caps=True)
-    caps = cap_normals[len(points):]
+    caps = cap_normals[len(points) :]
     assert len(caps) == sections.masks[0].sum() + sections.masks[-1].sum()
     assert set(np.round(caps[:, 2]).astype(int).tolist()) == {-1, 1}
     # Cap points lie on the first / last plane.
     positions = sections.positions
-    z_caps = with_caps[len(points):, 2]
+    z_caps = with_caps[len(points) :, 2]
     assert np.all(np.isclose(z_caps, positions[0]) | np.isclose(z_caps, positions[-1]))
 
 

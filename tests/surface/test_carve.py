@@ -52,9 +52,10 @@ def test_carving_never_adds_volume_and_stays_inside_the_hull() -> None:
 
     assert binary_dilation(hull)[tuple(index.T)].all()
     assert truth is not None
-    assert evaluate(carved, truth, n_points=10_000).volume_iou > evaluate(
-        raw, truth, n_points=10_000
-    ).volume_iou
+    assert (
+        evaluate(carved, truth, n_points=10_000).volume_iou
+        > evaluate(raw, truth, n_points=10_000).volume_iou
+    )
 
 
 def test_cuboid_composite_is_recovered_exactly_from_its_silhouettes() -> None:

@@ -26,8 +26,9 @@ def _tube(slope: float, radius: float = 6.0, shape: tuple[int, int, int] = (60, 
 
 def _sections(volume: Volume, planes: list[int]) -> CrossSections:
     masks = np.stack([volume.mask[:, :, p] for p in planes])
-    return CrossSections(masks, np.asarray(planes, dtype=np.float64), 2, volume.affine,
-                         volume.shape)
+    return CrossSections(
+        masks, np.asarray(planes, dtype=np.float64), 2, volume.affine, volume.shape
+    )
 
 
 def _hull(volume: Volume) -> np.ndarray:
@@ -87,12 +88,14 @@ def test_maps_are_monotone_and_invertible() -> None:
     for ax in (0, 1):
         order = np.argsort(circle[:, ax], kind="stable")
         assert np.all(np.diff(mapped[order, ax]) >= -1e-12)
-    area = 0.5 * np.sum(mapped[:, 0] * np.roll(mapped[:, 1], -1)
-                        - mapped[:, 1] * np.roll(mapped[:, 0], -1))
+    area = 0.5 * np.sum(
+        mapped[:, 0] * np.roll(mapped[:, 1], -1) - mapped[:, 1] * np.roll(mapped[:, 0], -1)
+    )
     assert area > 0
     # Extent edges land on the target edges; beyond them points move with the nearer edge.
-    np.testing.assert_allclose(layer.forward(np.array([[10.0, 5.0], [20.0, 25.0]])),
-                               [[14.0, 5.0], [34.0, 15.0]])
+    np.testing.assert_allclose(
+        layer.forward(np.array([[10.0, 5.0], [20.0, 25.0]])), [[14.0, 5.0], [34.0, 15.0]]
+    )
     np.testing.assert_allclose(layer.forward(np.array([[8.0, 27.0]])), [[12.0, 17.0]])
 
 
@@ -108,8 +111,12 @@ def test_a_hull_on_another_grid_is_refused() -> None:
     tube = _tube(slope=0.0)
     sections = _sections(tube, [20, 30])
     with pytest.raises(GeometryError, match="grid"):
-        loft_solid(sections, box=Box((0, 0, 2), (60, 30, 62)), extend_to_box=True,
-                   hull=np.ones((4, 4, 4), dtype=bool))
+        loft_solid(
+            sections,
+            box=Box((0, 0, 2), (60, 30, 62)),
+            extend_to_box=True,
+            hull=np.ones((4, 4, 4), dtype=bool),
+        )
 
 
 def test_maps_follow_a_hull_that_narrows_along_x() -> None:

@@ -48,8 +48,9 @@ def test_sphere_without_box_is_capped_at_end_planes(sphere: Volume) -> None:
     _closed(mesh)
     assert mesh.volume == pytest.approx(sphere.volume_mm3, rel=0.03)
     # Flat caps exactly at the first and last plane (world z = index - 42.5 here).
-    z = sphere.index_to_world(np.array([[0, 0, sections.indices[0]],
-                                        [0, 0, sections.indices[-1]]]))[:, 2]
+    z = sphere.index_to_world(
+        np.array([[0, 0, sections.indices[0]], [0, 0, sections.indices[-1]]])
+    )[:, 2]
     assert mesh.bounds[0, 2] == pytest.approx(z[0])
     assert mesh.bounds[1, 2] == pytest.approx(z[1])
 
@@ -108,8 +109,9 @@ def test_appearing_component_closes_half_way() -> None:
     i, j, k = np.ogrid[:40, :30, :60]
     mask |= (i - 28) ** 2 + (j - 15) ** 2 + (k - 30) ** 2 <= 7**2
     planes = np.arange(2, 58, 6)
-    sections = CrossSections(mask[:, :, planes].transpose(2, 0, 1), planes, 2, np.eye(4),
-                             mask.shape)
+    sections = CrossSections(
+        mask[:, :, planes].transpose(2, 0, 1), planes, 2, np.eye(4), mask.shape
+    )
     mesh = loft(sections)
     _closed(mesh)
     parts = sorted(mesh.split(only_watertight=False), key=lambda m: m.bounds[0, 0])
@@ -141,9 +143,9 @@ def test_anisotropic_and_mirrored_affines(sphere: Volume, axis: int, diagonal) -
 
 def test_oblique_affine(sphere: Volume) -> None:
     angle = np.deg2rad(30.0)
-    rot = np.array([[np.cos(angle), -np.sin(angle), 0.0],
-                    [np.sin(angle), np.cos(angle), 0.0],
-                    [0.0, 0.0, 1.0]])
+    rot = np.array(
+        [[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0.0, 0.0, 1.0]]
+    )
     affine = np.eye(4)
     affine[:3, :3] = rot @ np.diag([0.7, 0.7, 2.0])
     affine[:3, 3] = (10.0, -5.0, 3.0)

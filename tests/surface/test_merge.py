@@ -98,8 +98,13 @@ def test_taubin_leaves_input_untouched_and_checks_options() -> None:
     assert np.array_equal(taubin_smooth(mesh, iterations=0).vertices, before)
     taubin_smooth(mesh, iterations=3)
     assert np.array_equal(mesh.vertices, before)
-    for bad in (dict(iterations=-1), dict(iterations=1.5), dict(lamb=1.2), dict(mu=-0.3),
-                dict(mu=0.5)):
+    for bad in (
+        dict(iterations=-1),
+        dict(iterations=1.5),
+        dict(lamb=1.2),
+        dict(mu=-0.3),
+        dict(mu=0.5),
+    ):
         with pytest.raises(OptionError):
             taubin_smooth(mesh, **bad)  # type: ignore[arg-type]
     with pytest.raises(InputError):

@@ -21,7 +21,10 @@ def _disc(shape: tuple[int, int], centre: tuple[float, float], radius: float) ->
 def _sections(masks: list[np.ndarray], indices: list[float], depth: int) -> CrossSections:
     rows, cols = masks[0].shape
     return CrossSections(
-        np.stack(masks), np.asarray(indices, dtype=np.float64), 2, np.eye(4),
+        np.stack(masks),
+        np.asarray(indices, dtype=np.float64),
+        2,
+        np.eye(4),
         (rows, cols, depth),
     )
 

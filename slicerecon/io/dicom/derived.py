@@ -58,9 +58,21 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 DEFAULT_COLOURS: tuple[tuple[int, int, int], ...] = (
-    (230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48),
-    (145, 30, 180), (70, 240, 240), (240, 50, 230), (210, 245, 60), (250, 190, 212),
-    (0, 128, 128), (220, 190, 255), (170, 110, 40), (128, 0, 0), (170, 255, 195),
+    (230, 25, 75),
+    (60, 180, 75),
+    (255, 225, 25),
+    (0, 130, 200),
+    (245, 130, 48),
+    (145, 30, 180),
+    (70, 240, 240),
+    (240, 50, 230),
+    (210, 245, 60),
+    (250, 190, 212),
+    (0, 128, 128),
+    (220, 190, 255),
+    (170, 110, 40),
+    (128, 0, 0),
+    (170, 255, 195),
     (128, 128, 0),
 )
 """Display colours (RGB 0-255) of structures that have none, in turn (Trubetskoy's
@@ -69,8 +81,13 @@ DEFAULT_COLOURS: tuple[tuple[int, int, int], ...] = (
 GRID_TOLERANCE_PX = 0.01
 """How far, in pixels, a label map's in-plane pixels may lie from the series' pixels."""
 
-_REQUIRED_UIDS = ("SOPClassUID", "SOPInstanceUID", "StudyInstanceUID", "SeriesInstanceUID",
-                  "FrameOfReferenceUID")
+_REQUIRED_UIDS = (
+    "SOPClassUID",
+    "SOPInstanceUID",
+    "StudyInstanceUID",
+    "SeriesInstanceUID",
+    "FrameOfReferenceUID",
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,12 +181,15 @@ def _slices_from_items(items: Sequence[Any]) -> list[_Slice]:
         if found is not None:
             slices.append(found)
     if not slices:
-        raise InputError("source_images hold no DICOM image: pass the image series the "
-                         "label map was drawn on")
+        raise InputError(
+            "source_images hold no DICOM image: pass the image series the label map was drawn on"
+        )
     series = {s.series_uid for s in slices}
     if len(series) > 1:
-        raise InputError(f"source_images belong to {len(series)} series "
-                         f"({', '.join(sorted(series))}); pass the images of one series")
+        raise InputError(
+            f"source_images belong to {len(series)} series "
+            f"({', '.join(sorted(series))}); pass the images of one series"
+        )
     return slices
 
 
@@ -225,8 +245,10 @@ def load_source_series(
             )
     frames = {str(image.FrameOfReferenceUID) for image in images}
     if len(frames) > 1:
-        raise GeometryError(f"{name}: the images have {len(frames)} FrameOfReferenceUIDs; "
-                            "they are not one series in one frame of reference")
+        raise GeometryError(
+            f"{name}: the images have {len(frames)} FrameOfReferenceUIDs; "
+            "they are not one series in one frame of reference"
+        )
     return SourceSeries(layout.affine, layout.shape, images, planes, positions, name)
 
 
@@ -262,8 +284,9 @@ def check_label_map(
     if values.dtype == bool:
         values = values.astype(np.uint8)
     if values.ndim != 3 or values.dtype.kind not in "iu":
-        raise OptionError(f"labels must be a 3-D integer array (got {values.dtype} of shape "
-                          f"{values.shape})")
+        raise OptionError(
+            f"labels must be a 3-D integer array (got {values.dtype} of shape {values.shape})"
+        )
     aff = check_affine(affine)
     chosen = list(structures)
     if not chosen or not all(isinstance(s, Structure) for s in chosen):
@@ -361,11 +384,18 @@ def labels_on_series(
         dst = (slice(src_i.start - di, src_i.stop - di), slice(src_j.start - dj, src_j.stop - dj))
         out[dst[0], dst[1], k] = labels[src_i, src_j, dk]
     if resampled:
-        logger.info("the label map's planes are not the slices of %s: each image slice takes "
-                    "the nearest label plane", series.name)
+        logger.info(
+            "the label map's planes are not the slices of %s: each image slice takes "
+            "the nearest label plane",
+            series.name,
+        )
     else:
         kept = int(np.count_nonzero(out))
         if kept < lost:
-            logger.warning("%d of %d labelled voxels lie outside %s and are not written",
-                           lost - kept, lost, series.name)
+            logger.warning(
+                "%d of %d labelled voxels lie outside %s and are not written",
+                lost - kept,
+                lost,
+                series.name,
+            )
     return out

@@ -65,8 +65,12 @@ def floats(ds: Any, keyword: str, count: int, path: Path) -> NDArray[np.float64]
         raise FormatError(f"{path} lacks {keyword}; it cannot be placed in space")
     try:
         raw = ds[keyword].value
-        values = np.asarray([float(v) for v in (raw if isinstance(raw, Sequence)
-                                                and not isinstance(raw, str) else [raw])])
+        values = np.asarray(
+            [
+                float(v)
+                for v in (raw if isinstance(raw, Sequence) and not isinstance(raw, str) else [raw])
+            ]
+        )
     except PARSE_ERRORS as exc:
         raise FormatError(f"{path}: {keyword} is not numeric ({exc})") from exc
     if values.shape != (count,) or not np.all(np.isfinite(values)):

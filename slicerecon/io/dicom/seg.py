@@ -189,7 +189,10 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
         if thickness is not None and abs(thickness - step_t) > position_tolerance(step_t):
             logger.debug(
                 "%s: SpacingBetweenSlices/SliceThickness %.4g mm differs from the frame "
-                "spacing %.4g mm; using the frame spacing", path, thickness, step_t,
+                "spacing %.4g mm; using the frame spacing",
+                path,
+                thickness,
+                step_t,
             )
     steps = (t - t_planes[0]) / step_t
     off_grid = np.abs(steps - np.rint(steps)) * step_t
@@ -252,8 +255,9 @@ def _mask_by_highdicom(
     try:
         from highdicom.seg import Segmentation
     except ImportError:
-        logger.warning("highdicom is not installed; %s is decoded frame by frame with pydicom",
-                       path)
+        logger.warning(
+            "highdicom is not installed; %s is decoded frame by frame with pydicom", path
+        )
         return None
     try:
         segmentation = Segmentation.from_dataset(ds, copy=False)
@@ -268,8 +272,12 @@ def _mask_by_highdicom(
     except MemoryError:
         raise
     except Exception as exc:  # noqa: BLE001 - a dataset highdicom does not read: decode it here
-        logger.debug("highdicom does not read %s (%s: %s); decoding its frames with pydicom",
-                     path, type(exc).__name__, exc)
+        logger.debug(
+            "highdicom does not read %s (%s: %s); decoding its frames with pydicom",
+            path,
+            type(exc).__name__,
+            exc,
+        )
         return None
 
     affine, (columns, rows, planes) = geometry.affine, geometry.shape
@@ -283,13 +291,17 @@ def _mask_by_highdicom(
     origins = hd_affine[:3, 3] + np.arange(stored.shape[0])[:, None] * hd_affine[:3, 0]
     index = (np.linalg.inv(affine) @ np.c_[origins, np.ones(len(origins))].T)[:3].T
     plane = np.rint(index[:, 2]).astype(np.int64)
-    world_error = np.linalg.norm(
-        origins - (affine[:3, 3] + plane[:, None] * affine[:3, 2]), axis=1
-    ) if len(origins) else np.zeros(0)
-    if not (same_pixels and np.all((plane >= 0) & (plane < planes))
-            and np.all(world_error <= tol)):
-        logger.debug("highdicom stacks the frames of %s otherwise than its frame positions; "
-                     "decoding its frames with pydicom", path)
+    world_error = (
+        np.linalg.norm(origins - (affine[:3, 3] + plane[:, None] * affine[:3, 2]), axis=1)
+        if len(origins)
+        else np.zeros(0)
+    )
+    if not (same_pixels and np.all((plane >= 0) & (plane < planes)) and np.all(world_error <= tol)):
+        logger.debug(
+            "highdicom stacks the frames of %s otherwise than its frame positions; "
+            "decoding its frames with pydicom",
+            path,
+        )
         return None
     mask = np.zeros(geometry.shape, dtype=bool)
     for k, values in zip(plane, stored, strict=True):
@@ -375,22 +387,28 @@ def read_dicom_seg(
     geometry = _seg_geometry(ds, p)
     check_geometry(geometry.affine, geometry.shape, what=str(p))
     check_grid(geometry.shape, what=str(p), memory_budget_gb=memory_budget_gb, bytes_per_voxel=1)
-    check_grid((geometry.frame_plane.size, *geometry.shape[:2]), what=f"{p} (frames)",
-               memory_budget_gb=memory_budget_gb, bytes_per_voxel=2)
+    check_grid(
+        (geometry.frame_plane.size, *geometry.shape[:2]),
+        what=f"{p} (frames)",
+        memory_budget_gb=memory_budget_gb,
+        bytes_per_voxel=2,
+    )
     unknown = sorted(set(geometry.frame_segment.tolist()) - set(segments))
     if unknown:
         raise FormatError(f"{p}: frames refer to segments {unknown} missing from SegmentSequence")
     seg_type = _segmentation_type(ds, p)
     mask = _mask_by_highdicom(ds, p, number, geometry, seg_type)
     if mask is None:  # highdicom changed ds in place: read the file again
-        mask = _mask_by_frames(_read_seg_dataset(p, stop_before_pixels=False), p, number,
-                               geometry, seg_type)
+        mask = _mask_by_frames(
+            _read_seg_dataset(p, stop_before_pixels=False), p, number, geometry, seg_type
+        )
     if not mask.any():
         raise EmptyMaskError(
             f"segment {number} ({segments[number] or 'no label'}) of {p} has no foreground pixel"
         )
-    logger.info("read DICOM SEG %s segment %d (%s), grid %s", p, number, segments[number],
-                geometry.shape)
+    logger.info(
+        "read DICOM SEG %s segment %d (%s), grid %s", p, number, segments[number], geometry.shape
+    )
     return Volume(mask, geometry.affine)
 
 

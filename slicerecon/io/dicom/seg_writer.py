@@ -62,7 +62,8 @@ def _segment_descriptions(structures: Sequence[Structure]) -> list[Any]:
     from ... import __version__
 
     algorithm = AlgorithmIdentificationSequence(
-        name=SEG_ALGORITHM_NAME, family=codes.cid7162.ArtificialIntelligence,
+        name=SEG_ALGORITHM_NAME,
+        family=codes.cid7162.ArtificialIntelligence,
         version=str(__version__),
     )
     out = []
@@ -147,18 +148,24 @@ def write_seg(
     series = load_source_series(source_images, allow_irregular=allow_irregular)
     on_grid = labels_on_series(values, aff, series)
     ordered = sorted(chosen, key=lambda s: s.value)
-    lut = np.zeros(int(max(s.value for s in ordered)) + 1,
-                   dtype=np.uint8 if len(ordered) < 256 else np.uint16)
+    lut = np.zeros(
+        int(max(s.value for s in ordered)) + 1, dtype=np.uint8 if len(ordered) < 256 else np.uint16
+    )
     for number, structure in enumerate(ordered, start=1):
         lut[structure.value] = number
     frames = np.ascontiguousarray(lut[on_grid[:, :, series.planes]].transpose(2, 1, 0))
     if not frames.any():
-        raise EmptyMaskError(f"no structure holds a voxel on the images of {series.name}: "
-                             "there is nothing to write in a SEG")
+        raise EmptyMaskError(
+            f"no structure holds a voxel on the images of {series.name}: "
+            "there is nothing to write in a SEG"
+        )
     for number, structure in enumerate(ordered, start=1):
         if not np.any(frames == number):
-            logger.warning("structure %d (%s) holds no voxel on the images; its segment has "
-                           "no frame", structure.value, structure.name)
+            logger.warning(
+                "structure %d (%s) holds no voxel on the images; its segment has no frame",
+                structure.value,
+                structure.name,
+            )
     segmentation = Segmentation(
         source_images=list(series.images),
         pixel_array=frames,
@@ -181,6 +188,11 @@ def write_seg(
     target = Path(path)
     with atomic_path(target) as tmp:
         segmentation.save_as(tmp)
-    logger.info("wrote DICOM SEG %s: %d segments, %d frames, referring to %s", target,
-                len(ordered), int(segmentation.NumberOfFrames), series.name)
+    logger.info(
+        "wrote DICOM SEG %s: %d segments, %d frames, referring to %s",
+        target,
+        len(ordered),
+        int(segmentation.NumberOfFrames),
+        series.name,
+    )
     return target

@@ -265,7 +265,12 @@ def _layout(slices: list[_Slice], *, allow_irregular: bool) -> _Layout:
             logger.warning(
                 "irregular slice spacing (gaps %.4g to %.4g mm): %d slices placed on a regular "
                 "grid of %d planes, %.4g mm apart; %d planes copied from the nearest slice",
-                gaps.min(), gaps.max(), n, sources.size, step_t, int((~own).sum()),
+                gaps.min(),
+                gaps.max(),
+                n,
+                sources.size,
+                step_t,
+                int((~own).sum()),
             )
 
     first = ordered[0]
@@ -392,8 +397,9 @@ def _checked_layout(directory: Path, allow_irregular: bool, memory_budget_gb: fl
         _scan_series(directory, stop_before_pixels=False), allow_irregular=allow_irregular
     )
     check_geometry(layout.affine, layout.shape, what=str(directory))
-    check_grid(layout.shape, what=str(directory), memory_budget_gb=memory_budget_gb,
-               bytes_per_voxel=6)
+    check_grid(
+        layout.shape, what=str(directory), memory_budget_gb=memory_budget_gb, bytes_per_voxel=6
+    )
     return layout
 
 
@@ -516,19 +522,20 @@ def read_dicom_series(
         )
     logger.info(
         "read DICOM series %s: %d slices, grid %s, spacing %s mm",
-        directory, len(layout.slices), layout.shape,
+        directory,
+        len(layout.slices),
+        layout.shape,
         np.round(np.linalg.norm(layout.affine[:3, :3], axis=0), 4).tolist(),
     )
     return Volume(mask, layout.affine)
 
 
-
-
 def series_info(path: str | os.PathLike[str], *, allow_irregular: bool = True) -> dict[str, Any]:
     """Describe a DICOM image-series directory from its headers (see :func:`dicom_info`)."""
     directory = require_path(path, want_dir=True)
-    layout = _layout(_scan_series(directory, stop_before_pixels=True),
-                     allow_irregular=allow_irregular)
+    layout = _layout(
+        _scan_series(directory, stop_before_pixels=True), allow_irregular=allow_irregular
+    )
     first = layout.slices[0].dataset
     gaps = layout.gaps_mm
     return {
