@@ -55,7 +55,7 @@ DEFAULT_LABEL = "sdf + heuristic (default)"
 
 VARIANTS = (
     Variant(DEFAULT_LABEL, "sdf", "heuristic"),
-    Variant("sdf + heuristic, carve only", "sdf", "heuristic", cover=False),
+    Variant("sdf + heuristic (carve only)", "sdf", "heuristic", cover=False),
     Variant("hybrid + heuristic", "hybrid", "heuristic"),
     Variant("loft + heuristic", "loft", "heuristic"),
     Variant("loft + heuristic (uncarved)", "loft", "heuristic", carve=False),
@@ -358,7 +358,7 @@ def _summary(rows: list[dict[str, Any]], labels: list[str]) -> list[str]:
     for r in ok:
         by_case.setdefault((r["shape"], r["setting"]), {})[r["variant"]] = r
     default = DEFAULT_LABEL
-    for other in ("sdf plain", "sdf + heuristic, carve only", "loft + heuristic"):
+    for other in ("sdf plain", "sdf + heuristic (carve only)", "loft + heuristic"):
         pairs = [(c[default], c[other]) for c in by_case.values() if default in c and other in c]
         if not pairs:
             continue
