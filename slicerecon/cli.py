@@ -375,7 +375,9 @@ def batch(
 # ------------------------------------------------------------------------ evaluate
 @app.command()
 def evaluate(
-    prediction: Annotated[Path, typer.Argument(help="Predicted mesh or mask.")],
+    prediction: Annotated[
+        Path, typer.Argument(help="Predicted mesh or mask, or a run's meshes/ directory.")
+    ],
     ground_truth: Annotated[Path, typer.Argument(help="Ground-truth mesh or mask.")],
     label: Annotated[
         str | None, typer.Option(help="Structure of the ground truth (number or name).")
@@ -386,10 +388,22 @@ def evaluate(
 ) -> None:
     """Print metrics of PREDICTION against GROUND_TRUTH as JSON.
 
-    A mesh is scored as the exact surface; a mask as its voxels (docs/metrics.md).
+    A mesh is scored as the exact surface; a mask as its voxels (docs/metrics.md). A
+    ground-truth label map of several structures, without --label, is scored structure by
+    structure against a predicted label map or a run's meshes/ directory.
     """
     from .io import load_ground_truth
     from .metrics import evaluate as evaluate_metrics
+
+    if label is None:
+        from .structures import evaluate_structures
+
+        per_structure = evaluate_structures(
+            prediction, ground_truth, n_points=n_points, seed=seed, memory_budget_gb=max_memory
+        )
+        if per_structure is not None:
+            typer.echo(json.dumps(per_structure, indent=2))
+            return
 
     metrics = evaluate_metrics(
         load_ground_truth(prediction, memory_budget_gb=max_memory),

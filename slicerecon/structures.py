@@ -22,15 +22,17 @@ structure. Metrics per structure compare each with its own mask.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from .errors import OptionError
+from .errors import InputError, OptionError
 from .io.labelmap import LabelMap, Structure
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB
 from .sections import CrossSections, Volume
@@ -625,3 +627,102 @@ def _union_projections(result: StructuresReconstruction) -> Any:
     if result.truth is None:
         return projections_from_sections(result.sections)
     return projections_from_volume(Volume(_truth_union(result), result.sections.affine))
+
+
+def _mesh_value(path: Path) -> int | None:
+    """The label value a ``meshes/`` file is named for (``<value>_<name>.<fmt>``)."""
+    head = path.name.split(".")[0].split("_")[0]
+    return int(head) if head.isdigit() else None
+
+
+def evaluate_structures(
+    prediction: str | os.PathLike[str],
+    ground_truth: str | os.PathLike[str],
+    *,
+    n_points: int = 50_000,
+    seed: int = 0,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> dict[str, Any] | None:
+    """Score every structure of a label-map ground truth against its own prediction.
+
+    Parameters
+    ----------
+    prediction : path-like
+        A label map with the ground truth's label values (NIfTI, NRRD, VTI,
+        DICOM; e.g. a run's ``labels.nii.gz``), or a run's output directory
+        holding ``meshes/``, or that ``meshes/`` directory itself
+        (``<value>_<name>.<fmt>`` files: each mesh is scored as the exact
+        surface of structure ``<value>``).
+    ground_truth : path-like
+        A dense label map.
+    n_points, seed
+        As for :func:`slicerecon.metrics.evaluate`.
+    memory_budget_gb : float
+        As for :func:`slicerecon.io.load_input`.
+
+    Returns
+    -------
+    dict or None
+        None when the ground truth holds fewer than two structures (score it
+        as one shape). Otherwise ``{"structures": {"<value>_<name>": metrics},
+        "mean": {...}, "missing": [...]}`` as in a run's ``metrics.json``:
+        ``missing`` lists the ground-truth structures the prediction does not
+        hold (left out of the mean).
+
+    Raises
+    ------
+    InputError
+        A prediction that is a single mesh (it cannot say which structure it
+        is: give ``--label``), or a directory without meshes.
+    """
+    from .io import detect_kind, load_ground_truth
+    from .io.labelmap import LABEL_MAP_KINDS, read_label_map
+    from .metrics import evaluate
+
+    kind = detect_kind(ground_truth).kind
+    if kind not in LABEL_MAP_KINDS:
+        return None
+    truth = read_label_map(ground_truth, memory_budget_gb=memory_budget_gb)
+    if len(truth.structures) < 2:
+        return None
+    pred_path = Path(prediction)
+    meshes: dict[int, Path] = {}
+    pred_map: LabelMap | None = None
+    if pred_path.is_dir():
+        folder = pred_path / "meshes" if (pred_path / "meshes").is_dir() else pred_path
+        for file in sorted(folder.iterdir()):
+            value = _mesh_value(file)
+            if value is not None and file.suffix.lower() in (".stl", ".ply", ".obj", ".off"):
+                meshes[value] = file
+        if not meshes:
+            raise InputError(
+                f"{pred_path} holds no <value>_<name> meshes (a run's meshes/ directory) to "
+                "score each structure of the ground truth"
+            )
+    elif detect_kind(pred_path).kind == "mesh":
+        raise InputError(
+            f"the ground truth {ground_truth} holds {len(truth.structures)} structures and "
+            f"{pred_path.name} is one mesh: give --label to score it against one, or pass a "
+            "label map or a meshes/ directory"
+        )
+    else:
+        pred_map = read_label_map(pred_path, memory_budget_gb=memory_budget_gb)
+    scored: dict[str, dict[str, Any]] = {}
+    missing: list[str] = []
+    for structure in truth.structures:
+        target = truth.mask(structure.value)
+        if pred_map is not None:
+            found = [s for s in pred_map.structures if s.value == structure.value]
+            pred = pred_map.mask(structure.value) if found else None
+        else:
+            path = meshes.get(structure.value)
+            pred = None if path is None else load_ground_truth(path)
+        if pred is None:
+            missing.append(structure.label)
+            continue
+        scored[structure.label] = evaluate(pred, target, n_points=n_points, seed=seed).to_dict()
+    if not scored:
+        raise InputError(
+            f"{pred_path} holds none of the {len(truth.structures)} structures of {ground_truth}"
+        )
+    return {"structures": scored, "mean": _mean_metrics(scored), "missing": missing}

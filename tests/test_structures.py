@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
@@ -202,3 +204,25 @@ def test_batch_and_report_give_one_row_per_structure(four: Path, tmp_path: Path)
         ("four", "mean"),
     ]
     assert all(float(r["volume_iou"]) > 0.9 for r in rows)
+
+
+def test_evaluate_scores_each_label_of_a_label_map(four: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    assert main(["run", str(four), "--slices", "8", "-o", str(out), "-q"]) == 0
+    truth = nib.load(four)
+    values = sorted(int(v) for v in np.unique(np.asarray(truth.dataobj)) if v)
+    for prediction in (out / "labels.nii.gz", out, out / "meshes"):
+        buffer = io.StringIO()
+        with contextlib.redirect_stdout(buffer):
+            assert main(["evaluate", str(prediction), str(four)]) == 0
+        scores = json.loads(buffer.getvalue())
+        assert sorted(int(k.split("_")[0]) for k in scores["structures"]) == values
+        assert scores["missing"] == []
+        # each structure against its own mask, not against the union of all labels
+        assert min(s["volume_iou"] for s in scores["structures"].values()) > 0.5
+        assert scores["mean"]["volume_iou"] == pytest.approx(
+            np.mean([s["volume_iou"] for s in scores["structures"].values()])
+        )
+    # one mesh against a multi-label truth: one clear line, exit 2
+    one = next((out / "meshes").glob("*.stl"))
+    assert main(["evaluate", str(one), str(four)]) == 2

@@ -281,7 +281,9 @@ def signed_volume(vertices: NDArray[np.float64], faces: NDArray[np.integer]) -> 
     return float((a[:, 0] * cross_x + a[:, 1] * cross_y + a[:, 2] * cross_z).sum() / 6.0)
 
 
-def march_field(field: NDArray[np.float32], affine: NDArray[np.float64]) -> trimesh.Trimesh:
+def march_field(
+    field: NDArray[np.float32], affine: NDArray[np.float64], *, repair: bool = True
+) -> trimesh.Trimesh:
     """Marching cubes on a ready signed-distance field: the fast path of the sdf surface.
 
     ``field`` (negative inside) must be finite, positive on every border sample
@@ -289,20 +291,57 @@ def march_field(field: NDArray[np.float32], affine: NDArray[np.float64]) -> trim
     then no padding, flipping or copying is needed. :func:`field_to_mesh` is
     the checked, general entry point.
 
+    In rare sample configurations scikit-image's marching cubes emits edges
+    shared by four faces. With ``repair`` (the default) the mesh is checked and,
+    when it is not closed, the ambiguous 2×2×2 blocks of samples next to such
+    edges are made inside (set to minus half a sample spacing, **in place** in
+    ``field``) and the field is marched again, as :func:`volume_to_mesh` does
+    for masks; the caller's occupancy (``field < 0``) should be read after this
+    call.
+
     Returns
     -------
     trimesh.Trimesh
         Closed, outward-oriented mesh, world mm.
     """
-    return _march(
-        np.asarray(field, dtype=np.float32),
-        check_affine(affine),
-        level=0.0,
-        inside_high=False,
-        pad_value=0.0,
-        step=1,
-        pad=False,
-    )
+    values = np.asarray(field, dtype=np.float32)
+    aff = check_affine(affine)
+    mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
+    if not repair or mesh.is_watertight:
+        return mesh
+    from scipy import ndimage
+
+    inside_value = np.float32(-0.5 * float(np.min(np.linalg.norm(aff[:3, :3], axis=0))))
+    to_index = np.linalg.inv(aff)
+    added = 0
+    for round_ in range(8):
+        edges = np.sort(mesh.edges, axis=1)
+        unique, counts = np.unique(edges, axis=0, return_counts=True)
+        bad = unique[counts > 2]
+        if bad.size == 0:
+            break
+        world = np.asarray(mesh.vertices)[bad].mean(axis=1)
+        centres = world @ to_index[:3, :3].T + to_index[:3, 3]
+        near = np.zeros(tuple(n - 1 for n in values.shape), dtype=bool)
+        index = np.clip(np.floor(centres).astype(np.int64), 0, np.array(near.shape) - 1)
+        near[tuple(index.T)] = True
+        near = ndimage.binary_dilation(near, iterations=1 + round_)
+        near[[0, -1], :, :] = near[:, [0, -1], :] = near[:, :, [0, -1]] = False  # keep the border
+        blocks = _ambiguous_blocks(values < 0) & near
+        if not blocks.any():
+            blocks = near
+        ni, nj, nk = values.shape
+        for i in (0, 1):
+            for j in (0, 1):
+                for k in (0, 1):
+                    corner = values[i : ni - 1 + i, j : nj - 1 + j, k : nk - 1 + k]
+                    added += int(np.count_nonzero(blocks & (corner >= 0)))
+                    np.minimum(corner, inside_value, out=corner, where=blocks)
+        mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
+        if mesh.is_watertight:
+            break
+    logger.debug("marching cubes: %d samples made inside to resolve non-manifold edges", added)
+    return mesh
 
 
 def _check_step(step_size: int) -> int:

@@ -726,15 +726,15 @@ def sdf_parts_surface(
         carve=carve,
         cover=cover,
     )
+    # _parts_union guarantees an inside sample; the mesh may repair ``union`` in place
+    # (march_field), so the occupancy is read after it.
+    mesh = _mesh(sections, np.moveaxis(union, sections.axis, 0), lo, upsample, checked=True)
     occupancy = None
     if upsample == 1:
         inside = union[1:-1, 1:-1, 1:-1] < 0
         affine = sections.affine.copy()
         affine[:3, 3] = sections.affine[:3, :3] @ np.asarray(lo, dtype=np.float64) + affine[:3, 3]
         occupancy = Volume(inside, affine)
-    mesh = _mesh(
-        sections, np.moveaxis(union, sections.axis, 0), lo, upsample, checked=occupancy is not None
-    )
     field = None
     if keep_field:
         affine = sections.affine @ _to_index(sections, lo, upsample, pad=1)
@@ -783,5 +783,6 @@ def _mesh(
     flat = field.reshape(-1)
     flat[near] = np.where(flat[near] < 0, -nudge, nudge)
     # The padded field is finite, closed (positive on every border sample) and
-    # off its zero level: marching cubes runs on it as it is, without copies.
+    # off its zero level: marching cubes runs on it as it is, without copies (a
+    # contiguous ``padded`` in grid order is ``field`` itself, repaired in place).
     return march_field(field, affine)
