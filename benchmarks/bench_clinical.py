@@ -9,7 +9,10 @@ Cases (written as NIfTI masks into a temporary folder):
 * ``liver 512x512x200``: the frog liver at 0.7 × 0.7 × 1.5 mm on a full
   512 × 512 × 200 CT grid;
 * ``brain 512x512x300`` (procedural): slicerecon's procedural brain on a
-  512 × 512 × 300 grid of 0.7 × 0.7 × 1.5 mm.
+  512 × 512 × 300 grid of 0.7 × 0.7 × 1.5 mm;
+* ``sphere 256x256x256``: a ball of radius 126 voxels filling a 256³ grid of
+  1 mm voxels, at 16 planes only (:data:`CASE_PLANES`; the in-process target
+  is at most 1.7× plain SDF there).
 
 For each case and each plane count (12, 24), in one fresh process per case:
 
@@ -76,6 +79,10 @@ def _liver() -> tuple[np.ndarray, np.ndarray]:
     return liver.mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]], liver.spacing
 
 
+CASE_PLANES = {"sphere 256x256x256": [16]}
+"""Cases measured at their own plane counts instead of ``--planes``."""
+
+
 def make_cases(root: Path) -> dict[str, Path]:
     """Write the case masks as NIfTI files; return name → path."""
     import nibabel as nib
@@ -95,6 +102,9 @@ def make_cases(root: Path) -> dict[str, Path]:
     scale = min(480 / brain.shape[0], 480 / brain.shape[1], 280 / brain.shape[2])
     big = _resample(brain.mask, (scale, scale * 0.9, scale))
     cases["brain 512x512x300"] = (_place(big, (512, 512, 300)), (0.7, 0.7, 1.5))
+    i, j, k = np.ogrid[:256, :256, :256]
+    ball = (i - 127.5) ** 2 + (j - 127.5) ** 2 + (k - 127.5) ** 2 <= 126.0**2
+    cases["sphere 256x256x256"] = (ball.astype(np.uint8), (1.0, 1.0, 1.0))
     paths = {}
     for name, (mask, sp) in cases.items():
         path = root / (name.replace(" ", "_") + ".nii.gz")
@@ -205,9 +215,10 @@ def main(argv: list[str] | None = None) -> int:
         wanted = args.cases.split(",") if args.cases else list(paths)
         for name in wanted:
             path = paths[name]
+            counts = CASE_PLANES.get(name, planes)
             print(f"{name}: in process", file=sys.stderr, flush=True)
-            inner = _child([str(path), ",".join(map(str, planes)), str(args.repeat)])
-            for n in planes:
+            inner = _child([str(path), ",".join(map(str, counts)), str(args.repeat)])
+            for n in counts:
                 print(f"{name}, {n} planes: end to end", file=sys.stderr, flush=True)
                 e2e = end_to_end(path, n, args.repeat, tmp)
                 mem = peak_memory(path, n, tmp)

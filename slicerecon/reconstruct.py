@@ -106,7 +106,8 @@ class ReconstructConfig:
     """With ``carve`` and ``method="sdf"``: also make the surface fill the two
     silhouettes whose rays lie in the section planes, where the interpolation
     between planes falls short of them (``docs/method.md``, section 7; chosen on
-    the real-anatomy development half)."""
+    the real-anatomy development half). Silhouettes derived from the sections
+    themselves are never covered."""
     mesh_format: str = "stl"
     """Output mesh format: stl, ply or obj."""
     label: int | str | None = None
@@ -454,7 +455,11 @@ def reconstruct(
         whose rays lie in the section planes meets the silhouette but not the
         interpolated shape, add the hull samples the interpolation came
         nearest to (:func:`slicerecon.surface.sdf.sdf_parts_mesh`), so the
-        surface fills the silhouettes as well as staying inside them.
+        surface fills the silhouettes as well as staying inside them. Only
+        silhouettes that say something the sections do not are covered: with
+        projections derived from the sections (``projections.source ==
+        "sections"``, the choice for contour inputs) there is nothing to add,
+        and covering them measured worse (``docs/method.md``, section 7).
 
     Returns
     -------
@@ -501,7 +506,7 @@ def reconstruct(
             carve=hull if implicit_carve else None,
             upsample=(upsample or axis_upsample(sections)) if entry.implicit_carve else 1,
             keep_field=keep_field,
-            cover=cover and implicit_carve,
+            cover=cover and implicit_carve and projections.source != "sections",
         )
         mesh, occupancy = surface.mesh, surface.occupancy
     if carve and entry.carved and not implicit_carve:

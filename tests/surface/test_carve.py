@@ -11,7 +11,7 @@ import trimesh
 from slicerecon.errors import EmptyMaskError
 from slicerecon.metrics import evaluate
 from slicerecon.reconstruct import prepare_inputs, reconstruct
-from slicerecon.sampling import projections_from_volume, visual_hull
+from slicerecon.sampling import projections_from_sections, projections_from_volume, visual_hull
 from slicerecon.sections import Volume
 from slicerecon.shapes import make_shape
 from slicerecon.surface.carve import carve
@@ -108,3 +108,15 @@ def test_cover_fills_the_silhouettes_in_the_section_planes(shape: str) -> None:
             assert missed > 0
     iou = {c: evaluate(r.mesh, truth, n_points=10_000).volume_iou for c, r in results.items()}
     assert iou[True] > iou[False]
+
+
+def test_silhouettes_derived_from_the_sections_are_not_covered() -> None:
+    # Derived side views say nothing the sections do not: covering them would
+    # only copy their interpolation, so the cover leaves them alone.
+    sections, _, _ = prepare_inputs(make_shape("kidney"), slices=6, axis="z")
+    derived = projections_from_sections(sections)
+    assert derived.source == "sections"
+    covered = reconstruct(sections, derived, planner="none", cover=True).occupancy
+    carved = reconstruct(sections, derived, planner="none", cover=False).occupancy
+    assert covered is not None and carved is not None
+    np.testing.assert_array_equal(covered.mask, carved.mask)
