@@ -569,6 +569,7 @@ def run_case(
     from .io.mesh import write_mesh
     from .metrics import evaluate
     from .preview import write_preview
+    from .rasterize import is_closed
 
     def say(stage: str) -> None:
         if progress is not None:
@@ -753,7 +754,7 @@ def run_case(
         "mesh": str(mesh_path),
         "parts": len(result.plan.parts),
         "planes": sections.n_planes,
-        "watertight": bool(result.mesh.is_watertight),
+        "watertight": is_closed(result.mesh),
         "metrics": None if metrics is None else metrics.to_dict(),
         "timings_s": {k: round(v, 4) for k, v in timings.items()},
     }

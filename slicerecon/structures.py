@@ -479,6 +479,7 @@ def run_structures_case(
     from .io.outputs import dicom_image_series, write_label_outputs
     from .metrics import evaluate
     from .preview import write_preview
+    from .rasterize import is_closed
     from .reconstruct import _write_json
 
     def say(stage: str) -> None:
@@ -596,7 +597,7 @@ def run_structures_case(
         "mesh": str(outdir / "meshes"),
         "parts": sum(0 if r.plan is None else len(r.plan.parts) for r in result.results),
         "planes": sections.n_planes,
-        "watertight": all(bool(m.is_watertight) for m in meshes),
+        "watertight": all(is_closed(m) for m in meshes),
         "metrics": mean,
         "structures": records,
         "timings_s": {k: round(v, 4) for k, v in times.items()},

@@ -83,6 +83,8 @@ def volume_to_mesh(
     if not 0.0 < level < 1.0:
         raise OptionError(f"level must lie strictly between 0 and 1 on a binary mask (got {level})")
     step = _check_step(step_size)
+    from ..rasterize import is_closed
+
     # Marching cubes only needs the foreground and one background layer around it.
     cropped = volume.crop(pad=1)
     # C order for skimage (a NIfTI mask is often Fortran-ordered: no second copy)
@@ -96,7 +98,7 @@ def volume_to_mesh(
         step=step,
         check_orientation=repair,
     )
-    if not repair or step != 1 or mesh.is_watertight:
+    if not repair or step != 1 or is_closed(mesh):
         return mesh
     # Rare voxel configurations make skimage's marching cubes emit edges shared by
     # four faces; fill the ambiguous 2x2x2 blocks next to them and march again.
@@ -307,7 +309,12 @@ def march_field(
     values = np.asarray(field, dtype=np.float32)
     aff = check_affine(affine)
     mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
-    if not repair or mesh.is_watertight:
+    if not repair:
+        return mesh
+    from ..rasterize import edge_face_counts
+
+    edges, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
+    if np.all(counts == 2):
         return mesh
     from scipy import ndimage
 
@@ -315,9 +322,7 @@ def march_field(
     to_index = np.linalg.inv(aff)
     added = 0
     for round_ in range(8):
-        edges = np.sort(mesh.edges, axis=1)
-        unique, counts = np.unique(edges, axis=0, return_counts=True)
-        bad = unique[counts > 2]
+        bad = edges[counts > 2]
         if bad.size == 0:
             break
         world = np.asarray(mesh.vertices)[bad].mean(axis=1)
@@ -338,7 +343,8 @@ def march_field(
                     added += int(np.count_nonzero(blocks & (corner >= 0)))
                     np.minimum(corner, inside_value, out=corner, where=blocks)
         mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
-        if mesh.is_watertight:
+        edges, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
+        if np.all(counts == 2):
             break
     logger.debug("marching cubes: %d samples made inside to resolve non-manifold edges", added)
     return mesh

@@ -613,7 +613,7 @@ def _parts_union(
         )
         if not np.any(part < 0):
             raise EmptyMaskError("no part's box holds any section foreground")
-        union = np.ascontiguousarray(np.moveaxis(_mirror_pad(part), 0, axis))
+        union = _mirror_pad(np.moveaxis(part, 0, axis))  # C order in grid axes: one copy
         del part
         return carve_field(sections, union, lo, hi, upsample, carve, cover=cover), lo, hi
     inner: NDArray[np.float32] | None = None
