@@ -265,7 +265,8 @@ def main() -> None:
         "never seen in training or its evaluation), longest side "
         f"{args.voxels} voxels, {args.slices} planes along z (fewer for flat shapes: as many "
         "as they occupy), ground-truth projections, "
-        "the default surface (`hybrid`, carved by the hull); `reconstruct()` + `evaluate()` "
+        "the default surface (`sdf` with PCHIP, carved and covering the silhouettes); "
+        "`reconstruct()` + `evaluate()` "
         "(20 000 surface samples). The learned "
         "planners are the shipped actors (`slicerecon/policy/weights/`, see its README).",
         "",
