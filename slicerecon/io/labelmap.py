@@ -31,10 +31,12 @@ from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 from .selection import choose_structure, parse_selector
 
 __all__ = [
+    "DEFAULT_COLOURS",
     "LABEL_MAP_KINDS",
     "LabelMap",
     "Structure",
     "read_label_map",
+    "structure_colour",
     "write_label_map",
 ]
 
@@ -44,6 +46,49 @@ LABEL_MAP_KINDS = ("nifti", "nrrd", "vti", "dicom-series", "dicom-seg")
 """Input kinds (:func:`slicerecon.io.detect_kind`) that hold dense structures."""
 
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
+DEFAULT_COLOURS: tuple[tuple[int, int, int], ...] = (
+    (230, 25, 75),
+    (60, 180, 75),
+    (255, 225, 25),
+    (0, 130, 200),
+    (245, 130, 48),
+    (145, 30, 180),
+    (70, 240, 240),
+    (240, 50, 230),
+    (210, 245, 60),
+    (250, 190, 212),
+    (0, 128, 128),
+    (220, 190, 255),
+    (170, 110, 40),
+    (128, 0, 0),
+    (170, 255, 195),
+    (128, 128, 0),
+)
+"""Display colours (RGB 0-255) of structures that have none, in turn (Trubetskoy's
+16 distinct colours without black, white and greys): the one palette of every
+written segmentation (``labels.seg.nrrd``, ``seg.dcm``, ``rtstruct.dcm``)."""
+
+
+def structure_colour(structure: Structure, index: int) -> tuple[int, int, int]:
+    """A structure's display colour: its own, else the ``index``-th of :data:`DEFAULT_COLOURS`.
+
+    Parameters
+    ----------
+    structure : Structure
+    index : int
+        Its position among the structures written (0-based).
+
+    Returns
+    -------
+    tuple of 3 int
+        RGB, 0-255.
+    """
+    if structure.colour is not None:
+        r, g, b = (int(np.clip(round(float(c)), 0, 255)) for c in structure.colour)
+        return r, g, b
+    return DEFAULT_COLOURS[index % len(DEFAULT_COLOURS)]
 
 
 @dataclass(frozen=True)

@@ -59,7 +59,6 @@ from .selection import choose_structure, parse_selector
 __all__ = [
     "NrrdInfo",
     "NrrdSegment",
-    "PALETTE",
     "labels_dtype",
     "label_values",
     "nrrd_info",
@@ -134,20 +133,6 @@ _SEGMENT_KEY = re.compile(r"^Segment(\d+)_(.+)$")
 
 _LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 _LAS_TO_RAS = np.diag([-1.0, 1.0, 1.0, 1.0])
-
-PALETTE: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180),
-    (255, 127, 14),
-    (44, 160, 44),
-    (214, 39, 40),
-    (148, 103, 189),
-    (140, 86, 75),
-    (227, 119, 194),
-    (127, 127, 127),
-    (188, 189, 34),
-    (23, 190, 207),
-)
-"""Colours given to structures that have none when a segmentation is written."""
 
 _COMPRESSED = {"gzip": "gzip", "gz": "gzip", "bzip2": "bzip2", "bz2": "bzip2"}
 

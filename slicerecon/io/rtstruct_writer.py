@@ -250,7 +250,7 @@ def write_rtstruct(
         One per label value (every non-zero value of ``labels`` needs one), in
         the order the ROIs are listed. ROINumber is the value; ROIName the
         name (else ``"Structure <value>"``); ROIDisplayColor the colour (else
-        one of :data:`~slicerecon.io.dicom.derived.DEFAULT_COLOURS`). A
+        one of :data:`~slicerecon.io.labelmap.DEFAULT_COLOURS`). A
         structure without voxels becomes an ROI without contours.
     source_images : path-like or sequence of pydicom.Dataset or path-like
         The image series: its directory, or its images (datasets, headers

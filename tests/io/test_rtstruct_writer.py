@@ -10,8 +10,7 @@ import pydicom
 import pytest
 
 from slicerecon.errors import EmptyMaskError, GeometryError, InputError, LabelError
-from slicerecon.io.dicom.derived import DEFAULT_COLOURS
-from slicerecon.io.labelmap import Structure
+from slicerecon.io.labelmap import DEFAULT_COLOURS, Structure
 from slicerecon.io.rtstruct import list_rois, read_rtstruct
 from slicerecon.io.rtstruct_writer import write_rtstruct
 

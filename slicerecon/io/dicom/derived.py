@@ -40,14 +40,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...errors import FormatError, GeometryError, InputError, LabelError, OptionError
 from ...sections import check_affine
-from ..labelmap import Structure
+from ..labelmap import Structure, structure_colour
 from ..limits import check_geometry
 from .geometry import require_path
 from .series import _layout, _scan_series, _Slice, _slice_from
 from .sniff import read_dicom_header
 
 __all__ = [
-    "DEFAULT_COLOURS",
     "SourceSeries",
     "check_label_map",
     "display_colour",
@@ -56,27 +55,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-DEFAULT_COLOURS: tuple[tuple[int, int, int], ...] = (
-    (230, 25, 75),
-    (60, 180, 75),
-    (255, 225, 25),
-    (0, 130, 200),
-    (245, 130, 48),
-    (145, 30, 180),
-    (70, 240, 240),
-    (240, 50, 230),
-    (210, 245, 60),
-    (250, 190, 212),
-    (0, 128, 128),
-    (220, 190, 255),
-    (170, 110, 40),
-    (128, 0, 0),
-    (170, 255, 195),
-    (128, 128, 0),
-)
-"""Display colours (RGB 0-255) of structures that have none, in turn (Trubetskoy's
-16 distinct colours without black, white and greys)."""
 
 GRID_TOLERANCE_PX = 0.01
 """How far, in pixels, a label map's in-plane pixels may lie from the series' pixels."""
@@ -312,11 +290,8 @@ def check_label_map(
 
 
 def display_colour(structure: Structure, index: int) -> tuple[int, int, int]:
-    """The structure's colour, else the ``index``-th of :data:`DEFAULT_COLOURS`."""
-    if structure.colour is not None:
-        r, g, b = (int(np.clip(round(float(c)), 0, 255)) for c in structure.colour)
-        return r, g, b
-    return DEFAULT_COLOURS[index % len(DEFAULT_COLOURS)]
+    """The structure's colour, else the ``index``-th default (``labelmap.structure_colour``)."""
+    return structure_colour(structure, index)
 
 
 def labels_on_series(

@@ -17,7 +17,7 @@ Segments
 * SegmentLabel: the structure's name, else ``"Structure <value>"``.
 * RecommendedDisplayCIELabValue: the structure's colour (RGB converted to
   CIELab by highdicom), else one of
-  :data:`~slicerecon.io.dicom.derived.DEFAULT_COLOURS`.
+  :data:`~slicerecon.io.labelmap.DEFAULT_COLOURS`.
 * SegmentedPropertyCategory / Type: SCT 85756007 "Tissue" / SCT 85756007
   "Tissue" (3D Slicer's code for a segment of unknown kind: slicerecon does
   not know what a structure is).
