@@ -8,12 +8,10 @@ line (``slicerecon run``) and the batch pipelines fill a
 
 from __future__ import annotations
 
-import json
 import logging
-import math
 import os
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -25,9 +23,17 @@ from numpy.typing import NDArray
 
 from . import policy as _policy  # noqa: F401  (registers the "policy" planner, no torch)
 from .errors import OptionError
-from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid
+from .inputs import (
+    DEFAULT_SLICES,
+    MAX_AXIS_UPSAMPLE,
+    PROJECTION_SOURCES,
+    axis_upsample,
+    looks_sparse,
+    prepare_inputs,
+)
+from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget
 from .partition.planner import planner_names
-from .sections import AXIS_NAMES, CrossSections, Projections, Volume, axis_index
+from .sections import CrossSections, Projections, Volume, axis_index
 from .surface.methods import method_entry, method_names
 
 __all__ = [
@@ -39,6 +45,10 @@ __all__ = [
     "PROJECTION_SOURCES",
     "INTERPOLATIONS",
     "MESH_FORMATS",
+    "DEFAULT_SLICES",
+    "MAX_AXIS_UPSAMPLE",
+    "axis_upsample",
+    "looks_sparse",
     "prepare_inputs",
     "reconstruct",
     "run_case",
@@ -54,10 +64,8 @@ METHODS = method_names()
 WHOLE_SHAPE_METHODS = method_names(per_part=False)
 """Methods that reconstruct all the sections at once, without a partition
 (:mod:`slicerecon.surface.baselines`); planners and carving apply to the others only."""
-PROJECTION_SOURCES = ("auto", "gt", "sections")
 INTERPOLATIONS = ("pchip", "linear")
 MESH_FORMATS = ("stl", "ply", "obj")
-DEFAULT_SLICES = 16
 PLANNING_MAX_GRID = 192
 """Planners see at most this many voxels along a side: larger grids are planned on
 a pooled copy (:func:`slicerecon.partition.planner.plan_partition`, ``max_grid``)
@@ -222,159 +230,6 @@ def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
         timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
 
 
-def _sparse_volume_to_sections(volume: Volume, axis: int) -> CrossSections:
-    from .sampling import sample_sections
-
-    planes = volume.occupied_planes(axis)
-    full = sample_sections(volume, every=1, axis=axis)
-    keep = np.flatnonzero(np.isin(full.indices.astype(np.int64), planes))
-    return full.select(keep)
-
-
-def looks_sparse(volume: Volume, axis: int) -> bool:
-    """Guess whether a mask annotates only some planes along ``axis``.
-
-    A mask is taken as sparse when at least two planes hold foreground and
-    more than half of the planes between the first and the last of them are
-    empty (a dense organ mask has no empty planes inside its extent). Two
-    annotated planes with a gap between them are sparse (ITK's morphological
-    contour interpolation examples are such label maps); two neighbouring
-    planes are a dense mask two slices thick.
-    """
-    planes = volume.occupied_planes(axis)
-    if planes.size < 2:
-        return False
-    span = int(planes[-1] - planes[0] + 1)
-    return (span - planes.size) > 0.5 * span
-
-
-def prepare_inputs(
-    data: Volume | CrossSections,
-    *,
-    slices: int | None = None,
-    every: int | None = None,
-    axis: int | str = "z",
-    projections: str | Sequence[str | os.PathLike[str]] = "auto",
-    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
-) -> tuple[CrossSections, Projections, Volume | None]:
-    """Turn a loaded input into cross-sections, projections and (maybe) ground truth.
-
-    A dense volume is cropped to its foreground (plus a margin), sampled at
-    ``slices`` / ``every`` planes and kept as ground truth. A volume that
-    annotates only some planes (see :func:`looks_sparse`) and contour inputs
-    are used as they are, without ground truth.
-
-    ``projections`` is ``"gt"`` (from the dense mask), ``"sections"``
-    (derived from the sections), ``"auto"`` (``gt`` when there is a dense
-    mask), or one to three NIfTI silhouette files, as a sequence of paths or
-    one comma-separated string (:mod:`slicerecon.io.projections`).
-
-    The grid the reconstruction will work on (the cropped mask, or the
-    sections' grid, refined along the axis as :func:`axis_upsample` says) is
-    checked against ``memory_budget_gb``, GiB
-    (:func:`slicerecon.io.limits.check_grid`), before anything is allocated on it.
-
-    Returns
-    -------
-    sections : CrossSections
-    projections : Projections
-    ground_truth : Volume or None
-    """
-    from .sampling import projections_from_sections, projections_from_volume, sample_sections
-
-    if isinstance(projections, str):
-        files = (
-            []
-            if projections in PROJECTION_SOURCES
-            else [f.strip() for f in projections.split(",") if f.strip()]
-        )
-    else:
-        files = [os.fspath(f) for f in projections]
-    if not files and projections not in PROJECTION_SOURCES:
-        raise OptionError(f"projections must be one of {PROJECTION_SOURCES} or silhouette files")
-    ax = axis_index(axis)
-    truth: Volume | None = None
-    if isinstance(data, Volume):
-        volume = data.crop(pad=3)
-        check_grid(volume.shape, what="the reconstruction grid", memory_budget_gb=memory_budget_gb)
-        if looks_sparse(volume, ax):
-            logger.info("the mask annotates only some planes: using them as sections")
-            sections = _sparse_volume_to_sections(volume, ax)
-        else:
-            spanned = int(volume.occupied_planes(ax).size)
-            if slices is None and every is None:
-                slices = min(DEFAULT_SLICES, spanned)
-            if slices is not None and slices > spanned:
-                raise OptionError(
-                    f"--slices {slices} asks for more planes than the {spanned} the structure "
-                    f"spans along {AXIS_NAMES[ax]}; ask for at most {spanned}"
-                )
-            if spanned == 1:  # a structure on one plane: that plane, a one-slice slab
-                logger.warning(
-                    "the structure lies on one plane along %s: the reconstruction "
-                    "is a slab one slice thick",
-                    AXIS_NAMES[ax],
-                )
-                slices, every = None, 1
-            sections = sample_sections(volume, n=slices, every=every, axis=ax)
-            truth = volume
-    else:
-        sections = data
-        if slices is not None or every is not None:
-            raise OptionError("--slices/--every apply to dense masks; this input is already sparse")
-    sections.require_foreground()
-    samples = list(sections.grid_shape)
-    samples[sections.axis] *= axis_upsample(sections)  # the sdf surface's field samples
-    check_grid(samples, what="the reconstruction grid", memory_budget_gb=memory_budget_gb)
-    if files:
-        from .io.projections import read_projection_files
-
-        return sections, read_projection_files(files, sections), truth
-    source = projections
-    if source == "auto":
-        source = "gt" if truth is not None else "sections"
-    if source == "gt":
-        if truth is None:
-            raise OptionError(
-                "--projections gt needs a dense mask as input; use --projections sections"
-            )
-        proj = projections_from_volume(truth)
-    else:
-        proj = projections_from_sections(sections)
-    return sections, proj, truth
-
-
-MAX_AXIS_UPSAMPLE = 9
-"""Largest number of signed-distance samples per voxel along the section axis."""
-
-
-def axis_upsample(sections: CrossSections) -> int:
-    """Field samples per voxel along the section axis for the ``sdf`` surface.
-
-    A grid whose slice step is the gap between planes (contours read on their
-    own, or an RTSTRUCT on a slice axis of its own) has no voxel layer between
-    two planes, so a field sampled per voxel could only be interpolated
-    linearly, by marching cubes, between planes. When the median gap holds
-    fewer than four voxel layers, the axis is sampled about as finely as the
-    in-plane pixels instead (an odd factor, so that the planes stay on
-    samples; at most :data:`MAX_AXIS_UPSAMPLE`). Dense masks sampled at a few
-    planes keep one sample per voxel.
-
-    Returns
-    -------
-    int
-        Odd, in ``[1, MAX_AXIS_UPSAMPLE]``.
-    """
-    if sections.n_planes < 2 or float(np.median(np.diff(sections.indices))) >= 4.0:
-        return 1
-    spacing = sections.spacing
-    a, b = sections.plane_axes
-    ratio = float(spacing[sections.axis] / min(spacing[a], spacing[b]))
-    factor = max(1, math.ceil(ratio - 1e-6))
-    factor += 1 - factor % 2  # odd: the planes stay on samples
-    return int(min(factor, MAX_AXIS_UPSAMPLE))
-
-
 def planning_occupancy(sections: CrossSections, projections: Projections) -> np.ndarray:
     """The 3-D occupancy a planner sees: the projections' visual hull, exact on the planes.
 
@@ -537,13 +392,6 @@ def _reconstruct_whole_shape(
     return Reconstruction(mesh, plan, sections, projections, timings)
 
 
-def _write_json(path: Path, payload: dict[str, Any]) -> None:
-    from .io.atomic import atomic_path
-
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(payload, indent=2, sort_keys=False) + "\n")
-
-
 def run_case(
     input_path: str | os.PathLike[str],
     outdir: str | os.PathLike[str],
@@ -565,6 +413,7 @@ def run_case(
         A summary: output paths, metrics (or None), timings, part count.
     """
     from .io import DICOM_KINDS, detect_kind, load_ground_truth, load_input
+    from .io.atomic import write_json
     from .io.labelmap import read_label_map
     from .io.mesh import write_mesh
     from .metrics import evaluate
@@ -698,9 +547,9 @@ def run_case(
         plan["ground_truth"] = None if ground_truth is None else str(ground_truth)
         plan["config"] = asdict(config)
         plan["timings_s"] = {k: round(v, 4) for k, v in timings.items()}
-        _write_json(out / "plan.json", plan)
+        write_json(out / "plan.json", plan)
         if metrics is not None:
-            _write_json(out / "metrics.json", metrics.to_dict())
+            write_json(out / "metrics.json", metrics.to_dict())
         grid = data if isinstance(data, Volume) else None
         labels, labels_affine = _label_grid(result, sections, grid, value)
         from .io.labelmap import Structure
@@ -719,7 +568,7 @@ def run_case(
             rtstruct=kind.path if kind.kind == "rtstruct" else None,
             allow_irregular=config.allow_irregular,
         )
-        _write_json(
+        write_json(
             out / "structures.json",
             {
                 "structures": [

@@ -161,7 +161,7 @@ def reconstruct_structures(
     label_map : LabelMap
         The structures. Dense: planes are chosen over their union and each
         structure is its own ground truth (silhouettes from its mask). Sparse
-        (annotated on some planes only, :func:`slicerecon.reconstruct.looks_sparse`):
+        (annotated on some planes only, :func:`slicerecon.inputs.looks_sparse`):
         the annotated planes are the sections, silhouettes are derived from
         each structure's sections, and there is no ground truth.
     slices, every, axis
@@ -185,7 +185,7 @@ def reconstruct_structures(
     EmptyMaskError
         No structure holds a voxel.
     """
-    from .reconstruct import prepare_inputs
+    from .inputs import prepare_inputs
 
     if method != "sdf":
         raise OptionError(
@@ -339,7 +339,8 @@ def _reconstruct_jointly(
     shared grid (its silhouettes are taken from it), or None for contours
     (silhouettes derived from its sections).
     """
-    from .reconstruct import axis_upsample, reconstruct
+    from .inputs import axis_upsample
+    from .reconstruct import reconstruct
     from .surface.joint import resolve
 
     upsample = axis_upsample(shared)
@@ -475,12 +476,12 @@ def run_structures_case(
     from pathlib import Path
 
     from .io import detect_kind
+    from .io.atomic import write_json
     from .io.mesh import write_mesh
     from .io.outputs import dicom_image_series, write_label_outputs
     from .metrics import evaluate
     from .preview import write_preview
     from .rasterize import is_closed
-    from .reconstruct import _write_json
 
     def say(stage: str) -> None:
         if progress is not None:
@@ -551,12 +552,12 @@ def run_structures_case(
         rtstruct=kind.path if kind.kind == "rtstruct" else None,
         allow_irregular=config.allow_irregular,
     )
-    _write_json(outdir / "structures.json", {"structures": records, "outputs": outputs.to_dict()})
+    write_json(outdir / "structures.json", {"structures": records, "outputs": outputs.to_dict()})
     mean = _mean_metrics(metrics) if metrics else None
     if metrics:
-        _write_json(outdir / "metrics.json", {"structures": metrics, "mean": mean})
+        write_json(outdir / "metrics.json", {"structures": metrics, "mean": mean})
     sections = result.sections
-    _write_json(
+    write_json(
         outdir / "plan.json",
         {
             "structures": [
