@@ -19,7 +19,8 @@ from ..errors import OptionError
 from ..sections import check_affine
 from .atomic import atomic_path
 from .labelmap import Structure, structure_colour
-from .nrrd import label_values, labels_dtype, pynrrd_module
+from .nrrd import label_values, labels_dtype
+from .nrrd_header import pynrrd_module
 
 __all__ = ["write_seg_nrrd"]
 
