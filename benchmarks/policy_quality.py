@@ -52,7 +52,7 @@ def run_case(task: tuple[str, int, int, int, str]) -> dict[str, Any]:
     from slicerecon.metrics import evaluate
     from slicerecon.reconstruct import prepare_inputs, reconstruct
 
-    name, seed, voxels, slices, planner = task
+    name, seed, voxels, slices, planner, weights_dir = task
     row: dict[str, Any] = {"family": name, "seed": seed, "slices": slices, "planner": planner}
     try:
         volume = make_volume(name, seed, voxels)
@@ -62,7 +62,7 @@ def run_case(task: tuple[str, int, int, int, str]) -> dict[str, Any]:
         row["slices"] = sections.n_planes
         kwargs: dict[str, Any] = {"planner": planner}
         if planner in LEARNED:
-            kwargs = {"planner": "policy", "weights": WEIGHTS_DIR / f"{planner}.safetensors"}
+            kwargs = {"planner": "policy", "weights": Path(weights_dir) / f"{planner}.safetensors"}
         start = time.perf_counter()
         result = reconstruct(sections, projections, **kwargs)
         row["seconds"] = time.perf_counter() - start
@@ -206,6 +206,12 @@ def main() -> None:
     )
     parser.add_argument("--families", default="", help="comma-separated (default: all)")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument(
+        "--weights-dir",
+        type=Path,
+        default=WEIGHTS_DIR,
+        help="folder of ddpg / il / il_rl .safetensors (default: the shipped actors)",
+    )
     args = parser.parse_args()
 
     from slicerecon.io.atomic import atomic_path
@@ -213,7 +219,7 @@ def main() -> None:
 
     families = [f for f in args.families.split(",") if f] or shape_names()
     tasks = [
-        (f, HOLDOUT_SEED + i, args.voxels, args.slices, p)
+        (f, HOLDOUT_SEED + i, args.voxels, args.slices, p, str(args.weights_dir))
         for f in families
         for i in range(args.seeds)
         for p in PLANNERS
@@ -225,7 +231,7 @@ def main() -> None:
         if make_volume(f, HOLDOUT_SEED, args.voxels).occupied_planes(2).size >= max(counts)
     ]
     sweep = [
-        (f, HOLDOUT_SEED, args.voxels, c, p)
+        (f, HOLDOUT_SEED, args.voxels, c, p, str(args.weights_dir))
         for f in sweep_fams
         for c in counts
         if c != args.slices
@@ -240,7 +246,9 @@ def main() -> None:
     with atomic_path(raw) as tmp:
         tmp.write_text(json.dumps({"main": rows, "contours": sweep_rows}, indent=1) + "\n")
 
-    manifest = json.loads((WEIGHTS_DIR / "manifest.json").read_text())
+    weights = args.weights_dir
+    manifest_path = weights / "manifest.json"
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
     args.figures.mkdir(parents=True, exist_ok=True)
     fig1 = args.figures / "policy_iou_vs_contours.png"
     sweep_all = sweep_rows + [
@@ -248,9 +256,7 @@ def main() -> None:
     ]
     figure_contours(sweep_all, fig1)
     fig2 = args.figures / "policy_iou_vs_training.png"
-    logs = {
-        n: WEIGHTS_DIR / f"{n}_log.csv" for n in LEARNED if (WEIGHTS_DIR / f"{n}_log.csv").is_file()
-    }
+    logs = {n: weights / f"{n}_log.csv" for n in LEARNED if (weights / f"{n}_log.csv").is_file()}
     figure_training(logs, manifest.get("heuristic_eval_iou"), fig2)
 
     errors = [r for r in rows + sweep_rows if "error" in r]
