@@ -33,6 +33,7 @@ from .selection import choose_structure, parse_selector
 __all__ = [
     "DEFAULT_COLOURS",
     "LABEL_MAP_KINDS",
+    "LPS_TO_RAS",
     "LabelMap",
     "Structure",
     "read_label_map",
@@ -45,7 +46,8 @@ logger = logging.getLogger(__name__)
 LABEL_MAP_KINDS = ("nifti", "nrrd", "vti", "dicom-series", "dicom-seg")
 """Input kinds (:func:`slicerecon.io.detect_kind`) that hold dense structures."""
 
-_LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
+LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
+"""DICOM patient LPS → RAS (x and y negated); its own inverse."""
 
 
 DEFAULT_COLOURS: tuple[tuple[int, int, int], ...] = (
@@ -343,7 +345,7 @@ def write_label_map(
         values = values.astype(np.uint16 if values.max() < 2**16 else np.int32)
     aff = np.asarray(affine, dtype=np.float64)
     if coordinates == "LPS":
-        aff = _LPS_TO_RAS @ aff
+        aff = LPS_TO_RAS @ aff
     img = nib.Nifti1Image(values, aff)
     img.header.set_xyzt_units(xyz="mm")
     img.set_sform(aff, code=1)

@@ -99,7 +99,6 @@ _UNITS_MM = {
 
 _SEGMENT_KEY = re.compile(r"^Segment(\d+)_(.+)$")
 
-_LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 _LAS_TO_RAS = np.diag([-1.0, 1.0, 1.0, 1.0])
 
 COMPRESSED = {"gzip": "gzip", "gz": "gzip", "bzip2": "bzip2", "bz2": "bzip2"}

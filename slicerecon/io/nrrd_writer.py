@@ -18,15 +18,13 @@ from numpy.typing import NDArray
 from ..errors import OptionError
 from ..sections import check_affine
 from .atomic import atomic_path
-from .labelmap import Structure, structure_colour
+from .labelmap import LPS_TO_RAS, Structure, structure_colour
 from .nrrd import label_values, labels_dtype
 from .nrrd_header import pynrrd_module
 
 __all__ = ["write_seg_nrrd"]
 
 logger = logging.getLogger(__name__)
-
-_LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 
 
 def _extent_text(mask: NDArray[np.bool_]) -> str:
@@ -103,7 +101,7 @@ def write_seg_nrrd(
         )
     aff = np.array(check_affine(affine))
     if coordinates == "RAS":
-        aff = _LPS_TO_RAS @ aff  # the flip is its own inverse: RAS → LPS
+        aff = LPS_TO_RAS @ aff  # the flip is its own inverse: RAS → LPS
     chosen = list(structures)
     numbers = [int(s.value) for s in chosen]
     if len(set(numbers)) != len(numbers) or 0 in numbers:

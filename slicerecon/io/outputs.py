@@ -36,13 +36,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import SlicereconError
-from .labelmap import Structure
+from .labelmap import LPS_TO_RAS, Structure
 
 __all__ = ["LabelOutputs", "dicom_image_series", "write_label_outputs"]
 
 logger = logging.getLogger(__name__)
-
-_LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 
 
 @dataclass
@@ -157,7 +155,7 @@ def write_label_outputs(
         return result
     lps = np.asarray(affine, dtype=np.float64)
     if coordinates == "RAS":
-        lps = _LPS_TO_RAS @ lps
+        lps = LPS_TO_RAS @ lps
     chosen = [s for s in structures if np.any(labels == s.value)]
     if not chosen:
         result.skipped["seg"] = "no structure holds a voxel"

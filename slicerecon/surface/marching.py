@@ -143,6 +143,32 @@ def _ambiguous_blocks(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     return found
 
 
+def _blocks_to_fill(
+    inside: NDArray[np.bool_],
+    centres: NDArray[np.float64],
+    round_: int,
+    *,
+    keep_border: bool = False,
+) -> NDArray[np.bool_]:
+    """The 2x2x2 blocks to make inside next to non-manifold edges, of shape ``inside.shape - 1``.
+
+    ``centres``: the offending edges' midpoints in sample index coordinates. The
+    blocks within ``1 + round_`` blocks of them that are ambiguous (or all of
+    those blocks, when none is); ``keep_border`` leaves the blocks that touch
+    the grid's border alone (a field that must stay outside there).
+    """
+    from scipy import ndimage
+
+    near = np.zeros(tuple(n - 1 for n in inside.shape), dtype=bool)
+    index = np.clip(np.floor(centres).astype(np.int64), 0, np.array(near.shape) - 1)
+    near[tuple(index.T)] = True
+    near = ndimage.binary_dilation(near, iterations=1 + round_)
+    if keep_border:
+        near[[0, -1], :, :] = near[:, [0, -1], :] = near[:, :, [0, -1]] = False
+    blocks = _ambiguous_blocks(inside) & near
+    return blocks if blocks.any() else near
+
+
 def _repair_ambiguous_blocks(
     mask: NDArray[np.bool_], *, level: float, max_rounds: int = 8
 ) -> tuple[NDArray[np.bool_], int]:
@@ -152,28 +178,20 @@ def _repair_ambiguous_blocks(
     mask changes by a handful of voxels (52 of 119,296 on the MNI152 white
     matter at 2 mm).
     """
-    from scipy import ndimage
     from skimage.measure import marching_cubes
+
+    from ..rasterize import edge_face_counts
 
     fixed = mask.copy()
     for round_ in range(max_rounds):
         padded = np.pad(fixed.astype(np.float32), 1)
         verts, faces, _, _ = marching_cubes(padded, level, method="lewiner")
-        edges = np.sort(
-            np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1
-        )
-        unique, counts = np.unique(edges, axis=0, return_counts=True)
-        bad = unique[counts > 2]
+        edges, counts = edge_face_counts(faces, len(verts))
+        bad = edges[counts > 2]
         if bad.size == 0:
             break
         centres = verts[bad].mean(axis=1) - 1.0  # undo the pad: voxel index coordinates
-        near = np.zeros(tuple(n - 1 for n in fixed.shape), dtype=bool)
-        index = np.clip(np.floor(centres).astype(np.int64), 0, np.array(near.shape) - 1)
-        near[tuple(index.T)] = True
-        near = ndimage.binary_dilation(near, iterations=1 + round_)
-        blocks = _ambiguous_blocks(fixed) & near
-        if not blocks.any():
-            blocks = near
+        blocks = _blocks_to_fill(fixed, centres, round_)
         for corner in _block_corners(fixed).values():
             corner |= blocks  # the corners are views of ``fixed``: fill the whole blocks
     return fixed, int(np.count_nonzero(fixed) - np.count_nonzero(mask))
@@ -316,8 +334,6 @@ def march_field(
     edges, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
     if np.all(counts == 2):
         return mesh
-    from scipy import ndimage
-
     inside_value = np.float32(-0.5 * float(np.min(np.linalg.norm(aff[:3, :3], axis=0))))
     to_index = np.linalg.inv(aff)
     added = 0
@@ -327,21 +343,10 @@ def march_field(
             break
         world = np.asarray(mesh.vertices)[bad].mean(axis=1)
         centres = world @ to_index[:3, :3].T + to_index[:3, 3]
-        near = np.zeros(tuple(n - 1 for n in values.shape), dtype=bool)
-        index = np.clip(np.floor(centres).astype(np.int64), 0, np.array(near.shape) - 1)
-        near[tuple(index.T)] = True
-        near = ndimage.binary_dilation(near, iterations=1 + round_)
-        near[[0, -1], :, :] = near[:, [0, -1], :] = near[:, :, [0, -1]] = False  # keep the border
-        blocks = _ambiguous_blocks(values < 0) & near
-        if not blocks.any():
-            blocks = near
-        ni, nj, nk = values.shape
-        for i in (0, 1):
-            for j in (0, 1):
-                for k in (0, 1):
-                    corner = values[i : ni - 1 + i, j : nj - 1 + j, k : nk - 1 + k]
-                    added += int(np.count_nonzero(blocks & (corner >= 0)))
-                    np.minimum(corner, inside_value, out=corner, where=blocks)
+        blocks = _blocks_to_fill(values < 0, centres, round_, keep_border=True)
+        for corner in _block_corners(values).values():  # views of ``values``
+            added += int(np.count_nonzero(blocks & (corner >= 0)))
+            np.minimum(corner, inside_value, out=corner, where=blocks)
         mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
         edges, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
         if np.all(counts == 2):
