@@ -49,6 +49,7 @@ class Variant:
     carve: bool = True
     cover: bool = True
     interpolation: str = "pchip"
+    join_drift: bool = True
 
 
 DEFAULT_LABEL = "sdf + heuristic (default)"
@@ -61,7 +62,7 @@ VARIANTS = (
     Variant("loft + heuristic", "loft", "heuristic"),
     Variant("loft + heuristic (uncarved)", "loft", "heuristic", carve=False),
     Variant("loft + none", "loft", "none"),
-    Variant("sdf plain", "sdf", "none", carve=False, interpolation="linear"),
+    Variant("sdf plain", "sdf", "none", carve=False, interpolation="linear", join_drift=False),
     Variant("sdf-hull", "sdf-hull", "none"),
     Variant("poisson", "poisson", "none"),
     Variant("itk-mci", "itk-mci", "none"),
@@ -122,6 +123,7 @@ def _available_variants(variants: tuple[Variant, ...]) -> list[Variant]:
                 carve=variant.carve,
                 cover=variant.cover,
                 interpolation=variant.interpolation,
+                join_drift=variant.join_drift,
             )
         except DependencyError as exc:
             logging.warning("skipping %s: %s", variant.label, exc)
@@ -217,6 +219,7 @@ def main(argv: list[str] | None = None) -> int:
                             carve=variant.carve,
                             cover=variant.cover,
                             interpolation=variant.interpolation,
+                            join_drift=variant.join_drift,
                         )
                         row["seconds"] = time.perf_counter() - start
                         metrics = evaluate(result.mesh, truth, n_points=args.n_points, seed=0)

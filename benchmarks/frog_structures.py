@@ -31,7 +31,7 @@ import numpy as np
 from slicerecon.io.labelmap import read_label_map
 from slicerecon.metrics import evaluate
 from slicerecon.realshapes import FROG_TISSUES, frog_tissues_path
-from slicerecon.reconstruct import reconstruct
+from slicerecon.reconstruct import PLAIN_SDF, reconstruct
 from slicerecon.sections import CrossSections, Volume
 from slicerecon.structures import crop_to_structure, reconstruct_structures
 
@@ -72,9 +72,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         reconstruct(sub, projections)
         single_seconds += time.perf_counter() - t0
-        plain = reconstruct(
-            sub, projections, method="sdf", planner="none", carve=False, interpolation="linear"
-        )
+        plain = reconstruct(sub, projections, **PLAIN_SDF)
         crop = Volume(truth.mask, sections.affine)
         plain_score = evaluate(plain.mesh, crop, n_points=20_000)
         rows.append((value, item.status, score.volume_iou, plain_score.volume_iou, score.hd95_mm))

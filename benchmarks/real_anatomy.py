@@ -47,13 +47,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # independent_eval, as
 from independent_eval import Truth, score_mesh  # noqa: E402
 
 from slicerecon.errors import DependencyError, SlicereconError  # noqa: E402
+from slicerecon.reconstruct import PLAIN_SDF  # noqa: E402
 from slicerecon.sections import Volume  # noqa: E402
 
 SPLIT_FILE = Path(__file__).resolve().with_name("real_split.toml")
 """The committed development / validation split (``benchmarks/draw_real_split.py``)."""
 
 VARIANTS: dict[str, dict[str, Any]] = {
-    "sdf-plain": {"method": "sdf", "planner": "none", "carve": False, "interpolation": "linear"},
+    "sdf-plain": PLAIN_SDF,
     "default": {},
     "loft-heuristic": {"method": "loft", "planner": "heuristic"},
     "itk-mci": {"method": "itk-mci", "planner": "none"},
@@ -68,6 +69,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     },
     "sdf-carve-only": {"method": "sdf", "planner": "heuristic", "cover": False},
     "sdf-cover-none": {"method": "sdf", "planner": "none"},
+    "sdf-no-drift": {"join_drift": False},
 }
 """Variant name → keyword arguments of :func:`slicerecon.reconstruct.reconstruct`.
 
@@ -91,6 +93,8 @@ VARIANT_NOTES: dict[str, str] = {
     "sdf-carve-only": "the default until 2026-12-01: sdf, PCHIP, heuristic planner, carved but "
     "not covering the silhouettes",
     "sdf-cover-none": "sdf, PCHIP, carved and covering, one part (no planner)",
+    "sdf-no-drift": "the default until 2026-12-02: as the default, but regions that overlap "
+    "nothing on the next plane are not joined",
 }
 
 DEFAULT_VARIANTS = ("sdf-plain", "default", "loft-heuristic", "itk-mci")

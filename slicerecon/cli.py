@@ -169,6 +169,13 @@ CoverOpt = Annotated[
         help="With --carve (sdf): also fill the silhouettes whose rays lie in the section planes.",
     ),
 ]
+DriftOpt = Annotated[
+    bool,
+    typer.Option(
+        "--join-drift/--no-join-drift",
+        help="(sdf) Join regions that overlap nothing on the next plane along their shift.",
+    ),
+]
 LabelOpt = Annotated[
     str | None,
     typer.Option(
@@ -210,6 +217,7 @@ def run(
     smooth: SmoothOpt = False,
     carve: CarveOpt = True,
     cover: CoverOpt = True,
+    join_drift: DriftOpt = True,
     label: LabelOpt = None,
     roi: RoiOpt = None,
     union: UnionOpt = False,
@@ -295,6 +303,7 @@ def batch(
     smooth: SmoothOpt = False,
     carve: CarveOpt = True,
     cover: CoverOpt = True,
+    join_drift: DriftOpt = True,
     label: LabelOpt = None,
     roi: RoiOpt = None,
     allow_irregular: IrregularOpt = False,

@@ -39,6 +39,7 @@ from .surface.methods import method_entry, method_names
 __all__ = [
     "ReconstructConfig",
     "Reconstruction",
+    "PLAIN_SDF",
     "PLANNERS",
     "METHODS",
     "WHOLE_SHAPE_METHODS",
@@ -66,6 +67,17 @@ WHOLE_SHAPE_METHODS = method_names(per_part=False)
 (:mod:`slicerecon.surface.baselines`); planners and carving apply to the others only."""
 INTERPOLATIONS = ("pchip", "linear")
 MESH_FORMATS = ("stl", "ply", "obj")
+PLAIN_SDF: dict[str, Any] = {
+    "method": "sdf",
+    "planner": "none",
+    "carve": False,
+    "interpolation": "linear",
+    "join_drift": False,
+}
+"""Keyword arguments of :func:`reconstruct` for the baseline every table beats:
+plain signed-distance (shape-based) interpolation between the planes, linear
+across them, one part, no projections (Raya & Udupa 1990)."""
+
 PLANNING_MAX_GRID = 192
 """Planners see at most this many voxels along a side: larger grids are planned on
 a pooled copy (:func:`slicerecon.partition.planner.plan_partition`, ``max_grid``)
@@ -116,6 +128,10 @@ class ReconstructConfig:
     between planes falls short of them (``docs/method.md``, section 7; chosen on
     the real-anatomy development half). Silhouettes derived from the sections
     themselves are never covered."""
+    join_drift: bool = True
+    """With ``method="sdf"``: join regions of consecutive planes that overlap
+    nothing on the other plane, blending their distances along the shift between
+    them (:mod:`slicerecon.surface.drift`; a slanted rod stays one piece)."""
     mesh_format: str = "stl"
     """Output mesh format: stl, ply or obj."""
     label: int | str | None = None
@@ -265,6 +281,7 @@ def reconstruct(
     keep_field: bool = False,
     upsample: int | None = None,
     cover: bool = True,
+    join_drift: bool = True,
 ) -> Reconstruction:
     """Reconstruct a watertight surface from cross-sections and projections.
 
@@ -315,6 +332,12 @@ def reconstruct(
         projections derived from the sections (``projections.source ==
         "sections"``, the choice for contour inputs) there is nothing to add,
         and covering them measured worse (``docs/method.md``, section 7).
+    join_drift : bool
+        With the signed-distance surfaces: regions of two consecutive planes
+        that overlap nothing on the other plane and are each other's nearest
+        are joined by a blend that moves along the shift between them
+        (:mod:`slicerecon.surface.drift`), so that a structure that drifts by
+        more than its width between planes stays one piece.
 
     Returns
     -------
@@ -362,6 +385,7 @@ def reconstruct(
             upsample=(upsample or axis_upsample(sections)) if entry.implicit_carve else 1,
             keep_field=keep_field,
             cover=cover and implicit_carve and projections.source != "sections",
+            join_drift=join_drift,
         )
         mesh, occupancy = surface.mesh, surface.occupancy
     if carve and entry.carved and not implicit_carve:
@@ -516,6 +540,7 @@ def run_case(
         smooth=config.smooth,
         carve=config.carve,
         cover=config.cover,
+        join_drift=config.join_drift,
         max_parts=config.max_parts,
         weights=config.weights,
         interpolation=config.interpolation,

@@ -332,6 +332,37 @@ def _side_view(
     return image
 
 
+def _drifting_layers(sections: CrossSections) -> list[tuple[int, NDArray[np.bool_]]]:
+    """The regions that join drifting pairs sweep on the grid layers between planes.
+
+    Per pair of consecutive planes, the pairs of
+    :func:`~slicerecon.surface.drift.drifting_pairs` (regions that overlap
+    nothing on the other plane) and, on each grid layer strictly between the
+    planes, the in-plane mask of their moving blend
+    (:func:`~slicerecon.surface.drift.moving_blend`): what the signed-distance
+    surface adds there, so that the derived silhouettes hold it too.
+    """
+    from .surface.drift import consecutive_drifting_pairs, moving_blend
+    from .surface.sdf import plane_signed_distance
+
+    spacing = sections.spacing[list(sections.plane_axes)]
+    w = sections.indices
+    n_rows = sections.grid_shape[sections.axis]
+    drift = consecutive_drifting_pairs(
+        sections.masks, w, spacing, float(sections.spacing[sections.axis])
+    )
+    layers = []
+    for p, pairs in drift.items():
+        rows = np.arange(max(math.floor(w[p]) + 1, 0), min(math.ceil(w[p + 1]), n_rows))
+        for lower, upper, shift_px in pairs:
+            d_a = plane_signed_distance(lower, spacing)
+            d_b = plane_signed_distance(upper, spacing)
+            for row in rows:
+                t = float((row - w[p]) / (w[p + 1] - w[p]))
+                layers.append((int(row), moving_blend(d_a, d_b, shift_px, t) < 0))
+    return layers
+
+
 def projections_from_sections(sections: CrossSections) -> Projections:
     """Orthographic silhouettes derived from the cross-sections alone.
 
@@ -378,14 +409,18 @@ def projections_from_sections(sections: CrossSections) -> Projections:
     sections.require_foreground()
     s = sections.axis
     n_rows = sections.grid_shape[s]
-    views: dict[int, Projection] = {
-        s: Projection(np.asarray(sections.masks.any(axis=0)), s, sections.affine)
-    }
+    drifting = _drifting_layers(sections)
+    along = np.asarray(sections.masks.any(axis=0))
+    for _, region in drifting:
+        along |= region
+    views: dict[int, Projection] = {s: Projection(along, s, sections.affine)}
     for plane_dim, a in enumerate(sections.plane_axes, start=1):
         # (P, L): each plane's profile along the other in-plane axis b
         profiles = np.asarray(sections.masks.any(axis=plane_dim))
         b = next(ax for ax in sections.plane_axes if ax != a)
         image = _side_view(profiles, sections.indices, n_rows)  # rows along s, columns along b
+        for row, region in drifting:
+            image[row] |= region.any(axis=plane_dim - 1)
         if b < s:
             image = image.T
         views[a] = Projection(image, a, sections.affine)

@@ -150,6 +150,7 @@ def reconstruct_structures(
     interpolation: str = "pchip",
     carve: bool = True,
     cover: bool = True,
+    join_drift: bool = True,
     max_parts: int = 8,
     weights: str | None = None,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
@@ -167,7 +168,7 @@ def reconstruct_structures(
     slices, every, axis
         Plane choice over the union of the structures
         (:func:`slicerecon.reconstruct.prepare_inputs`).
-    planner, interpolation, carve, cover, max_parts, weights
+    planner, interpolation, carve, cover, join_drift, max_parts, weights
         As for :func:`slicerecon.reconstruct.reconstruct`, for every structure.
     method : {"sdf"}
         The joint resolution works on signed distances: ``sdf`` only.
@@ -236,6 +237,7 @@ def reconstruct_structures(
         interpolation=interpolation,
         carve=carve,
         cover=cover,
+        join_drift=join_drift,
         max_parts=max_parts,
         weights=weights,
     )
@@ -266,6 +268,7 @@ def reconstruct_sparse_structures(
     interpolation: str = "pchip",
     carve: bool = True,
     cover: bool = True,
+    join_drift: bool = True,
     max_parts: int = 8,
     weights: str | None = None,
 ) -> StructuresReconstruction:
@@ -281,7 +284,7 @@ def reconstruct_sparse_structures(
         All the ROIs' planes together (:func:`slicerecon.io.rtstruct.read_rtstruct_structures`).
     coordinates : {"RAS", "LPS"}
         The world frame of the grid (LPS for DICOM).
-    planner, method, interpolation, carve, cover, max_parts, weights
+    planner, method, interpolation, carve, cover, join_drift, max_parts, weights
         As for :func:`reconstruct_structures`; each ROI's silhouettes are
         derived from its own sections.
 
@@ -307,6 +310,7 @@ def reconstruct_sparse_structures(
         interpolation=interpolation,
         carve=carve,
         cover=cover,
+        join_drift=join_drift,
         max_parts=max_parts,
         weights=weights,
     )
@@ -496,6 +500,7 @@ def run_structures_case(
         "interpolation": config.interpolation,
         "carve": config.carve,
         "cover": config.cover,
+        "join_drift": config.join_drift,
         "max_parts": config.max_parts,
         "weights": config.weights,
     }

@@ -8,8 +8,8 @@ Inference reconstructs every part with the default surface of
 interpolation across planes with PCHIP, extended to the box faces following
 the visual hull, carved by the hull. :func:`part_surface_voxels` is exactly
 that part's voxel occupancy (:func:`slicerecon.surface.part.part_voxels` with
-``method="sdf"``, ``interpolation="pchip"`` and the hull, intersected with the
-hull). The torch environment uses it (``reward_surface="exact"``, the
+``method="sdf"``, ``interpolation="pchip"``, drifting regions joined and the
+hull, intersected with the hull). The torch environment uses it (``reward_surface="exact"``, the
 default) or a batched surrogate of it (:mod:`slicerecon.policy.surrogate`)
 whose agreement is measured in ``docs/policy.md``
 (``benchmarks/reward_agreement.py``).
@@ -49,6 +49,8 @@ SURFACE_METHOD = "sdf"
 
 SURFACE_INTERPOLATION = "pchip"
 """Its interpolation across planes (``ReconstructConfig.interpolation``'s default)."""
+SURFACE_JOIN_DRIFT = True
+"""Whether drifting regions are joined (``ReconstructConfig.join_drift``'s default)."""
 
 
 def part_surface_voxels(
@@ -70,12 +72,17 @@ def part_surface_voxels(
     -------
     ndarray of shape box.shape, bool
         ``part_voxels(sections, box, method="sdf", hull=hull,
-        interpolation="pchip") & hull[box.slices]``.
+        interpolation="pchip", join_drift=True) & hull[box.slices]``.
     """
     from ..surface.part import part_voxels
 
     voxels = part_voxels(
-        sections, box, method=SURFACE_METHOD, hull=hull, interpolation=SURFACE_INTERPOLATION
+        sections,
+        box,
+        method=SURFACE_METHOD,
+        hull=hull,
+        interpolation=SURFACE_INTERPOLATION,
+        join_drift=SURFACE_JOIN_DRIFT,
     )
     return voxels & hull[box.slices]
 

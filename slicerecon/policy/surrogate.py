@@ -7,7 +7,7 @@ extended to the box faces along the visual hull, carved by the hull
 (:mod:`slicerecon.surface.sdf`, ``docs/method.md``). It costs a few
 milliseconds per part in numpy, too slow for thousands of environment steps
 per second. :func:`surrogate_parts` computes the same field for a batch of
-parts at once on torch tensors, with two simplifications:
+parts at once on torch tensors, with three simplifications:
 
 * **In-plane distances** are each plane's signed distance over the whole
   plane (computed once per episode, :func:`slicerecon.policy.reward.plane_distances`),
@@ -19,6 +19,9 @@ parts at once on torch tensors, with two simplifications:
 * **Extensions** from the first / last plane in the box to the box faces are
   prisms (the plane's distance repeated) instead of following the hull's
   extent layer by layer; the carve by the hull removes what lies outside it.
+* **Drifting regions** (a region that overlaps nothing on the next plane,
+  :mod:`slicerecon.surface.drift`) are not joined: between such planes the
+  surrogate has the plain blend, which closes both regions off.
 
 Everything else is the library's rule: the planes used (inside the box, or
 the two either side of a box that holds none), PCHIP through them with the
@@ -26,8 +29,8 @@ Fritsch–Carlson slopes (linear for two planes, the library's float32 linear
 blend when a plane's substitute for emptiness is missing), a plane that is
 empty inside the crop replaced by the depth of its deepest neighbour, the
 sign test of the float32 field, the carve. On a part whose box holds the
-whole shape with a free border and whose ends are planes, the surrogate
-equals the library exactly (tested); ``benchmarks/reward_agreement.py``
+whole shape with a free border, whose ends are planes and where no region
+drifts, the surrogate equals the library exactly (tested); ``benchmarks/reward_agreement.py``
 measures the agreement on random parts (``docs/policy.md``).
 
 Grids have unit voxels (the training episodes' identity affine) and the

@@ -87,6 +87,7 @@ def reconstruct_part(
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
 ) -> trimesh.Trimesh | None:
     """Reconstruct one part from the sections inside its box.
 
@@ -124,7 +125,12 @@ def reconstruct_part(
         return None if solid is None else from_manifold(solid, transform=sections.affine)
     try:
         return sdf_mesh(
-            sections, box=box, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+            sections,
+            box=box,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=interpolation,
+            join_drift=join_drift,
         )
     except EmptyMaskError:
         return None
@@ -138,6 +144,7 @@ def part_voxels(
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
 ) -> NDArray[np.bool_]:
     """Voxel occupancy of a part's reconstruction on the reference grid, inside its box.
 
@@ -175,7 +182,12 @@ def part_voxels(
         )
     if method == "sdf":
         field, _ = sdf_field(
-            sections, box=box, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+            sections,
+            box=box,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=interpolation,
+            join_drift=join_drift,
         )
         return field < 0
     from ..rasterize import mesh_to_mask
@@ -197,6 +209,7 @@ def reconstruct_parts(
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
     carve: NDArray[np.bool_] | None = None,
     upsample: int = 1,
     cover: bool = False,
@@ -246,6 +259,7 @@ def reconstruct_parts(
         extend_to_box=extend_to_box,
         hull=hull,
         interpolation=interpolation,
+        join_drift=join_drift,
         carve=carve,
         upsample=upsample,
         cover=cover,
@@ -282,6 +296,7 @@ def reconstruct_surface(
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
     carve: NDArray[np.bool_] | None = None,
     upsample: int = 1,
     keep_field: bool = False,
@@ -303,7 +318,12 @@ def reconstruct_surface(
     if method == "hybrid":
         solids = [
             _hybrid_solid(
-                sections, b, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+                sections,
+                b,
+                extend_to_box=extend_to_box,
+                hull=hull,
+                interpolation=interpolation,
+                join_drift=join_drift,
             )
             for b in boxes
         ]
@@ -331,6 +351,7 @@ def reconstruct_surface(
             extend_to_box=extend_to_box,
             hull=hull,
             interpolation=interpolation,
+            join_drift=join_drift,
             carve=carve,
             upsample=upsample,
             keep_field=keep_field,
@@ -350,13 +371,19 @@ def _hybrid_solid(
     extend_to_box: bool,
     hull: NDArray[np.bool_] | None,
     interpolation: str = "linear",
+    join_drift: bool = False,
 ) -> manifold3d.Manifold | None:
     """One part of the ``"hybrid"`` method as a solid in voxel index coordinates."""
     if correspondence_is_simple(sections, box):
         return loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
     try:
         mesh = sdf_mesh(
-            sections, box=box, extend_to_box=extend_to_box, hull=hull, interpolation=interpolation
+            sections,
+            box=box,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=interpolation,
+            join_drift=join_drift,
         )
     except EmptyMaskError:
         return None

@@ -49,6 +49,7 @@ from scipy import ndimage
 
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..sections import Box, CrossSections, Volume
+from .drift import join_drifting_regions
 from .extension import LayerMap, check_hull, extension_maps, interpolate_maps
 from .marching import march_field
 from .silhouettes import carve_field
@@ -152,6 +153,7 @@ def _box_field(
     extend_to_box: bool,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
 ) -> NDArray[np.float32]:
     """Interpolated signed distance on the samples of ``box``, axis first.
 
@@ -187,6 +189,17 @@ def _box_field(
     if used.size and crop[used].any():
         distances = {int(p): plane_signed_distance(crop[p], spacing) for p in used}
         _fill_between(field, samples, w, used, distances, interpolation)
+        if join_drift:
+            join_drifting_regions(
+                field,
+                samples,
+                w,
+                used,
+                crop,
+                spacing,
+                float(sections.spacing[axis]),
+                plane_signed_distance,
+            )
         first, last = int(used[0]), int(used[-1])
         if bounded and extend_to_box:
             # <= and >=: a box holding one plane has no interpolated sample on it.
@@ -374,6 +387,7 @@ def sdf_field(
     extend_to_box: bool = False,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
 ) -> tuple[NDArray[np.float32], NDArray[np.float64]]:
     """The interpolated signed distance on the (box of the) reference grid.
 
@@ -428,6 +442,7 @@ def sdf_field(
         extend_to_box=extend_to_box,
         hull=hull,
         interpolation=interpolation,
+        join_drift=join_drift,
     )
     out = np.ascontiguousarray(np.moveaxis(field, 0, sections.axis))
     affine = sections.affine @ _to_index(sections, region.lo, upsample, pad=0)
@@ -443,6 +458,7 @@ def sdf_interpolate(
     extend_to_box: bool = False,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
 ) -> Volume:
     """Shape-based interpolation of the sections onto the (box of the) reference grid.
 
@@ -467,6 +483,7 @@ def sdf_interpolate(
         extend_to_box=extend_to_box,
         hull=hull,
         interpolation=interpolation,
+        join_drift=join_drift,
     )
     return Volume(field < 0, affine)
 
@@ -479,6 +496,7 @@ def sdf_mesh(
     extend_to_box: bool = False,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
 ) -> trimesh.Trimesh:
     """Closed surface of the SDF-interpolated shape (marching cubes), world mm.
 
@@ -508,6 +526,7 @@ def sdf_mesh(
         extend_to_box=extend_to_box,
         hull=hull,
         interpolation=interpolation,
+        join_drift=join_drift,
     )
     return _mesh(sections, _mirror_pad(field), region.lo, upsample)
 
@@ -520,6 +539,7 @@ def sdf_parts_mesh(
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
     carve: NDArray[np.bool_] | None = None,
     cover: bool = False,
 ) -> trimesh.Trimesh:
@@ -569,6 +589,7 @@ def sdf_parts_mesh(
         extend_to_box=extend_to_box,
         hull=hull,
         interpolation=interpolation,
+        join_drift=join_drift,
         carve=carve,
         cover=cover,
     )
@@ -583,6 +604,7 @@ def _parts_union(
     extend_to_box: bool,
     hull: NDArray[np.bool_] | None,
     interpolation: str,
+    join_drift: bool,
     carve: NDArray[np.bool_] | None,
     cover: bool = False,
 ) -> tuple[NDArray[np.float32], tuple[int, int, int], tuple[int, int, int]]:
@@ -610,6 +632,7 @@ def _parts_union(
             extend_to_box=extend_to_box,
             hull=hull,
             interpolation=interpolation,
+            join_drift=join_drift,
         )
         if not np.any(part < 0):
             raise EmptyMaskError("no part's box holds any section foreground")
@@ -629,6 +652,7 @@ def _parts_union(
             extend_to_box=extend_to_box,
             hull=hull,
             interpolation=interpolation,
+            join_drift=join_drift,
         )
         if not np.any(part < 0):
             continue
@@ -705,6 +729,7 @@ def sdf_parts_surface(
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
     interpolation: str = "linear",
+    join_drift: bool = False,
     carve: NDArray[np.bool_] | None = None,
     keep_field: bool = False,
     cover: bool = False,
@@ -723,6 +748,7 @@ def sdf_parts_surface(
         extend_to_box=extend_to_box,
         hull=hull,
         interpolation=interpolation,
+        join_drift=join_drift,
         carve=carve,
         cover=cover,
     )
