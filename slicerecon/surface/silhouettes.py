@@ -152,9 +152,14 @@ def cover_silhouettes(
     them. Rays along ``axis`` are left alone: they cross every interpolated
     layer, so the missing voxel has no good place along them.
 
+    Covered samples that join no part of the shape (a lone ray's sample, which
+    marching cubes would turn into a speck of its own) are given back their
+    field values: the cover only grows the shape, it never adds pieces.
+
     ``union`` and ``inside`` share their shape (samples in grid axis order).
     """
     shape_inside = union < 0
+    added: list[tuple[tuple[NDArray[np.intp], ...], NDArray[np.float32]]] = []
     for ray_axis in (ax for ax in range(3) if ax != axis):
         missed = np.any(inside, axis=ray_axis) & ~np.any(shape_inside, axis=ray_axis)
         lines = np.nonzero(missed)  # each missed ray by its indices on the other two axes
@@ -165,5 +170,43 @@ def cover_silhouettes(
         rays = np.where(held, values[lines], np.inf)
         near = held & (rays <= rays.min(axis=1, keepdims=True) + depth)
         ray, along = np.nonzero(near)
-        values[lines[0][ray], lines[1][ray], along] = -level
-        np.moveaxis(shape_inside, ray_axis, -1)[lines[0][ray], lines[1][ray], along] = True
+        index: list[NDArray[np.intp]] = [along, along, along]
+        others = [ax for ax in range(3) if ax != ray_axis]
+        index[others[0]], index[others[1]] = lines[0][ray], lines[1][ray]
+        where = tuple(index)
+        added.append((where, union[where].copy()))
+        union[where] = -level
+        shape_inside[where] = True
+    if added:
+        _drop_lone_cover(union, shape_inside, added)
+
+
+def _drop_lone_cover(
+    union: NDArray[np.float32],
+    shape_inside: NDArray[np.bool_],
+    added: list[tuple[tuple[NDArray[np.intp], ...], NDArray[np.float32]]],
+) -> None:
+    """Give back their values to covered samples not 6-connected to the uncovered shape.
+
+    Only the bounding box of the covered samples grown by one sample is
+    labelled: a covered piece that reaches the shape does so through an
+    uncovered inside sample next to it, which lies in that box.
+    """
+    from scipy import ndimage
+
+    coords = np.concatenate([np.stack(where) for where, _ in added], axis=1)
+    lo = np.maximum(coords.min(axis=1) - 1, 0)
+    hi = np.minimum(coords.max(axis=1) + 2, union.shape)
+    box = tuple(slice(int(a), int(b)) for a, b in zip(lo, hi, strict=True))
+    covered = np.zeros(tuple(int(b - a) for a, b in zip(lo, hi, strict=True)), dtype=bool)
+    covered[tuple(coords - lo[:, None])] = True
+    labels, _ = ndimage.label(shape_inside[box])
+    kept = np.unique(labels[shape_inside[box] & ~covered])
+    lone = ~np.isin(labels, kept) & covered
+    if not lone.any():
+        return
+    lone_at = np.zeros(union.shape, dtype=bool)
+    lone_at[box] = lone
+    for where, before in reversed(added):  # the first cover's values last: the originals
+        back = lone_at[where]
+        union[tuple(w[back] for w in where)] = before[back]

@@ -12,7 +12,7 @@ from slicerecon.errors import EmptyMaskError
 from slicerecon.metrics import evaluate
 from slicerecon.reconstruct import prepare_inputs, reconstruct
 from slicerecon.sampling import projections_from_sections, projections_from_volume, visual_hull
-from slicerecon.sections import Volume
+from slicerecon.sections import CrossSections, Volume
 from slicerecon.shapes import make_shape
 from slicerecon.surface.carve import carve
 
@@ -120,3 +120,24 @@ def test_silhouettes_derived_from_the_sections_are_not_covered() -> None:
     carved = reconstruct(sections, derived, planner="none", cover=False).occupancy
     assert covered is not None and carved is not None
     np.testing.assert_array_equal(covered.mask, carved.mask)
+
+
+def test_the_cover_adds_no_piece_of_its_own() -> None:
+    # A rod whose discs (radius 5 mm) move 8 mm along x per 4 mm plane: the
+    # blend between planes thins, and rays of the side silhouettes miss it. Each
+    # covered sample must join the shape; a lone one would be a speck of its own.
+    shape = (90, 30, 40)
+    i, j, k = np.meshgrid(*(np.arange(n, dtype=np.float64) for n in shape), indexing="ij")
+    inside = (i - 8.0 - 2.0 * k) ** 2 + (j - 15.0) ** 2 <= 25.0
+    inside[:, :, :2] = False
+    inside[:, :, -2:] = False
+    volume = Volume(inside, np.eye(4))
+    planes = list(range(4, 37, 4))
+    sections = CrossSections(
+        np.stack([inside[:, :, p] for p in planes]), np.asarray(planes, float), 2, np.eye(4), shape
+    )
+    projections = projections_from_volume(volume)
+    covered = reconstruct(sections, projections, planner="none")
+    carved = reconstruct(sections, projections, planner="none", cover=False)
+    assert len(covered.mesh.split(only_watertight=False)) == 1
+    assert covered.mesh.volume > carved.mesh.volume

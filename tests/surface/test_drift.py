@@ -56,8 +56,9 @@ def test_a_slanted_rod_is_one_watertight_piece(source: str) -> None:
     apart = reconstruct(sections, projections, join_drift=False)
     assert joined.mesh.is_watertight and joined.mesh.is_volume
     assert len(joined.mesh.split(only_watertight=False)) == 1
-    assert len(apart.mesh.split(only_watertight=False)) > 1
-    assert _iou(joined.mesh, rod) >= _iou(apart.mesh, rod) + 0.05
+    if source == "sections":  # with the dense silhouettes the cover bridges some gaps
+        assert len(apart.mesh.split(only_watertight=False)) > 1
+    assert _iou(joined.mesh, rod) >= _iou(apart.mesh, rod) + 0.1
     assert _iou(joined.mesh, rod) >= 0.8
 
 
