@@ -188,25 +188,36 @@ def _drop_lone_cover(
 ) -> None:
     """Give back their values to covered samples not 6-connected to the uncovered shape.
 
-    Only the bounding box of the covered samples grown by one sample is
-    labelled: a covered piece that reaches the shape does so through an
-    uncovered inside sample next to it, which lies in that box.
+    Works on the covered samples only (a few per missed ray), never on the
+    whole field: a covered sample is anchored when a 6-neighbour was inside
+    before the cover, and anchoring spreads to covered neighbours until
+    nothing changes.
     """
-    from scipy import ndimage
-
-    coords = np.concatenate([np.stack(where) for where, _ in added], axis=1)
-    lo = np.maximum(coords.min(axis=1) - 1, 0)
-    hi = np.minimum(coords.max(axis=1) + 2, union.shape)
-    box = tuple(slice(int(a), int(b)) for a, b in zip(lo, hi, strict=True))
-    covered = np.zeros(tuple(int(b - a) for a, b in zip(lo, hi, strict=True)), dtype=bool)
-    covered[tuple(coords - lo[:, None])] = True
-    labels, _ = ndimage.label(shape_inside[box])
-    kept = np.unique(labels[shape_inside[box] & ~covered])
-    lone = ~np.isin(labels, kept) & covered
-    if not lone.any():
+    shape = np.asarray(union.shape)
+    flat = np.unique(np.concatenate([np.ravel_multi_index(w, union.shape) for w, _ in added]))
+    coords = np.stack(np.unravel_index(flat, union.shape))  # (3, n)
+    neighbours = []  # per offset: (in-grid mask, flat indices of the neighbours in the grid)
+    for ax in range(3):
+        for step in (-1, 1):
+            moved = coords.copy()
+            moved[ax] += step
+            ok = (moved[ax] >= 0) & (moved[ax] < shape[ax])
+            neighbours.append((ok, np.ravel_multi_index(moved[:, ok], union.shape)))
+    anchored = np.zeros(flat.size, dtype=bool)
+    for ok, nb in neighbours:
+        was_inside = shape_inside[np.unravel_index(nb, union.shape)] & ~np.isin(nb, flat)
+        anchored[np.flatnonzero(ok)[was_inside]] = True
+    while True:
+        held = flat[anchored]
+        grown = anchored.copy()
+        for ok, nb in neighbours:
+            grown[np.flatnonzero(ok)[np.isin(nb, held)]] = True
+        if np.array_equal(grown, anchored):
+            break
+        anchored = grown
+    lone = flat[~anchored]
+    if lone.size == 0:
         return
-    lone_at = np.zeros(union.shape, dtype=bool)
-    lone_at[box] = lone
     for where, before in reversed(added):  # the first cover's values last: the originals
-        back = lone_at[where]
+        back = np.isin(np.ravel_multi_index(where, union.shape), lone)
         union[tuple(w[back] for w in where)] = before[back]
