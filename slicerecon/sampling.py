@@ -335,32 +335,24 @@ def _side_view(
 def _drifting_layers(sections: CrossSections) -> list[tuple[int, NDArray[np.bool_]]]:
     """The regions that join drifting pairs sweep on the grid layers between planes.
 
-    Per pair of consecutive planes, the pairs of
-    :func:`~slicerecon.surface.drift.drifting_pairs` (regions that overlap
-    nothing on the other plane) and, on each grid layer strictly between the
-    planes, the in-plane mask of their moving blend
-    (:func:`~slicerecon.surface.drift.moving_blend`): what the signed-distance
-    surface adds there, so that the derived silhouettes hold it too.
+    Per grid row strictly between two consecutive planes, the in-plane mask
+    of each drifting pair's moving blend there
+    (:func:`~slicerecon.surface.drift.swept_blends`): what the signed-distance
+    surface adds, so that the derived silhouettes hold it too.
     """
-    from .surface.drift import consecutive_drifting_pairs, moving_blend
+    from .surface.drift import swept_blends
     from .surface.sdf import plane_signed_distance
 
-    spacing = sections.spacing[list(sections.plane_axes)]
-    w = sections.indices
-    n_rows = sections.grid_shape[sections.axis]
-    drift = consecutive_drifting_pairs(
-        sections.masks, w, spacing, float(sections.spacing[sections.axis])
+    rows = np.arange(sections.grid_shape[sections.axis], dtype=np.float64)
+    blends = swept_blends(
+        sections.masks,
+        sections.indices,
+        rows,
+        sections.spacing[list(sections.plane_axes)],
+        float(sections.spacing[sections.axis]),
+        plane_signed_distance,
     )
-    layers = []
-    for p, pairs in drift.items():
-        rows = np.arange(max(math.floor(w[p]) + 1, 0), min(math.ceil(w[p + 1]), n_rows))
-        for lower, upper, shift_px in pairs:
-            d_a = plane_signed_distance(lower, spacing)
-            d_b = plane_signed_distance(upper, spacing)
-            for row in rows:
-                t = float((row - w[p]) / (w[p + 1] - w[p]))
-                layers.append((int(row), moving_blend(d_a, d_b, shift_px, t) < 0))
-    return layers
+    return [(row, blend < 0) for row, blend in blends]
 
 
 def projections_from_sections(sections: CrossSections) -> Projections:

@@ -29,7 +29,8 @@ regions that overlap their neighbours are left to the plain interpolation.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import functools
+from collections.abc import Callable, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +41,7 @@ __all__ = [
     "drifting_pairs",
     "join_drifting_regions",
     "moving_blend",
+    "swept_blends",
 ]
 
 _EIGHT = np.ones((3, 3), dtype=bool)
@@ -163,20 +165,17 @@ def consecutive_drifting_pairs(
         ``i`` → the pairs between planes ``i`` and ``i + 1``, for the ``i``
         that have any.
     """
-    labels: dict[int, _Labels] = {}
-
-    def labelled(i: int) -> Callable[[], _Labels]:
-        def get() -> _Labels:
-            if i not in labels:
-                labels[i] = _label(masks[i])
-            return labels[i]
-
-        return get
-
+    label = functools.cache(lambda i: _label(masks[i]))
     out = {}
     for i in range(len(masks) - 1):
         gap = float(w[i + 1] - w[i]) * axis_spacing
-        pairs = _pairs(masks[i], masks[i + 1], (labelled(i), labelled(i + 1)), spacing, gap)
+        pairs = _pairs(
+            masks[i],
+            masks[i + 1],
+            (functools.partial(label, i), functools.partial(label, i + 1)),
+            spacing,
+            gap,
+        )
         if pairs:
             out[i] = pairs
     return out
@@ -214,6 +213,49 @@ def moving_blend(
     return ((1.0 - t) * lower + t * upper).astype(np.float32)
 
 
+def swept_blends(
+    masks: NDArray[np.bool_],
+    w: NDArray[np.float64],
+    positions: NDArray[np.float64],
+    spacing: NDArray[np.float64],
+    axis_spacing: float,
+    distance: Callable[[NDArray[np.bool_], NDArray[np.float64]], NDArray[np.float32]],
+) -> Iterator[tuple[int, NDArray[np.float32]]]:
+    """The moving blend of every drifting pair on every layer strictly between its planes.
+
+    Parameters
+    ----------
+    masks : ndarray of shape (P, M, N), bool
+        The planes' masks, in order along the section axis.
+    w : ndarray of shape (P,)
+        Their positions along the section axis, index units.
+    positions : ndarray of shape (S,)
+        Positions of the layers to blend onto along the section axis, index units
+        (field samples, or grid rows).
+    spacing : ndarray of shape (2,)
+        In-plane pixel size, mm.
+    axis_spacing : float
+        Voxel size along the section axis, mm.
+    distance : callable
+        ``distance(mask, spacing)``: the in-plane signed distance of a mask
+        (:func:`~slicerecon.surface.sdf.plane_signed_distance`).
+
+    Yields
+    ------
+    k : int
+        Index into ``positions`` of a layer between the pair's planes.
+    blend : ndarray of shape (M, N), float32
+        The pair's :func:`moving_blend` there (mm, negative inside).
+    """
+    for i, pairs in consecutive_drifting_pairs(masks, w, spacing, axis_spacing).items():
+        between = np.flatnonzero((positions > w[i]) & (positions < w[i + 1]))
+        for lower, upper, shift_px in pairs:
+            d_a, d_b = distance(lower, spacing), distance(upper, spacing)
+            for k in between:
+                t = float((positions[k] - w[i]) / (w[i + 1] - w[i]))
+                yield int(k), moving_blend(d_a, d_b, shift_px, t)
+
+
 def join_drifting_regions(
     field: NDArray[np.float32],
     samples: NDArray[np.float64],
@@ -223,7 +265,7 @@ def join_drifting_regions(
     spacing: NDArray[np.float64],
     axis_spacing: float,
     distance: Callable[[NDArray[np.bool_], NDArray[np.float64]], NDArray[np.float32]],
-) -> int:
+) -> None:
     """Add the moving blend of every drifting pair of regions to ``field``, in place.
 
     Parameters
@@ -239,29 +281,9 @@ def join_drifting_regions(
         The planes interpolated into ``field``, in order.
     masks : ndarray of shape (P, M, N), bool
         The planes' masks on the field's in-plane grid.
-    spacing : ndarray of shape (2,)
-        In-plane pixel size, mm.
-    axis_spacing : float
-        Voxel size along the section axis, mm.
-    distance : callable
-        ``distance(mask, spacing)``: the in-plane signed distance of a mask
-        (:func:`~slicerecon.surface.sdf.plane_signed_distance`).
-
-    Returns
-    -------
-    int
-        How many pairs were joined.
+    spacing, axis_spacing, distance
+        As for :func:`swept_blends`.
     """
-    joined = 0
     order = np.asarray(used, dtype=np.int64)
-    drift = consecutive_drifting_pairs(masks[order], w[order], spacing, axis_spacing)
-    for i, pairs in drift.items():
-        p, q = int(order[i]), int(order[i + 1])
-        sel = np.flatnonzero((samples > w[p]) & (samples < w[q]))
-        for lower, upper, shift_px in pairs:
-            d_a, d_b = distance(lower, spacing), distance(upper, spacing)
-            for k in sel:
-                t = float((samples[k] - w[p]) / (w[q] - w[p]))
-                np.minimum(field[k], moving_blend(d_a, d_b, shift_px, t), out=field[k])
-            joined += 1
-    return joined
+    for k, blend in swept_blends(masks[order], w[order], samples, spacing, axis_spacing, distance):
+        np.minimum(field[k], blend, out=field[k])
