@@ -70,6 +70,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "sdf-carve-only": {"method": "sdf", "planner": "heuristic", "cover": False},
     "sdf-cover-none": {"method": "sdf", "planner": "none"},
     "sdf-no-drift": {"join_drift": False},
+    "sdf-policy": {"planner": "policy"},
 }
 """Variant name → keyword arguments of :func:`slicerecon.reconstruct.reconstruct`.
 
@@ -95,6 +96,7 @@ VARIANT_NOTES: dict[str, str] = {
     "sdf-cover-none": "sdf, PCHIP, carved and covering, one part (no planner)",
     "sdf-no-drift": "the default until 2026-12-02: as the default, but regions that overlap "
     "nothing on the next plane are not joined",
+    "sdf-policy": "the default surface with the learned planner (the shipped `il_rl` actor)",
 }
 
 DEFAULT_VARIANTS = ("sdf-plain", "default", "loft-heuristic", "itk-mci")
@@ -572,14 +574,27 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--timings", action="store_true", help="add a seconds column to the CSV (not reproducible)"
     )
+    parser.add_argument(
+        "--policy-weights",
+        default="",
+        help="comma-separated actor files (.safetensors): each adds a variant "
+        "policy-<file stem>, the default surface planned by that actor",
+    )
     parser.add_argument("--out", type=Path, default=Path("docs/results_real.md"))
     args = parser.parse_args(argv)
+    for item in (w.strip() for w in args.policy_weights.split(",") if w.strip()):
+        path = Path(item)
+        if not path.is_file():
+            parser.error(f"--policy-weights: no such file {item}")
+        VARIANTS[f"policy-{path.stem}"] = {"planner": "policy", "weights": str(path.resolve())}
+        VARIANT_NOTES[f"policy-{path.stem}"] = f"the default surface planned by the actor `{item}`"
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     logging.getLogger("slicerecon").setLevel(logging.ERROR)
 
     protocol, cases = load_split(args.split)
     halves = ("dev", "val") if args.half == "both" else (args.half,)
     wanted = [v.strip() for v in args.variants.split(",") if v.strip()]
+    wanted += [v for v in VARIANTS if v.startswith("policy-") and v not in wanted]
     unknown = [v for v in wanted if v not in VARIANTS]
     if unknown:
         parser.error(f"unknown variants {unknown}; choose from {list(VARIANTS)}")

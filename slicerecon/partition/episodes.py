@@ -29,6 +29,7 @@ __all__ = [
     "ShapePool",
     "fit_to_cube",
     "shape_occupancy",
+    "real_occupancy",
     "episode_sections",
     "occupancy_hull",
 ]
@@ -117,6 +118,91 @@ def shape_occupancy(name: str, *, seed: int, grid: int, margin: int = 1) -> NDAr
     raise OptionError(f"could not fit shape {name!r} (seed {seed}) into a {grid}^3 grid")
 
 
+def real_occupancy(
+    name: str,
+    *,
+    grid: int,
+    stretch: Sequence[float] = (1.0, 1.0, 1.0),
+    margin: int = 1,
+    mesh_resolution: int = 64,
+) -> NDArray[np.bool_]:
+    """A real shape (:mod:`slicerecon.realshapes`) resampled into ``grid^3``, optionally stretched.
+
+    The shape is loaded from its installed package, its world extent (mm) is
+    multiplied by ``stretch`` per grid axis, and it is resampled (Gaussian
+    anti-aliasing, linear interpolation, threshold 0.5) onto isotropic voxels
+    sized so that the longest stretched side spans ``grid - 2 * margin``
+    voxels; then centred (:func:`fit_to_cube`). Anisotropic ``stretch`` is the
+    training augmentation "anisotropic rescaling".
+
+    Parameters
+    ----------
+    name : str
+        A registered real shape (:func:`slicerecon.realshapes.real_shape_names`).
+    grid : int
+        Side of the cubic grid, voxels.
+    stretch : sequence of 3 floats, optional
+        Scale factor of each axis (> 0).
+    margin : int, optional
+        Empty voxels kept on each side.
+    mesh_resolution : int, optional
+        Voxels across a mesh source's longest side before resampling.
+
+    Returns
+    -------
+    ndarray of shape (grid, grid, grid), bool
+
+    Raises
+    ------
+    OptionError
+        If ``name`` is unknown, ``stretch`` is not 3 positive numbers or the
+        grid is too small.
+    DependencyError
+        If the shape's source package is not installed.
+    EmptyMaskError
+        If the shape vanishes at this grid size.
+    """
+    import inspect
+
+    from scipy import ndimage
+
+    from ..realshapes import REAL_SHAPES, real_shape
+
+    factors = np.asarray(stretch, dtype=np.float64)
+    if factors.shape != (3,) or not np.all(np.isfinite(factors)) or np.any(factors <= 0):
+        raise OptionError(f"stretch must be 3 positive numbers (got {stretch!r})")
+    inner = int(grid) - 2 * int(margin)
+    if inner < 4:
+        raise OptionError(f"grid {grid} is too small for margin {margin}")
+    options: dict[str, object] = {}
+    loader = getattr(REAL_SHAPES.get(name), "func", REAL_SHAPES.get(name))
+    if loader is not None and "resolution" in inspect.signature(loader).parameters:
+        options["resolution"] = int(mesh_resolution)
+    volume = real_shape(name, **options)
+    box = Box.of_mask(volume.mask)
+    field = volume.mask[box.slices].astype(np.float32)
+    extent_mm = np.asarray(box.shape, dtype=np.float64) * volume.spacing * factors
+    voxel = float(extent_mm.max()) / inner
+    for _ in range(20):
+        new = np.maximum(np.floor(extent_mm / voxel), 1).astype(np.int64)
+        zoom = new / np.asarray(field.shape, dtype=np.float64)
+        sigma = np.maximum(0.5, (1.0 / zoom - 1.0) / 2.0)
+        blurred = ndimage.gaussian_filter(np.pad(field, 2), sigma, mode="constant")
+        padded = np.asarray(blurred.shape) * zoom
+        out = (
+            ndimage.zoom(
+                blurred, padded / blurred.shape, order=1, grid_mode=True, mode="grid-constant"
+            )
+            > 0.5
+        )
+        if not out.any():
+            raise EmptyMaskError(f"real shape {name!r} vanished in a {grid}^3 grid")
+        if max(Box.of_mask(out).shape) <= inner:
+            return fit_to_cube(out, int(grid))
+        voxel *= 1.03
+    raise OptionError(f"could not fit real shape {name!r} into a {grid}^3 grid")
+
+
 @dataclass(frozen=True)
 class ShapePool:
     """Occupancy grids training episodes are drawn from.
@@ -135,16 +221,49 @@ class ShapePool:
     seeds: tuple[int, ...]
 
     @classmethod
-    def build(cls, names: Sequence[str], seeds: Sequence[int], *, grid: int) -> ShapePool:
-        """Every family in ``names`` with every seed in ``seeds``, on a ``grid^3`` cube."""
-        if not names or not seeds:
+    def build(
+        cls,
+        names: Sequence[str],
+        seeds: Sequence[int],
+        *,
+        grid: int,
+        real: Sequence[str] = (),
+        real_variants: int = 1,
+        max_stretch: float = 1.5,
+    ) -> ShapePool:
+        """Every family in ``names`` with every seed in ``seeds``, on a ``grid^3`` cube.
+
+        ``real`` adds real shapes (:func:`real_occupancy`): each as it is and
+        ``real_variants - 1`` copies stretched by factors drawn uniformly in
+        ``[1, max_stretch]`` per axis (seeded by the variant number, the
+        name ``"real:<name>"`` and seed ``k`` for variant ``k``). A real shape
+        whose package is missing is skipped with a warning.
+        """
+        from ..errors import DependencyError
+
+        if not seeds or not (names or real):
             raise OptionError("a shape pool needs at least one family and one seed")
+        if int(real_variants) < 1 or not float(max_stretch) >= 1.0:
+            raise OptionError("real_variants must be >= 1 and max_stretch >= 1")
         grids, out_names, out_seeds = [], [], []
         for name in names:
             for seed in seeds:
                 grids.append(shape_occupancy(name, seed=int(seed), grid=grid))
                 out_names.append(str(name))
                 out_seeds.append(int(seed))
+        for name in real:
+            for k in range(int(real_variants)):
+                rng = np.random.default_rng(k)
+                stretch = (1.0, 1.0, 1.0) if k == 0 else rng.uniform(1.0, max_stretch, 3)
+                try:
+                    grids.append(real_occupancy(name, grid=grid, stretch=stretch))
+                except DependencyError as exc:
+                    logger.warning("real shape %s skipped: %s", name, exc)
+                    break
+                out_names.append(f"real:{name}")
+                out_seeds.append(k)
+        if not grids:
+            raise OptionError("the shape pool is empty (no family and no installed real shape)")
         logger.info("shape pool: %d grids of %d^3", len(grids), grid)
         return cls(np.stack(grids), tuple(out_names), tuple(out_seeds))
 

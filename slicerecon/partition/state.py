@@ -3,7 +3,9 @@
 One episode partitions a shape ``O`` (a boolean occupancy grid) into parts:
 each step applies one cut to the remaining region ``R``, separates the part
 ``W_i`` (:func:`~slicerecon.partition.cuts.split`) and scores it with the
-paper's reward ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)``.
+paper's reward ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)`` or, with
+``reward="gain"``, with the change the part makes to the IoU of the whole
+reconstruction with ``O`` (:data:`REWARD_KINDS`, :func:`gain_rewards`).
 ``docs/method.md`` (section 3) states the rules.
 
 The reward and the end of an episode are written once, as functions of voxel
@@ -35,14 +37,31 @@ __all__ = [
     "iou",
     "count_iou",
     "part_rewards",
+    "gain_rewards",
     "episode_done",
     "NOOP_REWARD",
+    "REWARD_KINDS",
 ]
 
 logger = logging.getLogger(__name__)
 
 NOOP_REWARD: float = 0.0
 """Reward of a step whose action is degenerate or removes nothing (the step still counts)."""
+
+REWARD_KINDS = ("paper", "gain")
+"""What a step's reward measures.
+
+``"paper"``: the part itself, ``R_i = IoU(W_i, O) + lam * IoU(S_i, W_i)``
+(Cut-and-Approximate, eq. 1): each part adds up to ``1 + lam``, so the return
+grows with the number of parts whatever they do to the result.
+``"gain"``: the change of the potential ``Phi = IoU(S_1 ∪ ... ∪ S_i ∪ S_R, O)``,
+the IoU with ``O`` of the parts' reconstructions and of the remaining region
+``R`` reconstructed as one last part (what :meth:`PartitionState.finish`
+would make of it). The return telescopes to the episode's final IoU less the
+IoU of one part (potential-based shaping, Ng, Harada & Russell 1999): the
+objective the planner is judged by, so a cut that makes the result worse is
+punished and stopping (a no-op, reward 0) is worth as much as keeping it.
+"""
 
 Reconstruct = Callable[[Box], NDArray[np.bool_]]
 
@@ -141,6 +160,22 @@ def part_rewards(
     return first + float(lam) * np.asarray(iou_reconstruction, dtype=np.float64)
 
 
+def gain_rewards(before: ArrayLike, after: ArrayLike) -> NDArray[np.float64]:
+    """The ``"gain"`` reward of new parts: the change of the potential ``Phi``.
+
+    Parameters
+    ----------
+    before, after : ndarray of shape (B,)
+        ``Phi`` (see :data:`REWARD_KINDS`) before and after the step.
+
+    Returns
+    -------
+    ndarray of shape (B,), float64
+        ``after - before``; a no-op step gets :data:`NOOP_REWARD` instead.
+    """
+    return np.asarray(after, dtype=np.float64) - np.asarray(before, dtype=np.float64)
+
+
 def episode_done(
     remaining_voxels: ArrayLike,
     occupied_voxels: ArrayLike,
@@ -185,7 +220,10 @@ class PartitionState:
         (e.g. ``functools.partial(part_voxels, sections)``). None skips the
         second reward term.
     lam : float, optional
-        Weight ``lambda`` of the reconstruction term.
+        Weight ``lambda`` of the reconstruction term (``reward="paper"``).
+    reward : {"paper", "gain"}, optional
+        What a step's reward measures (:data:`REWARD_KINDS`); ``"gain"``
+        needs ``reconstruct``.
     max_steps : int, optional
         The episode ends after this many steps (no-op steps count).
     min_remaining : float, optional
@@ -211,6 +249,7 @@ class PartitionState:
         *,
         reconstruct: Reconstruct | None = None,
         lam: float = 1.0,
+        reward: str = "paper",
         max_steps: int = 8,
         min_remaining: float = 0.02,
         max_corners: int = 32,
@@ -226,6 +265,10 @@ class PartitionState:
             raise EmptyMaskError("the occupancy is empty: nothing to partition")
         if not np.isfinite(lam) or lam < 0:
             raise OptionError(f"lam must be a finite number >= 0 (got {lam})")
+        if reward not in REWARD_KINDS:
+            raise OptionError(f"reward must be one of {', '.join(REWARD_KINDS)} (got {reward!r})")
+        if reward == "gain" and reconstruct is None:
+            raise OptionError('reward="gain" needs a reconstruct function')
         if int(max_steps) < 0:
             raise OptionError(f"max_steps must be >= 0 (got {max_steps})")
         if not 0.0 <= float(min_remaining) < 1.0:
@@ -236,6 +279,7 @@ class PartitionState:
         self.occupancy.setflags(write=False)
         self.reconstruct = reconstruct
         self.lam = float(lam)
+        self.reward_kind = reward
         self.max_steps = int(max_steps)
         self.min_remaining = float(min_remaining)
         self.max_corners = int(max_corners)
@@ -246,6 +290,8 @@ class PartitionState:
         self.step_count = 0
         self._corners: tuple[NDArray[np.float64], ...] | None = None
         self._finished = False
+        self._recon: NDArray[np.bool_] = np.zeros(self.occupancy.shape, dtype=bool)
+        self._potential: float | None = None
 
     # -- observation ---------------------------------------------------------------
     @property
@@ -303,24 +349,68 @@ class PartitionState:
         return np.stack([p for p, _ in pairs]), np.stack([v for _, v in pairs])
 
     # -- transitions ---------------------------------------------------------------
-    def _score(self, w: NDArray[np.bool_], box: Box) -> tuple[float, float | None]:
-        iou_part = iou(w, self.occupancy)
-        if self.reconstruct is None:
-            return iou_part, None
+    def _reconstruction(self, box: Box) -> NDArray[np.bool_]:
+        assert self.reconstruct is not None
         s = np.asarray(self.reconstruct(box))
         if s.shape != box.shape:
             raise GeometryError(
                 f"reconstruct(box) returned shape {s.shape}, expected the box shape {box.shape}"
             )
-        return iou_part, iou(s.astype(bool), w[box.slices])
+        return s.astype(bool, copy=False)
+
+    def potential(self) -> float:
+        """``Phi``: IoU with ``O`` of the parts' reconstructions and of ``R`` as a last part.
+
+        The ``"gain"`` reward's potential (:data:`REWARD_KINDS`); after
+        :meth:`finish` it is the IoU of the finished partition's reconstruction.
+
+        Raises
+        ------
+        OptionError
+            Without a ``reconstruct`` function.
+        """
+        if self.reconstruct is None:
+            raise OptionError("the potential needs a reconstruct function")
+        if self._potential is None:
+            union = self._recon.copy()
+            if self.remaining.any():
+                box = Box.of_mask(self.remaining)
+                union[box.slices] |= self._reconstruction(box)
+            self._potential = iou(union, self.occupancy)
+        return self._potential
 
     def _make_part(self, w: NDArray[np.bool_], cut: Cut | None) -> tuple[Part, dict[str, Any]]:
+        """Score the part ``w``; the caller then sets the remaining region without it."""
         box = Box.of_mask(w)
-        iou_part, iou_rec = self._score(w, box)
-        rec = None if iou_rec is None else [iou_rec]
-        reward = float(part_rewards([iou_part], rec, lam=self.lam)[0])
+        iou_part = iou(w, self.occupancy)
+        if self.reconstruct is None:
+            reward = float(part_rewards([iou_part], None, lam=self.lam)[0])
+            return Part(box, int(np.count_nonzero(w)), reward, cut), {
+                "iou_part": iou_part,
+                "iou_reconstruction": None,
+            }
+        before = self.potential() if self.reward_kind == "gain" else 0.0
+        s = self._reconstruction(box)
+        iou_rec = iou(s, w[box.slices])
+        self._recon[box.slices] |= s
+        if self.reward_kind == "gain":
+            after = self._potential_without(w)
+            reward = float(gain_rewards([before], [after])[0])
+        else:
+            self._potential = None
+            reward = float(part_rewards([iou_part], [iou_rec], lam=self.lam)[0])
         part = Part(box, int(np.count_nonzero(w)), reward, cut)
         return part, {"iou_part": iou_part, "iou_reconstruction": iou_rec}
+
+    def _potential_without(self, w: NDArray[np.bool_]) -> float:
+        """``Phi`` once ``w`` has left the remaining region (its ``S`` already counted)."""
+        rest = self.remaining & ~w
+        union = self._recon.copy()
+        if rest.any():
+            box = Box.of_mask(rest)
+            union[box.slices] |= self._reconstruction(box)
+        self._potential = iou(union, self.occupancy)
+        return self._potential
 
     def _set_remaining(self, rest: NDArray[np.bool_]) -> None:
         rest.setflags(write=False)

@@ -46,9 +46,11 @@ from ..partition.episodes import ShapePool, episode_sections, occupancy_hull
 from ..partition.heuristic import expert_action
 from ..partition.state import (
     NOOP_REWARD,
+    REWARD_KINDS,
     PartitionState,
     count_iou,
     episode_done,
+    gain_rewards,
     part_rewards,
 )
 from ..sections import Box, CrossSections
@@ -247,6 +249,12 @@ class CutEnv:
         per episode (:func:`~slicerecon.partition.episodes.episode_sections`).
     augment : bool, optional
         Randomly permute and flip the grid axes of each drawn shape.
+    reward : {"paper", "gain"}, optional
+        What a step's reward measures
+        (:data:`~slicerecon.partition.state.REWARD_KINDS`): the paper's
+        ``IoU(W_i, O) + lam IoU(S_i, W_i)``, or the change of the IoU of the
+        whole reconstruction with ``O`` (the remaining region counted as a
+        last part), whose return is the episode's final IoU less one part's.
     reward_surface : {"exact", "surrogate"}, optional
         The reward's reconstruction ``S_i``: ``"exact"`` (the default) is the
         part surface of inference
@@ -270,6 +278,7 @@ class CutEnv:
         lam: float = 1.0,
         planes: tuple[int, int] = (8, 16),
         augment: bool = True,
+        reward: str = "paper",
         reward_surface: str = "exact",
         device: str | torch.device = "cpu",
         seed: int = 0,
@@ -291,6 +300,8 @@ class CutEnv:
         lo_p, hi_p = (int(p) for p in planes)
         if not 1 <= lo_p <= hi_p:
             raise OptionError(f"planes must be (min, max) with 1 <= min <= max (got {planes})")
+        if reward not in REWARD_KINDS:
+            raise OptionError(f"reward must be one of {', '.join(REWARD_KINDS)} (got {reward!r})")
         if reward_surface not in REWARD_SURFACES:
             raise OptionError(
                 f"reward_surface must be one of {', '.join(REWARD_SURFACES)} "
@@ -307,6 +318,7 @@ class CutEnv:
         self.lam = float(lam)
         self.planes = (lo_p, hi_p)
         self.augment = bool(augment)
+        self.reward_kind = reward
         self.reward_surface = reward_surface
         self.device = torch.device(device)
         self.rng = np.random.default_rng(seed)
@@ -326,6 +338,7 @@ class CutEnv:
         self.n_occupied = np.ones(b, dtype=np.int64)
         self._steps = np.zeros(b, dtype=np.int64)
         self.returns = np.zeros(b, dtype=np.float64)
+        self.potential = np.zeros(b, dtype=np.float64)
         self.n_parts = np.zeros(b, dtype=np.int64)
         self.corner_px = np.zeros((b, 3, k, 2), dtype=np.float64)
         self.corner_norm = np.zeros((b, 3, k, 2), dtype=np.float64)
@@ -427,6 +440,9 @@ class CutEnv:
             self._steps[env] = 0
             self.returns[env] = 0.0
             self.n_parts[env] = 0
+        if self.reward_kind == "gain":
+            idx = torch.tensor(list(envs), device=self.device)
+            self.potential[list(envs)] = self._potentials(idx, self.remaining[idx], self.recon[idx])
         self._refresh_corners(list(envs))
 
     def reset(self, seed: int | None = None, *, shapes: Sequence[int] | None = None) -> Observation:
@@ -655,7 +671,16 @@ class CutEnv:
         )
         iou_part = count_iou(sums[0], self.n_occupied)
         iou_rec = count_iou(sums[1], sums[2])
-        reward = np.where(noop, NOOP_REWARD, part_rewards(iou_part, iou_rec, lam=self.lam))
+        if self.reward_kind == "gain":
+            after = self.potential.copy()
+            if parts.numel():
+                after[~noop] = self._potentials(
+                    parts, self.remaining[parts] & ~w[parts], self.recon[parts] | s[parts]
+                )
+            reward = np.where(noop, NOOP_REWARD, gain_rewards(self.potential, after))
+            self.potential = after
+        else:
+            reward = np.where(noop, NOOP_REWARD, part_rewards(iou_part, iou_rec, lam=self.lam))
         self.last_step = StepRecord(
             cuts,
             removes_nothing,
@@ -701,23 +726,34 @@ class CutEnv:
             torch.from_numpy(n_parts).to(dev),
         )
 
+    def _potentials(
+        self, envs: torch.Tensor, remaining: torch.Tensor, recon: torch.Tensor
+    ) -> NDArray[np.float64]:
+        """IoU with ``O`` of ``recon`` and the remaining region's reconstruction as one part.
+
+        ``Phi`` of :data:`~slicerecon.partition.state.REWARD_KINDS` for episodes
+        ``envs`` (n,), given their remaining regions and parts' union (n, G, G, G).
+        """
+        lo, hi = self._boxes(remaining)
+        left = remaining.flatten(1).any(dim=1)
+        union = recon.clone()
+        rows = torch.nonzero(left).flatten()
+        if rows.numel():
+            union[rows] |= self._reconstruct(envs[rows], lo[rows], hi[rows])
+        occ = self.occupancy[envs]
+        sums = (
+            torch.stack([(union & occ).sum(dim=(1, 2, 3)), (union | occ).sum(dim=(1, 2, 3))])
+            .cpu()
+            .numpy()
+        )
+        return count_iou(sums[0], sums[1])
+
     def _finish(self, envs: list[int]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """IoU of ``∪ S_i`` with ``O`` for ended episodes, the leftover region a last part."""
         idx = torch.tensor(envs, device=self.device)
         rem = self.remaining[idx]
-        lo, hi = self._boxes(rem)
-        left = rem.flatten(1).any(dim=1)
-        recon = self.recon[idx].clone()
-        rows = torch.nonzero(left).flatten()
-        if rows.numel():
-            recon[rows] |= self._reconstruct(idx[rows], lo[rows], hi[rows])
-        occ = self.occupancy[idx]
-        sums = (
-            torch.stack([(recon & occ).sum(dim=(1, 2, 3)), (recon | occ).sum(dim=(1, 2, 3))])
-            .cpu()
-            .numpy()
-        )
-        return count_iou(sums[0], sums[1]), self.n_parts[envs] + left.cpu().numpy()
+        left = rem.flatten(1).any(dim=1).cpu().numpy()
+        return self._potentials(idx, rem, self.recon[idx]), self.n_parts[envs] + left
 
 
 def observe_state(

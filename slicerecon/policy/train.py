@@ -45,6 +45,7 @@ import torch
 
 from ..errors import FormatError, InputError, OptionError
 from ..partition.episodes import ShapePool
+from ..partition.state import REWARD_KINDS
 from .buffers import ReplayBuffer
 from .checkpoint import load_checkpoint, save_checkpoint
 from .ddpg import DDPG, TARGET_UPDATES
@@ -69,7 +70,7 @@ logger = logging.getLogger(__name__)
 EVAL_SEED_OFFSET = 10_000
 """Evaluation shapes use seeds from here on; training seeds stay below it."""
 
-CONFIG_NAMES = ("ddpg", "il", "il_rl")
+CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain", "il_gain", "il_rl_gain")
 """The shipped configs in ``slicerecon/policy/configs/``."""
 
 NOISES = ("gaussian", "ou")
@@ -100,6 +101,15 @@ class TrainConfig:
     """Seed of torch and numpy (network init, episode draws, noise, minibatches)."""
     shapes: tuple[str, ...] = ()
     """Shape families to train on; empty: every family ``slicerecon.shapes`` registers."""
+    real_shapes: tuple[str, ...] = ()
+    """Real shapes (:mod:`slicerecon.realshapes` names) added to the training pool
+    (:func:`~slicerecon.partition.episodes.real_occupancy`); only ever the
+    development half of ``benchmarks/real_split.toml`` (a test checks the
+    shipped configs). Missing source packages are skipped with a warning."""
+    real_variants: int = 1
+    """Copies of each real shape in the pool: as it is, then stretched per axis."""
+    max_stretch: float = 1.5
+    """Largest per-axis stretch of a real shape's copies (anisotropic rescaling)."""
     train_shapes: int = 16
     """Seeds per family for training (seeds ``0 .. train_shapes - 1``)."""
     eval_shapes: int = 3
@@ -115,7 +125,11 @@ class TrainConfig:
     min_remaining: float = 0.02
     """An episode ends when less than this fraction of the shape remains."""
     lam: float = 1.0
-    """Weight ``lambda`` of the reconstruction term of the reward."""
+    """Weight ``lambda`` of the reconstruction term of the paper's reward."""
+    reward: str = "paper"
+    """What a step's reward measures: ``paper`` (``IoU(W_i, O) + lam IoU(S_i, W_i)``)
+    or ``gain`` (the change of the whole reconstruction's IoU with ``O``,
+    :data:`~slicerecon.partition.state.REWARD_KINDS`)."""
     planes_min: int = 8
     """Fewest section planes (along z) the reward reconstructs a part from."""
     planes_max: int = 16
@@ -163,6 +177,10 @@ class TrainConfig:
     """Apply the Q-filter to the cloning loss."""
     bc_on_agent: bool = True
     """Clone the expert on agent samples too (needs the expert at every agent state)."""
+    expert_stops: bool = False
+    """Where the heuristic has no useful cut left, its action is the stop (a
+    degenerate no-op, all zeros) and is demonstrated and cloned as such;
+    False: such states have no expert action (the actor never learns to stop)."""
     noise: str = "gaussian"
     """Exploration noise: ``gaussian`` or ``ou`` (Ornstein-Uhlenbeck)."""
     noise_sigma: float = 0.1
@@ -184,6 +202,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "shapes", tuple(str(s) for s in self.shapes))
+        object.__setattr__(self, "real_shapes", tuple(str(s) for s in self.real_shapes))
         positive = (
             "train_shapes",
             "eval_shapes",
@@ -203,6 +222,7 @@ class TrainConfig:
             "log_every",
             "checkpoint_every",
             "planes_min",
+            "real_variants",
         )
         for name in positive:
             value = getattr(self, name)
@@ -223,6 +243,12 @@ class TrainConfig:
                 f"reward_surface must be one of {', '.join(REWARD_SURFACES)} "
                 f"(got {self.reward_surface!r})"
             )
+        if self.reward not in REWARD_KINDS:
+            raise OptionError(
+                f"reward must be one of {', '.join(REWARD_KINDS)} (got {self.reward!r})"
+            )
+        if not self.max_stretch >= 1.0:
+            raise OptionError(f"max_stretch must be >= 1 (got {self.max_stretch!r})")
         if self.noise not in NOISES:
             raise OptionError(f"noise must be one of {', '.join(NOISES)} (got {self.noise!r})")
         if self.target_update not in TARGET_UPDATES:
@@ -256,6 +282,7 @@ class TrainConfig:
         """JSON-ready dict of every field."""
         d = dataclasses.asdict(self)
         d["shapes"] = list(self.shapes)
+        d["real_shapes"] = list(self.real_shapes)
         return d
 
 
@@ -301,8 +328,9 @@ def load_config(source: str | os.PathLike[str], **overrides: Any) -> TrainConfig
             f"{path}: unknown setting(s) {', '.join(unknown)}; see TrainConfig for the fields"
         )
     data.update({k: v for k, v in overrides.items() if v is not None})
-    if "shapes" in data:
-        data["shapes"] = tuple(data["shapes"])
+    for key in ("shapes", "real_shapes"):
+        if key in data:
+            data[key] = tuple(data[key])
     try:
         return TrainConfig(**data)
     except TypeError as exc:
@@ -371,6 +399,7 @@ def _make_env(
         lam=config.lam,
         planes=(config.planes_min, config.planes_max),
         augment=augment,
+        reward=config.reward,
         reward_surface=config.reward_surface,
         device=device,
         seed=seed,
@@ -435,12 +464,19 @@ class _Noise:
         return self.state.copy()
 
 
-def _collect_demos(env: CutEnv, buffer: ReplayBuffer, episodes: int, seed: int) -> float:
-    """Roll out the heuristic into ``buffer``; returns the mean demonstration return."""
+def _collect_demos(
+    env: CutEnv, buffer: ReplayBuffer, episodes: int, seed: int, *, stops: bool = False
+) -> float:
+    """Roll out the heuristic into ``buffer``; returns the mean demonstration return.
+
+    With ``stops``, the step where the expert has no cut left is demonstrated
+    too, as the stop action (all zeros: a degenerate no-op).
+    """
     obs = env.reset(seed=seed)
     finished, returns = 0, []
     while finished < episodes:
-        actions, valid = env.expert_actions()
+        actions, has_cut = env.expert_actions()
+        valid = np.ones_like(has_cut) if stops else has_cut
         if not valid.any():  # the expert has no cut in any slot: those episodes are over
             finished += env.n_envs
             obs = env.reset()
@@ -457,10 +493,10 @@ def _collect_demos(env: CutEnv, buffer: ReplayBuffer, episodes: int, seed: int) 
             act[valid],
             torch.ones(int(valid.sum())),
         )
-        done = out.done.cpu().numpy() | ~valid
+        done = out.done.cpu().numpy() | ~has_cut
         finished += int(done.sum())
         returns.extend(out.episode_return.cpu().numpy()[out.done.cpu().numpy()].tolist())
-        stuck = [int(e) for e in np.flatnonzero(~valid)]
+        stuck = [int(e) for e in np.flatnonzero(~has_cut)]
         if stuck:
             env._start(stuck, [env._draw(e, None) for e in stuck])  # noqa: SLF001
         obs = env.observation()
@@ -570,7 +606,14 @@ def train(
     np_rng = np.random.default_rng(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
     names = _shape_names(config)
-    train_pool = ShapePool.build(names, range(config.train_shapes), grid=config.grid)
+    train_pool = ShapePool.build(
+        names,
+        range(config.train_shapes),
+        grid=config.grid,
+        real=config.real_shapes,
+        real_variants=config.real_variants,
+        max_stretch=config.max_stretch,
+    )
     eval_pool = ShapePool.build(
         names, range(EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + config.eval_shapes), grid=config.grid
     )
@@ -639,7 +682,9 @@ def train(
         heuristic_iou, _ = evaluate_actor(_expert_policy, eval_env, seed=eval_seed)
         logger.info("heuristic expert on the held-out shapes: IoU %.4f", heuristic_iou)
         if config.demo_episodes:
-            demo_return = _collect_demos(env, demos, config.demo_episodes, config.seed)
+            demo_return = _collect_demos(
+                env, demos, config.demo_episodes, config.seed, stops=config.expert_stops
+            )
             logger.info("%d demonstration transitions (mean return %.3f)", len(demos), demo_return)
         obs = env.reset(seed=config.seed + 2)
     (outdir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
@@ -675,6 +720,8 @@ def train(
             actions = actions.clamp(0.0, 1.0)
         if need_expert:
             ea, ev = env.expert_actions()
+            if config.expert_stops:
+                ev = np.ones_like(ev)  # no cut left: the expert stops (zeros)
         else:
             ea, ev = np.zeros((config.n_envs, 5), np.float32), np.zeros(config.n_envs, bool)
         step = env.step(actions)

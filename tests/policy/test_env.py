@@ -48,6 +48,7 @@ def _reference(env: CutEnv, i: int, surface: str) -> PartitionState:
         occ,
         reconstruct=recon,
         lam=env.lam,
+        reward=env.reward_kind,
         max_steps=env.max_steps,
         min_remaining=env.min_remaining,
         max_corners=env.max_corners,
@@ -80,6 +81,7 @@ def _run_contract(env: CutEnv, steps: int, seed: int, surface: str) -> dict[str,
     """Step env and numpy episodes in lockstep; every rule must agree exactly."""
     rng = np.random.default_rng(seed)
     states = [_reference(env, i, surface) for i in range(env.n_envs)]
+    starts = [s.potential() for s in states]
     seen = {"cuts": 0, "degenerate": 0, "removes_nothing": 0, "ends": 0}
     for _ in range(steps):
         actions = _actions(env, rng)
@@ -118,7 +120,13 @@ def _run_contract(env: CutEnv, steps: int, seed: int, surface: str) -> dict[str,
                 assert out.episode_return[i].item() == pytest.approx(
                     sum(p.reward for p in state.parts if p.cut is not None), abs=1e-5
                 )
+                if env.reward_kind == "gain":  # the return telescopes: final IoU - one part's
+                    assert out.episode_return[i].item() == pytest.approx(
+                        _final_iou(state) - starts[i], abs=1e-5
+                    )
+                    assert state.potential() == pytest.approx(_final_iou(state), abs=1e-12)
                 states[i] = _reference(env, i, surface)  # the env started a new episode
+                starts[i] = states[i].potential()
                 seen["ends"] += 1
             else:
                 np.testing.assert_array_equal(env.remaining[i].cpu().numpy(), state.remaining)
@@ -160,6 +168,49 @@ def test_env_reward_equals_partition_state_with_the_exact_surface(pool: ShapePoo
     env.load(list(pool.occupancies), n_planes=[9] * len(pool))
     seen = _run_contract(env, steps=12, seed=3, surface="exact")
     assert seen["cuts"] >= 15
+
+
+def test_env_gain_reward_equals_partition_state(pool: ShapePool) -> None:
+    """reward="gain": each step's reward is PartitionState's change of the whole IoU."""
+    env = CutEnv(
+        pool,
+        n_envs=len(pool),
+        resolution=32,
+        max_corners=12,
+        max_steps=5,
+        augment=False,
+        reward="gain",
+    )
+    env.load(list(pool.occupancies), n_planes=[9] * len(pool))
+    np.testing.assert_allclose(
+        env.potential,
+        [_reference(env, i, "exact").potential() for i in range(len(pool))],
+        atol=1e-12,
+    )
+    seen = _run_contract(env, steps=12, seed=3, surface="exact")
+    assert seen["cuts"] >= 15 and seen["ends"] >= 5
+
+
+def test_gain_reward_punishes_a_cut_that_lowers_the_iou() -> None:
+    """Halving a ball: two parts reconstruct it a little worse than one, so the gain is < 0."""
+    from slicerecon.partition.episodes import shape_occupancy
+    from slicerecon.policy.reward import episode_reconstruction
+
+    ball = shape_occupancy("sphere", seed=0, grid=24)
+    recon, _, _ = episode_reconstruction(ball, 6)
+    gain = PartitionState(ball, reconstruct=recon, reward="gain", max_corners=12)
+    paper = PartitionState(ball, reconstruct=recon, reward="paper", max_corners=12)
+    start = gain.potential()
+    cut = Cut(2, (0.5, 11.5), (23.5, 11.5))
+    g, p = gain.apply_cut(cut), paper.apply_cut(cut)
+    assert g.part is not None and p.part is not None
+    assert g.reward == pytest.approx(gain.potential() - start, abs=1e-12)
+    assert g.reward < 0
+    assert p.reward > 1.0  # the paper's reward pays for any part
+    with pytest.raises(OptionError):
+        PartitionState(ball, reward="gain")  # the gain needs a reconstruction
+    with pytest.raises(OptionError):
+        PartitionState(ball, reconstruct=recon, reward="area")
 
 
 def test_episodes_use_the_library_sections_and_hull(pool: ShapePool) -> None:

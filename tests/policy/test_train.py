@@ -223,3 +223,46 @@ def test_checkpoint_of_other_networks_is_refused_clearly(tmp_path: Path) -> None
     torch.save(ckpt, tmp_path / "checkpoint.pt")
     with pytest.raises(FormatError, match="does not fit"):
         train(cfg, out=tmp_path, resume=True)
+
+
+def test_gain_configs_train_only_on_development_real_shapes() -> None:
+    """The real shapes a shipped config trains on are all in the development half."""
+    import tomllib
+
+    split = Path(__file__).resolve().parents[2] / "benchmarks" / "real_split.toml"
+    cases = tomllib.loads(split.read_text())["cases"]
+    dev = {name for name, case in cases.items() if case["half"] == "dev"}
+    for name in ("ddpg_gain", "il_gain", "il_rl_gain"):
+        cfg = load_config(name)
+        assert cfg.name == name and cfg.reward == "gain"
+        assert cfg.real_shapes and set(cfg.real_shapes) <= dev, set(cfg.real_shapes) - dev
+        assert (cfg.planes_min, cfg.planes_max) == (6, 24)
+    assert load_config("il_rl_gain").expert_stops
+    with pytest.raises(OptionError):
+        TrainConfig(reward="area")
+
+
+def test_gain_reward_with_demonstrated_stops_trains_and_stops(tmp_path: Path) -> None:
+    """expert_stops: the no-cut states are demonstrated as the stop (zeros) and cloned."""
+    cfg = _il(reward="gain", expert_stops=True, total_updates=150, actor_lr=3e-3)
+    result = train(cfg, out=tmp_path / "run", device="cpu")
+    rows = _rows(result.log_path)
+    assert float(rows[-1]["bc_loss"]) < float(rows[0]["bc_loss"])
+    # a box has corners but no splitting segment: the expert stops at once, so does its clone
+    env = CutEnv(
+        ShapePool.build(["box"], [0], grid=24),
+        n_envs=1,
+        max_corners=8,
+        resolution=32,
+        max_steps=4,
+        reward="gain",
+        augment=False,
+    )
+    obs = env.reset(seed=0, shapes=[0])
+    assert env.corner_valid.sum() >= 4
+    with torch.no_grad():
+        action = result.agent.actor.eval()(obs)
+    out = env.step(action)
+    assert float(action.max()) < 0.05
+    assert env.last_step is not None and bool(env.last_step.cuts.degenerate[0])
+    assert bool(out.noop[0]) and out.reward[0].item() == 0.0
