@@ -29,6 +29,7 @@ import argparse
 import csv
 import io
 import logging
+import multiprocessing
 import os
 import shlex
 import sys
@@ -164,15 +165,16 @@ def _seed(*parts: object) -> int:
 _WARM: set[str] = set()
 
 
-def _warm_up(variants: Iterable[str]) -> None:
+def _warm_up(variants: Iterable[str], specs: dict[str, dict[str, Any]] | None = None) -> None:
     """Run each variant once on a tiny ball so first-call costs (ITK) are not timed."""
     from slicerecon.reconstruct import prepare_inputs, reconstruct
     from slicerecon.shapes import sphere
 
+    specs = VARIANTS if specs is None else specs
     sections, projections, _ = prepare_inputs(sphere(8.0), slices=5, projections="gt")
     for name in variants:
         if name not in _WARM:
-            reconstruct(sections, projections, **VARIANTS[name])
+            reconstruct(sections, projections, **specs[name])
             _WARM.add(name)
 
 
@@ -183,12 +185,18 @@ def run_case(
     axes: list[str],
     planes: list[int],
     variants: list[str],
+    specs: dict[str, dict[str, Any]] | None = None,
 ) -> list[dict[str, Any]]:
-    """Every (axis, planes, variant) row of one case."""
+    """Every (axis, planes, variant) row of one case.
+
+    ``specs`` maps variant names to their ``reconstruct()`` arguments (default
+    :data:`VARIANTS`; passed explicitly to worker processes, which are spawned).
+    """
     from slicerecon.reconstruct import prepare_inputs, reconstruct
 
+    specs = VARIANTS if specs is None else specs
     logging.getLogger("slicerecon").setLevel(logging.ERROR)
-    _warm_up(variants)
+    _warm_up(variants, specs)
     volume = load_case(name, protocol)
     base = {"half": info["half"], "stratum": info["stratum"], "case": name}
     rows: list[dict[str, Any]] = []
@@ -221,7 +229,7 @@ def run_case(
                 }
                 start = time.perf_counter()
                 try:
-                    result = reconstruct(sections, projections, **VARIANTS[variant])
+                    result = reconstruct(sections, projections, **specs[variant])
                 except SlicereconError as exc:
                     row.update(seconds=time.perf_counter() - start, error=str(exc))
                     rows.append(row)
@@ -658,9 +666,12 @@ def main(argv: list[str] | None = None) -> int:
             )
         rows.extend(case_rows)
 
-    task_args = [(n, cases[n], protocol, axes, planes, variants) for n in names]
+    specs = {v: VARIANTS[v] for v in variants}
+    task_args = [(n, cases[n], protocol, axes, planes, variants, specs) for n in names]
     if args.jobs > 1:
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        # spawned, not forked: the parent has run torch (the policy variants' warm-up)
+        spawn = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=args.jobs, mp_context=spawn) as pool:
             futures = [pool.submit(run_case, *a) for a in task_args]
             for future in as_completed(futures):
                 report(future.result())

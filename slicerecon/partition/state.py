@@ -290,7 +290,7 @@ class PartitionState:
         self.step_count = 0
         self._corners: tuple[NDArray[np.float64], ...] | None = None
         self._finished = False
-        self._recon: NDArray[np.bool_] = np.zeros(self.occupancy.shape, dtype=bool)
+        self._recon: NDArray[np.bool_] | None = None  # the parts' S, made when needed
         self._potential: float | None = None
 
     # -- observation ---------------------------------------------------------------
@@ -358,6 +358,12 @@ class PartitionState:
             )
         return s.astype(bool, copy=False)
 
+    def _union(self) -> NDArray[np.bool_]:
+        """The parts' reconstructions so far on the grid (allocated on first use)."""
+        if self._recon is None:
+            self._recon = np.zeros(self.occupancy.shape, dtype=bool)
+        return self._recon
+
     def potential(self) -> float:
         """``Phi``: IoU with ``O`` of the parts' reconstructions and of ``R`` as a last part.
 
@@ -372,7 +378,7 @@ class PartitionState:
         if self.reconstruct is None:
             raise OptionError("the potential needs a reconstruct function")
         if self._potential is None:
-            union = self._recon.copy()
+            union = self._union().copy()
             if self.remaining.any():
                 box = Box.of_mask(self.remaining)
                 union[box.slices] |= self._reconstruction(box)
@@ -392,7 +398,7 @@ class PartitionState:
         before = self.potential() if self.reward_kind == "gain" else 0.0
         s = self._reconstruction(box)
         iou_rec = iou(s, w[box.slices])
-        self._recon[box.slices] |= s
+        self._union()[box.slices] |= s
         if self.reward_kind == "gain":
             after = self._potential_without(w)
             reward = float(gain_rewards([before], [after])[0])
@@ -405,7 +411,7 @@ class PartitionState:
     def _potential_without(self, w: NDArray[np.bool_]) -> float:
         """``Phi`` once ``w`` has left the remaining region (its ``S`` already counted)."""
         rest = self.remaining & ~w
-        union = self._recon.copy()
+        union = self._union().copy()
         if rest.any():
             box = Box.of_mask(rest)
             union[box.slices] |= self._reconstruction(box)

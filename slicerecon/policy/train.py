@@ -195,6 +195,10 @@ class TrainConfig:
     """Weight of the penalty on the actor's pre-sigmoid outputs (with the DDPG loss)."""
     eval_every: int = 250
     """Updates between evaluations on the held-out shapes."""
+    keep_best: bool = False
+    """Also write ``actor_best.safetensors``: the actor of the evaluation with the
+    highest IoU (early stopping on the training's own evaluation shapes, seeds
+    ``EVAL_SEED_OFFSET + i``, never on a benchmark's held-out shapes)."""
     log_every: int = 50
     """Updates between CSV log rows."""
     checkpoint_every: int = 500
@@ -696,6 +700,21 @@ def train(
     window: dict[str, list[float]] = {}
     last: dict[str, float] = {}
     last_eval = float("nan")
+    best_eval = max(
+        (float(r["eval_iou"]) for r in rows if r.get("eval_iou") not in (None, "")),
+        default=-math.inf,
+    )
+
+    def meta(n_updates: int) -> dict[str, Any]:
+        return {
+            "grid": config.grid,
+            "max_steps": config.max_steps,
+            "config": config.to_dict(),
+            "n_updates": n_updates,
+            "families": names,
+            "real_shapes": list(config.real_shapes),
+            "heuristic_eval_iou": heuristic_iou,
+        }
 
     def checkpoint() -> None:
         state = {
@@ -783,6 +802,9 @@ def train(
                 }
                 row.update(eval_iou=iou, eval_return=ret)
                 last_eval = iou
+                if config.keep_best and iou > best_eval:
+                    best_eval = iou
+                    save_actor(agent.actor, outdir / "actor_best.safetensors", extra=meta(u))
                 logger.info("update %d: eval IoU %.4f (heuristic %.4f)", u, iou, heuristic_iou)
             if row is not None:
                 row["elapsed_s"] = round(elapsed_before + time.perf_counter() - start, 2)
@@ -804,18 +826,7 @@ def train(
         checkpoint()
     if writer is not None:
         writer.close()
-    actor_path = save_actor(
-        agent.actor,
-        outdir / "actor.safetensors",
-        extra={
-            "grid": config.grid,
-            "max_steps": config.max_steps,
-            "config": config.to_dict(),
-            "n_updates": agent.n_updates,
-            "families": names,
-            "heuristic_eval_iou": heuristic_iou,
-        },
-    )
+    actor_path = save_actor(agent.actor, outdir / "actor.safetensors", extra=meta(agent.n_updates))
     evals = [r["eval_iou"] for r in rows if "eval_iou" in r]
     return TrainResult(
         outdir,
