@@ -154,8 +154,8 @@ def test_env_follows_the_partition_rules(big_pool: ShapePool) -> None:
     assert seen["ends"] >= 200
 
 
-def test_env_reward_equals_partition_state_with_the_exact_surface(pool: ShapePool) -> None:
-    """reward_surface="exact": the reward is PartitionState's with inference's part surface."""
+def _exact_env(pool: ShapePool, *, reward: str) -> CutEnv:
+    """One episode per pool shape, 9 planes, the exact part surface."""
     env = CutEnv(
         pool,
         n_envs=len(pool),
@@ -163,25 +163,23 @@ def test_env_reward_equals_partition_state_with_the_exact_surface(pool: ShapePoo
         max_corners=12,
         max_steps=5,
         augment=False,
+        reward=reward,
         reward_surface="exact",
     )
     env.load(list(pool.occupancies), n_planes=[9] * len(pool))
+    return env
+
+
+def test_env_reward_equals_partition_state_with_the_exact_surface(pool: ShapePool) -> None:
+    """reward_surface="exact": the reward is PartitionState's with inference's part surface."""
+    env = _exact_env(pool, reward="paper")
     seen = _run_contract(env, steps=12, seed=3, surface="exact")
     assert seen["cuts"] >= 15
 
 
 def test_env_gain_reward_equals_partition_state(pool: ShapePool) -> None:
     """reward="gain": each step's reward is PartitionState's change of the whole IoU."""
-    env = CutEnv(
-        pool,
-        n_envs=len(pool),
-        resolution=32,
-        max_corners=12,
-        max_steps=5,
-        augment=False,
-        reward="gain",
-    )
-    env.load(list(pool.occupancies), n_planes=[9] * len(pool))
+    env = _exact_env(pool, reward="gain")
     np.testing.assert_allclose(
         env.potential,
         [_reference(env, i, "exact").potential() for i in range(len(pool))],
