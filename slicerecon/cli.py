@@ -519,7 +519,11 @@ def evaluate_dataset(
 @app.command()
 def train(
     config: Annotated[
-        str, typer.Option("--config", help="TOML file, or a shipped config: ddpg, il, il_rl.")
+        str,
+        typer.Option(
+            "--config",
+            help="TOML file, or a shipped config: ddpg, il, il_rl, ddpg_gain, il_gain, il_rl_gain.",
+        ),
     ] = "il_rl",
     device: Annotated[str, typer.Option(help="cpu or cuda.")] = "cpu",
     out: Annotated[Path | None, typer.Option("--out", help="Output directory.")] = None,
