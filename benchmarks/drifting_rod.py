@@ -24,6 +24,7 @@ from slicerecon.rasterize import mesh_to_mask
 from slicerecon.reconstruct import PLAIN_SDF, reconstruct
 from slicerecon.sampling import projections_from_sections, projections_from_volume
 from slicerecon.sections import CrossSections, Volume
+from slicerecon.shapes.primitives import slanted_rod
 
 RADIUS_MM = 5.0
 PLANE_GAP = 4
@@ -42,11 +43,7 @@ def rod(shift_mm: float) -> Volume:
     slope = shift_mm / PLANE_GAP
     depth = 40
     shape = (int(np.ceil(16 + slope * depth)), 30, depth)
-    i, j, k = np.meshgrid(*(np.arange(n, dtype=np.float64) for n in shape), indexing="ij")
-    inside = (i - 8.0 - slope * k) ** 2 + (j - 15.0) ** 2 <= RADIUS_MM**2
-    inside[:, :, :2] = False
-    inside[:, :, -2:] = False
-    return Volume(inside, np.eye(4))
+    return slanted_rod(radius=RADIUS_MM, slope=slope, shape=shape, start=8.0)
 
 
 def sections_of(volume: Volume) -> CrossSections:

@@ -1,4 +1,4 @@
-"""Primitive shapes: sphere, ellipsoid and box, with closed-form volumes."""
+"""Primitive shapes: sphere, ellipsoid and box, with closed-form volumes; a slanted rod."""
 
 from __future__ import annotations
 
@@ -93,3 +93,40 @@ def box(size: MmXYZ = (60.0, 40.0, 30.0), *, spacing: Spacing = 1.0, margin: int
         margin=margin,
         name="box",
     )
+
+
+def slanted_rod(
+    *,
+    radius: float,
+    slope: float,
+    shape: tuple[int, int, int],
+    start: float = 8.0,
+) -> Volume:
+    """A rod along z whose axis moves along x: a structure that drifts between planes.
+
+    On a grid of 1 mm voxels (identity affine): voxel ``(i, j, k)`` is inside
+    when ``(i - start - slope * k)**2 + (j - J / 2)**2 <= radius**2``; the first
+    and last two z layers are left empty, so the rod has flat ends inside the
+    grid. Not a registered family (it is the test and benchmark case of
+    :mod:`slicerecon.surface.drift`).
+
+    Parameters
+    ----------
+    radius : float
+        Radius of the rod's cross-section, mm (= voxels).
+    slope : float
+        Shift of the axis along x per z layer, voxels.
+    shape : tuple of 3 int
+        Grid shape ``(I, J, K)``; it must hold the rod (it is clipped otherwise).
+    start : float, optional
+        x index of the axis on layer 0.
+
+    Returns
+    -------
+    Volume
+    """
+    i, j, k = np.meshgrid(*(np.arange(n, dtype=np.float64) for n in shape), indexing="ij")
+    inside = (i - start - slope * k) ** 2 + (j - shape[1] / 2.0) ** 2 <= radius**2
+    inside[:, :, :2] = False
+    inside[:, :, -2:] = False
+    return Volume(inside, np.eye(4))

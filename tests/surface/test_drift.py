@@ -9,6 +9,7 @@ from slicerecon.rasterize import mesh_to_mask
 from slicerecon.reconstruct import reconstruct
 from slicerecon.sampling import projections_from_sections, projections_from_volume
 from slicerecon.sections import CrossSections, Volume
+from slicerecon.shapes.primitives import slanted_rod
 from slicerecon.surface.drift import drifting_pairs
 from slicerecon.surface.sdf import sdf_field
 
@@ -19,12 +20,7 @@ GAP = 4
 
 def _rod() -> Volume:
     """A rod of radius 5 mm along z whose axis moves 3 mm along x per 1 mm layer."""
-    shape = (130, 30, 40)
-    i, j, k = np.meshgrid(*(np.arange(n, dtype=np.float64) for n in shape), indexing="ij")
-    inside = (i - 8.0 - STEP * k) ** 2 + (j - 15.0) ** 2 <= RADIUS**2
-    inside[:, :, :2] = False
-    inside[:, :, -2:] = False
-    return Volume(inside, np.eye(4))
+    return slanted_rod(radius=RADIUS, slope=STEP, shape=(130, 30, 40), start=8.0)
 
 
 def _sections(volume: Volume) -> CrossSections:

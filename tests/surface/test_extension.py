@@ -9,6 +9,7 @@ from slicerecon.errors import GeometryError
 from slicerecon.rasterize import mesh_to_mask
 from slicerecon.sampling import projections_from_volume, visual_hull
 from slicerecon.sections import Box, CrossSections, Volume
+from slicerecon.shapes.primitives import slanted_rod
 from slicerecon.surface.extension import LayerMap, extension_maps, interpolate_maps
 from slicerecon.surface.loft import loft_solid
 from slicerecon.surface.part import reconstruct_part
@@ -16,12 +17,7 @@ from slicerecon.surface.part import reconstruct_part
 
 def _tube(slope: float, radius: float = 6.0, shape: tuple[int, int, int] = (60, 30, 64)) -> Volume:
     """A straight tube along z whose axis drifts by ``slope`` voxels along x per layer."""
-    i, j, k = np.meshgrid(*(np.arange(n, dtype=np.float64) for n in shape), indexing="ij")
-    centre = 12.0 + slope * k
-    inside = (i - centre) ** 2 + (j - 15.0) ** 2 <= radius**2
-    inside[:, :, :2] = False
-    inside[:, :, -2:] = False
-    return Volume(inside, np.eye(4))
+    return slanted_rod(radius=radius, slope=slope, shape=shape, start=12.0)
 
 
 def _sections(volume: Volume, planes: list[int]) -> CrossSections:
