@@ -59,9 +59,13 @@ class ReplayBuffer:
         Side ``R`` of the silhouettes.
     max_corners : int
         Corners per view ``K``.
+    advice : bool, optional
+        Also keep the observations' expert advice (:attr:`Observation.advice`).
     """
 
-    def __init__(self, capacity: int, *, resolution: int, max_corners: int) -> None:
+    def __init__(
+        self, capacity: int, *, resolution: int, max_corners: int, advice: bool = False
+    ) -> None:
         if int(capacity) < 1:
             raise OptionError(f"buffer capacity must be >= 1 (got {capacity})")
         n, r, k = int(capacity), int(resolution), int(max_corners)
@@ -72,6 +76,9 @@ class ReplayBuffer:
             self._data[prefix + "step"] = torch.zeros((n, 1))
             self._data[prefix + "corners"] = torch.zeros((n, 3, k, 2))
             self._data[prefix + "mask"] = torch.zeros((n, 3, k))
+            if advice:
+                self._data[prefix + "advice"] = torch.zeros((n, 6))
+        self.advice = bool(advice)
         self._data["actions"] = torch.zeros((n, 5))
         self._data["rewards"] = torch.zeros(n)
         self._data["dones"] = torch.zeros(n)
@@ -106,6 +113,10 @@ class ReplayBuffer:
             fields[prefix + "step"] = o.step
             fields[prefix + "corners"] = o.corners
             fields[prefix + "mask"] = o.corner_mask
+            if self.advice:
+                if o.advice is None:
+                    raise OptionError("this buffer keeps advice: observations must carry it")
+                fields[prefix + "advice"] = o.advice
         n = int(actions.shape[0])
         idx = (self.pos + torch.arange(n)) % self.capacity
         for key, value in fields.items():
@@ -132,6 +143,7 @@ class ReplayBuffer:
                 d[prefix + "step"],
                 d[prefix + "corners"],
                 d[prefix + "mask"],
+                d[prefix + "advice"] if self.advice else None,
             ).to(device)
 
         return ReplayBatch(

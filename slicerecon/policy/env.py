@@ -63,6 +63,7 @@ __all__ = [
     "StepRecord",
     "CutEnv",
     "resize_views",
+    "advice_vector",
     "observe_state",
 ]
 
@@ -85,25 +86,36 @@ class Observation(NamedTuple):
         Corner points per view, ``((row + .5) / M, (col + .5) / N)``; invalid rows 0.
     corner_mask : Tensor of shape (B, 3, K), float32
         1 for the rows that hold a corner.
+    advice : Tensor of shape (B, 6), float32, or None
+        The heuristic expert's action at this state and 1 where it has one
+        (``(x1, y1, x2, y2, c, valid)``; zeros where it has none, which is its
+        stop), for actors that take the expert's advice
+        (:attr:`~slicerecon.policy.networks.NetConfig.advice`); None otherwise.
     """
 
     views: torch.Tensor
     step: torch.Tensor
     corners: torch.Tensor
     corner_mask: torch.Tensor
+    advice: torch.Tensor | None = None
 
     def to(self, device: torch.device | str) -> Observation:
         """The same observation on ``device``."""
-        return Observation(*(t.to(device) for t in self))
+        return Observation(*(None if t is None else t.to(device) for t in self))
 
     def select(self, idx: torch.Tensor | slice) -> Observation:
         """Rows ``idx`` of every field."""
-        return Observation(*(t[idx] for t in self))
+        return Observation(*(None if t is None else t[idx] for t in self))
 
     @staticmethod
     def cat(parts: Sequence[Observation]) -> Observation:
         """Concatenate batches along the first axis."""
-        return Observation(*(torch.cat(fields) for fields in zip(*parts, strict=True)))
+        fields = list(zip(*parts, strict=True))
+        if any(f is None for f in fields[-1]) and not all(f is None for f in fields[-1]):
+            raise OptionError("cannot concatenate observations with and without advice")
+        return Observation(
+            *(None if column[0] is None else torch.cat(column) for column in fields)
+        )
 
 
 class EnvStep(NamedTuple):
@@ -261,6 +273,9 @@ class CutEnv:
         (:func:`~slicerecon.policy.reward.part_surface_voxels`, numpy on the
         CPU, a few ms per part); ``"surrogate"`` its batched torch
         approximation (:mod:`slicerecon.policy.surrogate`), for a GPU.
+    advice : bool, optional
+        Observations carry the heuristic expert's action at each state
+        (:attr:`Observation.advice`), for actors that take it.
     device : str or torch.device, optional
     seed : int, optional
         Seed of the episode draws.
@@ -280,6 +295,7 @@ class CutEnv:
         augment: bool = True,
         reward: str = "paper",
         reward_surface: str = "exact",
+        advice: bool = False,
         device: str | torch.device = "cpu",
         seed: int = 0,
     ) -> None:
@@ -320,6 +336,7 @@ class CutEnv:
         self.augment = bool(augment)
         self.reward_kind = reward
         self.reward_surface = reward_surface
+        self.advice = bool(advice)
         self.device = torch.device(device)
         self.rng = np.random.default_rng(seed)
         b, g, k = self.n_envs, self.grid, self.max_corners
@@ -519,7 +536,11 @@ class CutEnv:
         corners = torch.from_numpy(self.corner_norm).to(torch.float32)
         mask = torch.from_numpy(self.corner_valid).to(torch.float32)
         dev = self.device
-        return Observation(views, step.to(dev), corners.to(dev), mask.to(dev))
+        advice = None
+        if self.advice:
+            actions, valid = self.expert_actions()
+            advice = torch.from_numpy(advice_vector(actions, valid)).to(dev)
+        return Observation(views, step.to(dev), corners.to(dev), mask.to(dev), advice)
 
     def episode(self, env: int) -> tuple[NDArray[np.bool_], CrossSections, NDArray[np.bool_]]:
         """The running episode of slot ``env``: its occupancy ``O``, sections and visual hull."""
@@ -758,12 +779,35 @@ class CutEnv:
         return self._potentials(idx, rem, self.recon[idx]), self.n_parts[envs] + left
 
 
+def advice_vector(actions: ArrayLike, valid: ArrayLike) -> NDArray[np.float32]:
+    """Expert actions and their validity as :attr:`Observation.advice` rows.
+
+    Parameters
+    ----------
+    actions : ndarray of shape (B, 5)
+        The expert's actions (ignored where ``valid`` is False).
+    valid : ndarray of shape (B,), bool
+        Where the expert has a cut.
+
+    Returns
+    -------
+    ndarray of shape (B, 6), float32
+        ``(x1, y1, x2, y2, c, 1)`` where valid, zeros (the expert's stop) elsewhere.
+    """
+    ok = np.asarray(valid, dtype=bool)
+    out = np.zeros((ok.size, 6), dtype=np.float32)
+    out[ok, :5] = np.asarray(actions, dtype=np.float32)[ok]
+    out[ok, 5] = 1.0
+    return out
+
+
 def observe_state(
     state: PartitionState,
     *,
     resolution: int,
     max_corners: int,
     max_steps: int,
+    advice: bool = False,
     device: str | torch.device = "cpu",
 ) -> Observation:
     """The policy's observation of a numpy :class:`PartitionState` (batch of one).
@@ -772,7 +816,9 @@ def observe_state(
     ``resolution`` (:func:`resize_views`, each view on its own), the step over
     ``max_steps`` and the padded, normalised corners
     (:meth:`PartitionState.padded_corners`). ``state.max_corners`` should equal
-    ``max_corners`` (the strongest corners are kept).
+    ``max_corners`` (the strongest corners are kept). With ``advice``, also
+    the heuristic expert's action at the state
+    (:func:`~slicerecon.partition.heuristic.expert_action`, :func:`advice_vector`).
     """
     views = torch.stack(
         [
@@ -784,4 +830,10 @@ def observe_state(
     step = torch.tensor([[state.step_count / max(int(max_steps), 1)]], dtype=torch.float32)
     corners = torch.from_numpy(pts * valid[..., None]).to(torch.float32)[None]
     mask = torch.from_numpy(valid.astype(np.float32))[None]
-    return Observation(views, step, corners, mask).to(device)
+    hint = None
+    if advice:
+        action = expert_action(state)
+        has = action is not None
+        vec = advice_vector(np.zeros((1, 5)) if action is None else action[None], [has])
+        hint = torch.from_numpy(vec)
+    return Observation(views, step, corners, mask, hint).to(device)

@@ -13,6 +13,15 @@ same architecture (separate weights):
 * **Step and corners**: the step ``t / T`` and the corner list
   ``(3, K, 2)`` with its validity mask ``(3, K)`` are flattened into one MLP.
 * **Actor** ``pi(s)``: an MLP on the joined features, 5 sigmoid outputs in ``[0, 1]``.
+* **Advice** (``NetConfig.advice``): the heuristic expert's action at the
+  state (:attr:`~slicerecon.policy.env.Observation.advice`) joins the step and
+  corner MLP's input of both networks, and the actor is *residual*: its
+  pre-sigmoid outputs are ``logit(advice) + r(s)`` with the last layer of
+  ``r`` zero at initialisation, so an untrained actor is the expert (its stop
+  included) and learning moves it only where the critic finds better cuts
+  (residual policy learning: Silver et al., "Residual Policy Learning",
+  arXiv:1812.06298, 2018; Johannink et al., "Residual Reinforcement Learning
+  for Robot Control", ICRA 2019).
 * **Critic** ``Q(s, a)``: the joined features and the action through an MLP, one output.
 """
 
@@ -30,6 +39,9 @@ from .env import Observation
 __all__ = ["NetConfig", "CoordConv", "ViewEncoder", "StateEncoder", "Actor", "Critic"]
 
 ACTION_DIM = 5
+ADVICE_DIM = 6
+ADVICE_EPS = 0.01
+"""The expert's action is clipped to ``[eps, 1 - eps]`` before its logit."""
 
 
 @dataclass(frozen=True)
@@ -46,12 +58,16 @@ class NetConfig:
         Channels of the first convolution (doubled once).
     hidden : int
         Width of the MLP layers.
+    advice : bool
+        The networks read the expert's action and the actor is residual on it
+        (see the module docstring). Weights files without this field are not.
     """
 
     resolution: int = 64
     max_corners: int = 16
     channels: int = 16
     hidden: int = 256
+    advice: bool = False
 
     def __post_init__(self) -> None:
         for name in ("resolution", "max_corners", "channels", "hidden"):
@@ -59,10 +75,11 @@ class NetConfig:
                 raise OptionError(f"NetConfig.{name} must be >= 1 (got {getattr(self, name)})")
         if self.resolution < 16:
             raise OptionError(f"resolution must be >= 16 (got {self.resolution})")
+        object.__setattr__(self, "advice", bool(self.advice))
 
-    def to_dict(self) -> dict[str, int]:
-        """Plain dict of the sizes."""
-        return {k: int(v) for k, v in asdict(self).items()}
+    def to_dict(self) -> dict[str, int | bool]:
+        """Plain dict of the sizes (and ``advice``)."""
+        return {k: (v if isinstance(v, bool) else int(v)) for k, v in asdict(self).items()}
 
 
 class CoordConv(nn.Module):
@@ -122,8 +139,9 @@ class StateEncoder(nn.Module):
         self.config = config
         self.views = ViewEncoder(config.channels)
         k = config.max_corners
+        self.advice = config.advice
         self.corners = nn.Sequential(
-            nn.Linear(1 + 3 * k * 3, config.hidden),
+            nn.Linear(1 + 3 * k * 3 + (ADVICE_DIM if config.advice else 0), config.hidden),
             nn.ReLU(),
             nn.Linear(config.hidden, config.hidden),
             nn.ReLU(),
@@ -138,10 +156,19 @@ class StateEncoder(nn.Module):
         b = obs.views.shape[0]
         r = obs.views.shape[-1]
         v = self.views(obs.views.reshape(b * 3, 1, r, r)).reshape(b, -1)
-        corner_in = torch.cat(
-            [obs.step, obs.corners.reshape(b, -1), obs.corner_mask.reshape(b, -1)], dim=1
-        )
+        inputs = [obs.step, obs.corners.reshape(b, -1), obs.corner_mask.reshape(b, -1)]
+        if self.advice:
+            inputs.append(_advice(obs))
+        corner_in = torch.cat(inputs, dim=1)
         return torch.cat([self.view_proj(v), self.corners(corner_in)], dim=1)
+
+
+def _advice(obs: Observation) -> torch.Tensor:
+    if obs.advice is None:
+        raise OptionError(
+            "this network takes the expert's advice: build observations with advice=True"
+        )
+    return obs.advice
 
 
 class Actor(nn.Module):
@@ -156,6 +183,9 @@ class Actor(nn.Module):
             nn.ReLU(),
             nn.Linear(config.hidden, ACTION_DIM),
         )
+        if config.advice:  # an untrained residual actor is the expert
+            nn.init.zeros_(self.head[-1].weight)
+            nn.init.zeros_(self.head[-1].bias)
 
     def forward(self, obs: Observation) -> torch.Tensor:
         """Actions, Tensor of shape (B, 5)."""
@@ -163,7 +193,20 @@ class Actor(nn.Module):
 
     def logits(self, obs: Observation) -> torch.Tensor:
         """Pre-sigmoid outputs, Tensor of shape (B, 5)."""
-        return self.head(self.encoder(obs))
+        return self.outputs(obs)[0]
+
+    def outputs(self, obs: Observation) -> tuple[torch.Tensor, torch.Tensor]:
+        """Pre-sigmoid outputs and the network's own part of them, both (B, 5).
+
+        Without advice the two are the same; with it the second is the
+        residual ``r(s)`` added to the expert's logits (what a penalty on the
+        outputs should act on).
+        """
+        free = self.head(self.encoder(obs))
+        if not self.config.advice:
+            return free, free
+        expert = _advice(obs)[:, :ACTION_DIM].clamp(ADVICE_EPS, 1.0 - ADVICE_EPS)
+        return torch.logit(expert) + free, free
 
 
 class Critic(nn.Module):

@@ -70,7 +70,7 @@ logger = logging.getLogger(__name__)
 EVAL_SEED_OFFSET = 10_000
 """Evaluation shapes use seeds from here on; training seeds stay below it."""
 
-CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain", "il_gain", "il_rl_gain")
+CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain", "il_gain", "il_rl_gain", "il_rl_residual")
 """The shipped configs in ``slicerecon/policy/configs/``."""
 
 NOISES = ("gaussian", "ou")
@@ -147,6 +147,10 @@ class TrainConfig:
     """Channels of the first convolution."""
     hidden: int = 128
     """Width of the MLP layers."""
+    advice: bool = False
+    """The networks read the heuristic expert's action at each state and the
+    actor is residual on it (:class:`~slicerecon.policy.networks.NetConfig`):
+    an untrained actor is the expert, its stop included."""
     demo_episodes: int = 0
     """Heuristic episodes put in ``R_D`` before training; 0: no demonstrations."""
     pretrain_updates: int = 0
@@ -276,7 +280,9 @@ class TrainConfig:
     @property
     def net(self) -> NetConfig:
         """Network sizes."""
-        return NetConfig(self.resolution, self.max_corners, self.channels, self.hidden)
+        return NetConfig(
+            self.resolution, self.max_corners, self.channels, self.hidden, advice=self.advice
+        )
 
     def replace(self, **changes: Any) -> TrainConfig:
         """A copy with some fields changed."""
@@ -405,6 +411,7 @@ def _make_env(
         augment=augment,
         reward=config.reward,
         reward_surface=config.reward_surface,
+        advice=config.advice,
         device=device,
         seed=seed,
     )
@@ -648,11 +655,14 @@ def train(
         tau=config.tau,
         logit_penalty=config.logit_penalty,
     )
-    demos = ReplayBuffer(
-        config.buffer_size, resolution=config.resolution, max_corners=config.max_corners
-    )
-    replay = ReplayBuffer(
-        config.buffer_size, resolution=config.resolution, max_corners=config.max_corners
+    demos, replay = (
+        ReplayBuffer(
+            config.buffer_size,
+            resolution=config.resolution,
+            max_corners=config.max_corners,
+            advice=config.advice,
+        )
+        for _ in range(2)
     )
     rows: list[dict[str, Any]] = []
     env_steps = 0

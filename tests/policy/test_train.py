@@ -266,3 +266,53 @@ def test_gain_reward_with_demonstrated_stops_trains_and_stops(tmp_path: Path) ->
     assert float(action.max()) < 0.05
     assert env.last_step is not None and bool(env.last_step.cuts.degenerate[0])
     assert bool(out.noop[0]) and out.reward[0].item() == 0.0
+
+
+def test_an_untrained_residual_actor_plans_like_the_heuristic(tmp_path: Path) -> None:
+    """advice: before any update the actor is the expert, through a weights file too."""
+    from slicerecon.partition.planner import plan_partition
+    from slicerecon.policy.networks import Actor
+    from slicerecon.policy.weights import save_actor
+    from slicerecon.shapes import make_shape
+
+    cfg = _il_rl(advice=True, reward="gain", expert_stops=True)
+    torch.manual_seed(3)
+    path = save_actor(Actor(cfg.net), tmp_path / "residual.safetensors", extra={"max_steps": 4})
+    assert load_actor(path)[0].config.advice
+    for family, seed in (("chair", 12345), ("table", 7), ("box", 0)):
+        occ = make_shape(family, seed=seed, spacing=2.5).mask
+        expert = plan_partition(occ, planner="heuristic", max_parts=5)
+        learned = plan_partition(occ, planner="policy", max_parts=5, weights=path)
+        assert [p.box for p in learned.parts] == [p.box for p in expert.parts], family
+    # the heuristic has no cut on a box: its stop is the advice, and the actor stops
+    assert len(learned.parts) == 1
+
+
+def test_residual_actor_trains_keeps_its_advice_and_resumes(tmp_path: Path) -> None:
+    """The advice travels through both buffers, training, a checkpoint and a weights file."""
+    cfg = _il_rl(advice=True, reward="gain", expert_stops=True, total_updates=12)
+    first = train(cfg, out=tmp_path / "run", device="cpu")
+    actor, meta = load_actor(first.actor_path)
+    assert actor.config.advice and meta["config"]["advice"] is True
+    again = train(cfg.replace(total_updates=16), out=tmp_path / "run", device="cpu", resume=True)
+    assert again.n_updates == 16
+    env = CutEnv(
+        ShapePool.build(["two_spheres"], [0], grid=24),
+        n_envs=1,
+        max_corners=8,
+        resolution=32,
+        max_steps=4,
+        augment=False,
+    )
+    with pytest.raises(OptionError, match="advice"):
+        actor(env.reset(seed=0))  # an env without advice cannot feed this actor
+    env.advice = True
+    assert tuple(actor(env.observation()).shape) == (1, 5)
+    buffer = ReplayBuffer(8, resolution=32, max_corners=8, advice=True)
+    obs = env.observation()
+    one, five = torch.zeros(1), torch.zeros((1, 5))
+    buffer.add(obs, five, one, obs, one, five, one)
+    batch = buffer.sample(2, generator=torch.Generator().manual_seed(0))
+    assert batch.obs.advice is not None and torch.equal(batch.obs.advice[0], obs.advice[0])
+    with pytest.raises(OptionError, match="advice"):
+        buffer.add(obs._replace(advice=None), five, one, obs, one, five, one)
