@@ -459,6 +459,19 @@ class PartitionState:
         cut = snap_action(action, self.corners(), self.image_shapes)
         return self.apply_cut(cut)
 
+    def copy(self) -> PartitionState:
+        """An independent copy of this episode: stepping it leaves this one as it is.
+
+        The occupancy, the remaining region and the corners are shared (they
+        are read-only and replaced, never written); the parts' union is copied.
+        """
+        other = object.__new__(PartitionState)
+        other.__dict__.update(self.__dict__)
+        other.parts = list(self.parts)
+        if self._recon is not None:
+            other._recon = self._recon.copy()
+        return other
+
     def finish(self) -> list[Part]:
         """End the episode: any leftover ``R`` becomes a last part (its bounding box, no cut).
 

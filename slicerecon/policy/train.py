@@ -49,6 +49,7 @@ from ..partition.state import REWARD_KINDS
 from .buffers import ReplayBuffer
 from .checkpoint import load_checkpoint, save_checkpoint
 from .ddpg import DDPG, TARGET_UPDATES
+from .demos import collect_demos, collect_lookahead_demos
 from .env import CutEnv, Observation
 from .networks import NetConfig
 from .reward import REWARD_SURFACES
@@ -185,10 +186,21 @@ class TrainConfig:
     """Where the heuristic has no useful cut left, its action is the stop (a
     degenerate no-op, all zeros) and is demonstrated and cloned as such;
     False: such states have no expert action (the actor never learns to stop)."""
+    demo_lookahead: int = 0
+    """0: the demonstrations are the heuristic expert's. ``n > 0``: they are
+    its one-step lookahead (:func:`~slicerecon.partition.lookahead.lookahead_cut`
+    over its first ``n`` cuts and the stop, each finished by the expert and
+    scored on the known shape), a teacher at least as good on the states it
+    is asked about; the cloning target of the demonstrations is its action."""
+    demo_margin: float = 0.002
+    """The lookahead leaves the expert's choice only for an IoU higher by more than this."""
     noise: str = "gaussian"
     """Exploration noise: ``gaussian`` or ``ou`` (Ornstein-Uhlenbeck)."""
     noise_sigma: float = 0.1
     """Standard deviation of the exploration noise (actions live in [0, 1])."""
+    explore_stops: float = 0.0
+    """Share of exploring steps whose action is the stop (all zeros) instead of
+    the noisy actor's, so that the critic learns what stopping is worth."""
     target_update: str = "hard"
     """``hard``: copy the networks every ``target_period`` updates; ``polyak``: rate ``tau``."""
     target_period: int = 100
@@ -274,6 +286,14 @@ class TrainConfig:
             raise OptionError("rl_weight and bc_weight must be >= 0 and not both 0")
         if not 0 <= self.min_remaining < 1 or self.lam < 0 or not 0 <= self.gamma <= 1:
             raise OptionError("need 0 <= min_remaining < 1, lam >= 0 and 0 <= gamma <= 1")
+        if isinstance(self.demo_lookahead, bool) or not isinstance(self.demo_lookahead, int):
+            raise OptionError(f"demo_lookahead must be an integer (got {self.demo_lookahead!r})")
+        if self.demo_lookahead < 0 or not self.demo_margin >= 0:
+            raise OptionError("demo_lookahead and demo_margin must be >= 0")
+        if self.demo_lookahead and self.reward_surface != "exact":
+            raise OptionError("demo_lookahead scores choices with the exact reward surface")
+        if not 0.0 <= self.explore_stops <= 1.0:
+            raise OptionError(f"explore_stops must be in [0, 1] (got {self.explore_stops!r})")
         if min(self.noise_sigma, self.logit_penalty) < 0 or min(self.actor_lr, self.critic_lr) <= 0:
             raise OptionError("noise_sigma and logit_penalty must be >= 0, learning rates > 0")
 
@@ -475,50 +495,6 @@ class _Noise:
         return self.state.copy()
 
 
-def _collect_demos(
-    env: CutEnv, buffer: ReplayBuffer, episodes: int, seed: int, *, stops: bool = False
-) -> float:
-    """Roll out the heuristic into ``buffer``; returns the mean demonstration return.
-
-    With ``stops``, the step where the expert has no cut left is demonstrated
-    too, as the stop action (all zeros: a degenerate no-op).
-    """
-    obs = env.reset(seed=seed)
-    finished, returns = 0, []
-    while finished < episodes:
-        actions, has_cut = env.expert_actions()
-        valid = np.ones_like(has_cut) if stops else has_cut
-        if not valid.any():  # the expert has no cut in any slot: those episodes are over
-            finished += env.n_envs
-            obs = env.reset()
-            continue
-        act = torch.from_numpy(actions)
-        out = env.step(act)
-        # an episode where the expert has no cut left ends there (as the heuristic planner)
-        buffer.add(
-            obs.select(torch.from_numpy(valid)),
-            act[valid],
-            out.reward.cpu()[valid],
-            out.obs.select(torch.from_numpy(valid)),
-            out.done.cpu()[valid].float(),
-            act[valid],
-            torch.ones(int(valid.sum())),
-        )
-        done = out.done.cpu().numpy() | ~has_cut
-        finished += int(done.sum())
-        returns.extend(out.episode_return.cpu().numpy()[out.done.cpu().numpy()].tolist())
-        stuck = [int(e) for e in np.flatnonzero(~has_cut)]
-        if stuck:
-            env._start(stuck, [env._draw(e, None) for e in stuck])  # noqa: SLF001
-        obs = env.observation()
-    if len(buffer) == 0:
-        raise OptionError(
-            f"the heuristic expert found no cut in {finished} episodes on these training "
-            "shapes: no demonstrations; use other shapes or demo_episodes = 0"
-        )
-    return float(np.mean(returns)) if returns else float("nan")
-
-
 def _rng_state(np_rng: np.random.Generator, env: CutEnv, gen: torch.Generator) -> dict[str, Any]:
     return {
         "torch": torch.get_rng_state(),
@@ -696,9 +672,19 @@ def train(
         heuristic_iou, _ = evaluate_actor(_expert_policy, eval_env, seed=eval_seed)
         logger.info("heuristic expert on the held-out shapes: IoU %.4f", heuristic_iou)
         if config.demo_episodes:
-            demo_return = _collect_demos(
-                env, demos, config.demo_episodes, config.seed, stops=config.expert_stops
-            )
+            if config.demo_lookahead:
+                demo_return = collect_lookahead_demos(
+                    env,
+                    demos,
+                    config.demo_episodes,
+                    config.seed,
+                    candidates=config.demo_lookahead,
+                    margin=config.demo_margin,
+                )
+            else:
+                demo_return = collect_demos(
+                    env, demos, config.demo_episodes, config.seed, stops=config.expert_stops
+                )
             logger.info("%d demonstration transitions (mean return %.3f)", len(demos), demo_return)
         obs = env.reset(seed=config.seed + 2)
     (outdir / "config.json").write_text(json.dumps(config.to_dict(), indent=2) + "\n")
@@ -747,6 +733,9 @@ def train(
         else:
             actions = agent.act(obs).cpu() + torch.from_numpy(noise()).float()
             actions = actions.clamp(0.0, 1.0)
+            if config.explore_stops > 0:
+                stops = torch.from_numpy(np_rng.random(config.n_envs) < config.explore_stops)
+                actions[stops] = 0.0
         if need_expert:
             ea, ev = env.expert_actions()
             if config.expert_stops:

@@ -316,3 +316,31 @@ def test_residual_actor_trains_keeps_its_advice_and_resumes(tmp_path: Path) -> N
     assert batch.obs.advice is not None and torch.equal(batch.obs.advice[0], obs.advice[0])
     with pytest.raises(OptionError, match="advice"):
         buffer.add(obs._replace(advice=None), five, one, obs, one, five, one)
+
+
+def test_lookahead_demonstrations_are_cloned(tmp_path: Path) -> None:
+    """demo_lookahead: R_D holds the lookahead's choices, and imitation of them trains."""
+    from slicerecon.policy.demos import collect_lookahead_demos, episode_state
+
+    cfg = _il(reward="gain", advice=True, demo_lookahead=3, demo_margin=0.0, total_updates=30)
+    result = train(cfg, out=tmp_path / "run", device="cpu")
+    assert np.isfinite(float(_rows(result.log_path)[-1]["bc_loss"]))
+    env = CutEnv(
+        ShapePool.build(["box", "two_spheres", "torus"], [0, 1], grid=24),
+        n_envs=2,
+        max_corners=8,
+        resolution=32,
+        max_steps=4,
+        reward="gain",
+        advice=True,
+    )
+    buffer = ReplayBuffer(500, resolution=32, max_corners=8, advice=True)
+    mean_return = collect_lookahead_demos(env, buffer, 4, 0, candidates=3, margin=0.0)
+    assert len(buffer) >= 4 and np.isfinite(mean_return)
+    batch = buffer.sample(len(buffer), generator=torch.Generator().manual_seed(0))
+    assert torch.equal(batch.actions, batch.expert_actions)  # the cloning target is the choice
+    assert batch.obs.advice is not None
+    env.reset(seed=0)
+    assert episode_state(env, 0).potential() == pytest.approx(env.potential[0], abs=1e-9)
+    with pytest.raises(OptionError):
+        TrainConfig(demo_lookahead=2, reward_surface="surrogate")
