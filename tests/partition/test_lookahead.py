@@ -37,7 +37,7 @@ def test_lookahead_is_never_worse_than_the_expert(family: str, seed: int) -> Non
 
 
 def test_lookahead_stops_where_a_cut_lowers_the_iou() -> None:
-    """An ellipsoid the expert would cut: one part reconstructs it better, so the lookahead stops."""
+    """An ellipsoid the expert would cut: one part reconstructs it better, so it stops."""
     state = _episode("ellipsoid", 1, planes=6)
     assert expert_cut(state) is not None
     before = (state.remaining, state.step_count, state.potential())
