@@ -172,9 +172,7 @@ def collect_lookahead_demos(
                 obs = _observe(env, state)
                 choice = lookahead_cut(state, candidates=candidates, margin=margin)
                 stop = choice.cut is None
-                action = (
-                    np.zeros(5) if stop else cut_to_action(choice.cut, state.image_shapes)
-                )
+                action = np.zeros(5) if stop else cut_to_action(choice.cut, state.image_shapes)
                 deviations += int(abs(choice.value - choice.expert_value) > 0.0)
                 steps += 1
                 result = state.apply_cut(choice.cut)
@@ -193,9 +191,7 @@ def collect_lookahead_demos(
                     break
             returns.append(total)
         env.reset()
-    logger.info(
-        "lookahead demonstrations: %d steps, %d away from the expert", steps, deviations
-    )
+    logger.info("lookahead demonstrations: %d steps, %d away from the expert", steps, deviations)
     return float(np.mean(returns))
 
 

@@ -113,9 +113,7 @@ class Observation(NamedTuple):
         fields = list(zip(*parts, strict=True))
         if any(f is None for f in fields[-1]) and not all(f is None for f in fields[-1]):
             raise OptionError("cannot concatenate observations with and without advice")
-        return Observation(
-            *(None if column[0] is None else torch.cat(column) for column in fields)
-        )
+        return Observation(*(None if column[0] is None else torch.cat(column) for column in fields))
 
 
 class EnvStep(NamedTuple):
