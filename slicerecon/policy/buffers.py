@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from ..errors import OptionError
-from .env import Observation
+from .observation import Observation
 
 __all__ = ["ReplayBatch", "ReplayBuffer"]
 

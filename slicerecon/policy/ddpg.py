@@ -31,8 +31,8 @@ import torch.nn.functional as F
 
 from ..errors import OptionError
 from .buffers import ReplayBatch
-from .env import Observation
 from .networks import Actor, Critic, NetConfig
+from .observation import Observation
 
 __all__ = ["DDPG", "TARGET_UPDATES"]
 

@@ -8,7 +8,7 @@ shape and a reconstruction at every choice: it runs each episode the env
 draws as a numpy :class:`~slicerecon.partition.state.PartitionState` with the
 env's own reward and reconstruction (the env and the numpy episode follow
 the same rules, ``tests/policy/test_env.py``), and encodes each state with
-:func:`~slicerecon.policy.env.observe_state`.
+:func:`~slicerecon.policy.observation.observe_state`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from ..partition.lookahead import lookahead_cut
 from ..partition.state import PartitionState
 from ..sections import Box
 from .buffers import ReplayBuffer
-from .env import CutEnv, Observation, observe_state
+from .env import CutEnv
+from .observation import Observation, observe_state
 from .reward import part_surface_voxels
 
 __all__ = ["collect_demos", "collect_lookahead_demos", "episode_state"]

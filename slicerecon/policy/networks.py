@@ -1,6 +1,6 @@
 """Actor and critic networks of the learned cut planner.
 
-Both networks read an :class:`~slicerecon.policy.env.Observation` through the
+Both networks read an :class:`~slicerecon.policy.observation.Observation` through the
 same architecture (separate weights):
 
 * **Views**: each of the three silhouettes ``(R, R)`` gets two CoordConv
@@ -14,7 +14,7 @@ same architecture (separate weights):
   ``(3, K, 2)`` with its validity mask ``(3, K)`` are flattened into one MLP.
 * **Actor** ``pi(s)``: an MLP on the joined features, 5 sigmoid outputs in ``[0, 1]``.
 * **Advice** (``NetConfig.advice``): the heuristic expert's action at the
-  state (:attr:`~slicerecon.policy.env.Observation.advice`) joins the step and
+  state (:attr:`~slicerecon.policy.observation.Observation.advice`) joins the step and
   corner MLP's input of both networks, and the actor is *residual*: its
   pre-sigmoid outputs are ``logit(advice) + r(s)`` with the last layer of
   ``r`` zero at initialisation, so an untrained actor is the expert (its stop
@@ -34,7 +34,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..errors import OptionError
-from .env import Observation
+from .observation import Observation
 
 __all__ = ["NetConfig", "CoordConv", "ViewEncoder", "StateEncoder", "Actor", "Critic"]
 

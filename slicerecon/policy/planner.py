@@ -6,7 +6,7 @@
 unless this planner is used). The occupancy is centred in a cube (the
 training grids are cubes, so the silhouettes keep their aspect ratio when
 resized), each step's observation is encoded as in training
-(:func:`~slicerecon.policy.env.observe_state`), and the actor's action is
+(:func:`~slicerecon.policy.observation.observe_state`), and the actor's action is
 applied with :meth:`PartitionState.step` (snapped to the current corners at
 the occupancy's own resolution). Parts and cuts are mapped back to the
 occupancy's grid.
@@ -28,8 +28,8 @@ from ..errors import EmptyMaskError, InputError, OptionError
 from ..partition.cuts import Cut
 from ..partition.state import Part, PartitionState
 from ..sections import Box, in_plane_axes
-from .env import observe_state
 from .networks import Actor
+from .observation import observe_state
 from .weights import load_actor, shipped_weights
 
 __all__ = ["plan_policy", "load_policy"]

@@ -11,7 +11,8 @@ from slicerecon.partition.cuts import Cut, cut_to_action, snap_action
 from slicerecon.partition.episodes import ShapePool, episode_sections, occupancy_hull
 from slicerecon.partition.heuristic import expert_action
 from slicerecon.partition.state import NOOP_REWARD, PartitionState, iou
-from slicerecon.policy.env import CutEnv, observe_state
+from slicerecon.policy.env import CutEnv
+from slicerecon.policy.observation import observe_state
 from slicerecon.policy.reward import part_surface_voxels
 from slicerecon.policy.surrogate import surrogate_reconstruction
 from slicerecon.sections import Box
