@@ -30,6 +30,7 @@ __all__ = [
     "segment_band",
     "nearest_neighbour_pairs",
     "expert_segments",
+    "expert_cuts",
     "expert_cut",
     "expert_action",
 ]
@@ -222,6 +223,38 @@ def expert_segments(
     return segments
 
 
+def expert_cuts(state: PartitionState, count: int) -> list[Cut]:
+    """The expert's first ``count`` segments (best first) whose cut removes something.
+
+    Parameters
+    ----------
+    state : PartitionState
+    count : int
+        At most this many cuts.
+
+    Returns
+    -------
+    list of Cut
+        Empty when no segment splits a silhouette or every splitting
+        segment's line leaves one side of the remaining region empty.
+
+    Raises
+    ------
+    OptionError
+        For ``count < 1``.
+    """
+    if int(count) < 1:
+        raise OptionError(f"count must be >= 1 (got {count})")
+    cuts: list[Cut] = []
+    for seg in expert_segments(state.projections(), state.corners()):
+        cut = Cut(seg.view, seg.p1, seg.p2)
+        if split(state.remaining, cut) is not None:
+            cuts.append(cut)
+            if len(cuts) == int(count):
+                break
+    return cuts
+
+
 def expert_cut(state: PartitionState) -> Cut | None:
     """The best expert segment (on the current remaining region) that removes something.
 
@@ -231,11 +264,8 @@ def expert_cut(state: PartitionState) -> Cut | None:
         None when no segment splits a silhouette or every splitting segment's
         line leaves one side of the remaining region empty.
     """
-    for seg in expert_segments(state.projections(), state.corners()):
-        cut = Cut(seg.view, seg.p1, seg.p2)
-        if split(state.remaining, cut) is not None:
-            return cut
-    return None
+    cuts = expert_cuts(state, 1)
+    return cuts[0] if cuts else None
 
 
 def expert_action(state: PartitionState) -> NDArray[np.float64] | None:

@@ -25,8 +25,8 @@ import logging
 from typing import NamedTuple
 
 from ..errors import OptionError
-from .cuts import Cut, split
-from .heuristic import expert_cut, expert_segments
+from .cuts import Cut
+from .heuristic import expert_cut, expert_cuts
 from .state import PartitionState
 
 __all__ = ["Lookahead", "expert_value", "lookahead_cut"]
@@ -86,9 +86,9 @@ def lookahead_cut(
         A running episode with a ``reconstruct`` function (its potential is
         the IoU of the whole reconstruction with its occupancy ``O``).
     candidates : int, optional
-        Splitting segments scored, best first in the expert's order
-        (:func:`~slicerecon.partition.heuristic.expert_segments`); the first
-        is the expert's own cut.
+        Cuts scored: the expert's first ones, best first
+        (:func:`~slicerecon.partition.heuristic.expert_cuts`); the first is
+        the expert's own cut.
     margin : float, optional
         Another choice replaces the expert's only when its IoU is higher by
         more than this (volume IoU), so that the teacher does not move for
@@ -113,13 +113,7 @@ def lookahead_cut(
     if state.done:
         raise OptionError("the episode is over: nothing to choose")
     stop_value = state.potential()
-    cuts: list[Cut] = []
-    for seg in expert_segments(state.projections(), state.corners()):
-        cut = Cut(seg.view, seg.p1, seg.p2)
-        if split(state.remaining, cut) is not None:
-            cuts.append(cut)
-            if len(cuts) == int(candidates):
-                break
+    cuts = expert_cuts(state, int(candidates))
     if not cuts:
         return Lookahead(None, stop_value, stop_value, 1)
     values = []

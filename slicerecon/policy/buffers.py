@@ -59,12 +59,12 @@ class ReplayBuffer:
         Side ``R`` of the silhouettes.
     max_corners : int
         Corners per view ``K``.
-    advice : bool, optional
-        Also keep the observations' expert advice (:attr:`Observation.advice`).
+    candidates : int, optional
+        Also keep the observations' expert cuts (:attr:`Observation.advice`, ``C`` rows).
     """
 
     def __init__(
-        self, capacity: int, *, resolution: int, max_corners: int, advice: bool = False
+        self, capacity: int, *, resolution: int, max_corners: int, candidates: int = 0
     ) -> None:
         if int(capacity) < 1:
             raise OptionError(f"buffer capacity must be >= 1 (got {capacity})")
@@ -76,9 +76,9 @@ class ReplayBuffer:
             self._data[prefix + "step"] = torch.zeros((n, 1))
             self._data[prefix + "corners"] = torch.zeros((n, 3, k, 2))
             self._data[prefix + "mask"] = torch.zeros((n, 3, k))
-            if advice:
-                self._data[prefix + "advice"] = torch.zeros((n, 6))
-        self.advice = bool(advice)
+            if candidates:
+                self._data[prefix + "advice"] = torch.zeros((n, int(candidates), 6))
+        self.advice = bool(candidates)
         self._data["actions"] = torch.zeros((n, 5))
         self._data["rewards"] = torch.zeros(n)
         self._data["dones"] = torch.zeros(n)

@@ -33,7 +33,7 @@ __all__ = [
 EVAL_SEED_OFFSET = 10_000
 """Evaluation shapes use seeds from here on; training seeds stay below it."""
 
-CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain", "il_gain", "il_rl_gain", "il_rl_residual")
+CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain", "il_gain", "il_rl_gain", "il_rl_choice")
 """The shipped configs in ``slicerecon/policy/configs/``."""
 
 NOISES = ("gaussian", "ou")
@@ -95,10 +95,11 @@ class TrainConfig:
     """Channels of the first convolution."""
     hidden: int = 128
     """Width of the MLP layers."""
-    advice: bool = False
-    """The networks read the heuristic expert's action at each state and the
-    actor is residual on it (:class:`~slicerecon.policy.networks.NetConfig`):
-    an untrained actor is the expert, its stop included."""
+    candidates: int = 0
+    """``C > 0``: the networks read the heuristic expert's first ``C`` cuts at
+    each state and the actor chooses among them and the stop
+    (:class:`~slicerecon.policy.networks.NetConfig`); an untrained actor is
+    the expert, its stop included. 0: the paper's free actor."""
     demo_episodes: int = 0
     """Heuristic episodes put in ``R_D`` before training; 0: no demonstrations."""
     pretrain_updates: int = 0
@@ -195,7 +196,7 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise OptionError(f"{name} must be a positive integer (got {value!r})")
-        for name in ("demo_episodes", "pretrain_updates", "learning_starts", "seed"):
+        for name in ("demo_episodes", "pretrain_updates", "learning_starts", "seed", "candidates"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise OptionError(f"{name} must be an integer >= 0 (got {value!r})")
@@ -248,7 +249,7 @@ class TrainConfig:
     def net(self) -> NetConfig:
         """Network sizes."""
         return NetConfig(
-            self.resolution, self.max_corners, self.channels, self.hidden, advice=self.advice
+            self.resolution, self.max_corners, self.channels, self.hidden, self.candidates
         )
 
     def replace(self, **changes: Any) -> TrainConfig:

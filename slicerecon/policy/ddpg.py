@@ -8,8 +8,8 @@ the demonstration buffer ``R_D`` and one from the agent buffer ``R_A``
 1. **Critic** (when the RL loss is on): ``y = r + gamma (1 - done) Q'(s', pi'(s'))``,
    ``L_Q = mean (Q(s, a) - y)^2`` over both minibatches.
 2. **Actor**: ``L_pi = rl_weight * (-mean Q(s, pi(s))) + logit_penalty * mean(z^2)
-   + bc_weight * L_BC`` (``z`` the pre-sigmoid outputs, or a residual actor's
-   own part of them) with the
+   + bc_weight * L_BC`` (``z`` the pre-sigmoid outputs, or a chooser's
+   learned scores) with the
    Q-filtered behaviour cloning loss of the paper
    ``L_BC = mean_i ||pi(s_i) - pi^h(s_i)||^2 * 1[Q(s_i, pi^h(s_i)) > Q(s_i, pi(s_i))]``
    over the demonstration rows and (``bc_on_agent``) the agent rows, restricted
@@ -193,8 +193,7 @@ class DDPG:
             out["q_mean"] = float(q.detach().mean())
 
         # 2. actor: DDPG loss + Q-filtered behaviour cloning
-        logits, free = self.actor.outputs(batch.obs)
-        pi = torch.sigmoid(logits)
+        pi, raw = self.actor.outputs(batch.obs)
         actor_loss = torch.zeros((), device=self.device)
         features = None
         use_rl = self.rl_weight > 0 and not pretrain
@@ -204,7 +203,7 @@ class DDPG:
                 features = self.critic.encoder(batch.obs)
         if use_rl and features is not None:
             actor_loss = actor_loss - self.rl_weight * self.critic.q(features, pi).mean()
-            actor_loss = actor_loss + self.logit_penalty * (free**2).mean()
+            actor_loss = actor_loss + self.logit_penalty * (raw**2).mean()
         if self.bc_weight > 0:
             rows = torch.ones_like(batch.expert_valid)
             if not self.bc_on_agent:

@@ -145,8 +145,8 @@ def collect_lookahead_demos(
     Parameters
     ----------
     env : CutEnv
-        Draws the episodes; its ``advice`` decides whether observations carry
-        the plain expert's action.
+        Draws the episodes; its ``candidates`` decides whether observations
+        carry the expert's first cuts.
     buffer : ReplayBuffer
     episodes : int
         Episodes to demonstrate (at least; whole batches of ``env.n_envs``).
@@ -202,6 +202,6 @@ def _observe(env: CutEnv, state: PartitionState) -> Observation:
         resolution=env.resolution,
         max_corners=env.max_corners,
         max_steps=env.max_steps,
-        advice=env.advice,
+        candidates=env.candidates,
         device="cpu",
     )

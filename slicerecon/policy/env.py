@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..partition.cuts import SnappedCuts, choose_sides, line_sides, snap_actions, view_shapes
 from ..partition.episodes import ShapePool, episode_sections, occupancy_hull
-from ..partition.heuristic import expert_action
+from ..partition.heuristic import expert_action, expert_cuts
 from ..partition.state import (
     NOOP_REWARD,
     REWARD_KINDS,
@@ -49,7 +49,7 @@ from ..partition.state import (
     part_rewards,
 )
 from ..sections import Box, CrossSections
-from .observation import Observation, advice_vector, observe_state, padded_corners, resize_views
+from .observation import Observation, advice_rows, observe_state, padded_corners, resize_views
 from .reward import REWARD_SURFACES, mask_distances, part_surface_voxels, plane_distances
 from .surrogate import surrogate_parts
 
@@ -59,7 +59,7 @@ __all__ = [
     "StepRecord",
     "CutEnv",
     "resize_views",
-    "advice_vector",
+    "advice_rows",
     "observe_state",
 ]
 
@@ -168,9 +168,10 @@ class CutEnv:
         (:func:`~slicerecon.policy.reward.part_surface_voxels`, numpy on the
         CPU, a few ms per part); ``"surrogate"`` its batched torch
         approximation (:mod:`slicerecon.policy.surrogate`), for a GPU.
-    advice : bool, optional
-        Observations carry the heuristic expert's action at each state
-        (:attr:`Observation.advice`), for actors that take it.
+    candidates : int, optional
+        Observations carry the heuristic expert's first ``candidates`` cuts at
+        each state (:attr:`Observation.advice`), for actors that choose among
+        them; 0: none.
     device : str or torch.device, optional
     seed : int, optional
         Seed of the episode draws.
@@ -190,7 +191,7 @@ class CutEnv:
         augment: bool = True,
         reward: str = "paper",
         reward_surface: str = "exact",
-        advice: bool = False,
+        candidates: int = 0,
         device: str | torch.device = "cpu",
         seed: int = 0,
     ) -> None:
@@ -231,7 +232,9 @@ class CutEnv:
         self.augment = bool(augment)
         self.reward_kind = reward
         self.reward_surface = reward_surface
-        self.advice = bool(advice)
+        if isinstance(candidates, bool) or int(candidates) < 0:
+            raise OptionError(f"candidates must be an integer >= 0 (got {candidates!r})")
+        self.candidates = int(candidates)
         self.device = torch.device(device)
         self.rng = np.random.default_rng(seed)
         b, g, k = self.n_envs, self.grid, self.max_corners
@@ -259,6 +262,7 @@ class CutEnv:
         self._sections: list[CrossSections | None] = [None] * b
         self._hulls: list[NDArray[np.bool_] | None] = [None] * b
         self._expert: list[NDArray[np.float64] | None | bool] = [False] * b
+        self._candidates: list[NDArray[np.float32] | None] = [None] * b
         self._orient: list[tuple[int, tuple[int, ...], tuple[int, ...]] | None] = [None] * b
         self._plane_cache: dict[tuple[int, int], tuple[NDArray[np.float32], NDArray[np.bool_]]] = {}
         self.last_step: StepRecord | None = None
@@ -417,6 +421,7 @@ class CutEnv:
         changed_np = changed.cpu().numpy()
         for i, env in enumerate(envs):
             self._expert[env] = False
+            self._candidates[env] = None
             for v in np.flatnonzero(changed_np[i]):
                 px, norm, valid = padded_corners(sil_np[i, v], self.max_corners)
                 self.corner_px[env, v] = px
@@ -432,9 +437,8 @@ class CutEnv:
         mask = torch.from_numpy(self.corner_valid).to(torch.float32)
         dev = self.device
         advice = None
-        if self.advice:
-            actions, valid = self.expert_actions()
-            advice = torch.from_numpy(advice_vector(actions, valid)).to(dev)
+        if self.candidates:
+            advice = torch.from_numpy(self.expert_candidates()).to(dev)
         return Observation(views, step.to(dev), corners.to(dev), mask.to(dev), advice)
 
     def episode(self, env: int) -> tuple[NDArray[np.bool_], CrossSections, NDArray[np.bool_]]:
@@ -478,6 +482,25 @@ class CutEnv:
                 actions[env] = cached
                 valid[env] = True
         return actions, valid
+
+    def expert_candidates(self) -> NDArray[np.float32]:
+        """The expert's first ``candidates`` cuts of every episode (cached per state).
+
+        Returns
+        -------
+        ndarray of shape (B, C, 6), float32
+            :func:`~slicerecon.policy.observation.advice_rows` of
+            :func:`~slicerecon.partition.heuristic.expert_cuts`.
+        """
+        out = np.zeros((self.n_envs, self.candidates, 6), dtype=np.float32)
+        for env in range(self.n_envs):
+            cached = self._candidates[env]
+            if cached is None:
+                cuts = expert_cuts(self.state_of(env), self.candidates)
+                cached = advice_rows(cuts, self.image_shapes, self.candidates)
+                self._candidates[env] = cached
+            out[env] = cached
+        return out
 
     # -- voxel work on the device ---------------------------------------------------------
     def _column_counts(self, view: torch.Tensor) -> torch.Tensor:

@@ -13,16 +13,18 @@ same architecture (separate weights):
 * **Step and corners**: the step ``t / T`` and the corner list
   ``(3, K, 2)`` with its validity mask ``(3, K)`` are flattened into one MLP.
 * **Actor** ``pi(s)``: an MLP on the joined features, 5 sigmoid outputs in ``[0, 1]``.
-* **Advice** (``NetConfig.advice``): the heuristic expert's action at the
-  state (:attr:`~slicerecon.policy.observation.Observation.advice`) joins the step and
-  corner MLP's input of both networks, and the actor is *residual*: its
-  pre-sigmoid outputs are ``logit(advice) + r(s)`` with the last layer of
-  ``r`` zero at initialisation, so an untrained actor is the expert (its stop
-  included) and learning moves it only where the critic finds better cuts
-  (residual policy learning: Silver et al., "Residual Policy Learning",
-  arXiv:1812.06298, 2018; Johannink et al., "Residual Reinforcement Learning
-  for Robot Control", ICRA 2019).
-* **Critic** ``Q(s, a)``: the joined features and the action through an MLP, one output.
+* **Choice among the expert's cuts** (``NetConfig.candidates = C``): the
+  expert's first ``C`` cuts at the state
+  (:attr:`~slicerecon.policy.observation.Observation.advice`) join the step
+  and corner MLP's input of both networks, and the actor's head scores the
+  ``C`` cuts and the stop; its action is the softmax-weighted mean of their
+  actions (the stop's is zeros), invalid cuts masked out. The scores start
+  at a prior that puts almost all weight on the expert's own cut (the last
+  layer is zero at initialisation), so an untrained actor is the expert, its
+  stop included, and learning moves weight to another of the expert's cuts
+  or to stopping. This restricts the learned planner to choices the expert
+  proposes, the way residual policy learning starts from a base controller
+  (Silver et al., "Residual Policy Learning", arXiv:1812.06298, 2018).
 """
 
 from __future__ import annotations
@@ -40,8 +42,8 @@ __all__ = ["NetConfig", "CoordConv", "ViewEncoder", "StateEncoder", "Actor", "Cr
 
 ACTION_DIM = 5
 ADVICE_DIM = 6
-ADVICE_EPS = 0.01
-"""The expert's action is clipped to ``[eps, 1 - eps]`` before its logit."""
+CHOICE_PRIOR = 8.0
+"""Initial score of the expert's own cut (the others and the stop start at 0)."""
 
 
 @dataclass(frozen=True)
@@ -58,16 +60,17 @@ class NetConfig:
         Channels of the first convolution (doubled once).
     hidden : int
         Width of the MLP layers.
-    advice : bool
-        The networks read the expert's action and the actor is residual on it
-        (see the module docstring). Weights files without this field are not.
+    candidates : int
+        ``C``: the networks read the expert's first ``C`` cuts and the actor
+        chooses among them and the stop (see the module docstring); 0 (and
+        weights files without this field): the paper's free actor.
     """
 
     resolution: int = 64
     max_corners: int = 16
     channels: int = 16
     hidden: int = 256
-    advice: bool = False
+    candidates: int = 0
 
     def __post_init__(self) -> None:
         for name in ("resolution", "max_corners", "channels", "hidden"):
@@ -75,11 +78,12 @@ class NetConfig:
                 raise OptionError(f"NetConfig.{name} must be >= 1 (got {getattr(self, name)})")
         if self.resolution < 16:
             raise OptionError(f"resolution must be >= 16 (got {self.resolution})")
-        object.__setattr__(self, "advice", bool(self.advice))
+        if isinstance(self.candidates, bool) or int(self.candidates) < 0:
+            raise OptionError(f"NetConfig.candidates must be >= 0 (got {self.candidates!r})")
 
-    def to_dict(self) -> dict[str, int | bool]:
-        """Plain dict of the sizes (and ``advice``)."""
-        return {k: (v if isinstance(v, bool) else int(v)) for k, v in asdict(self).items()}
+    def to_dict(self) -> dict[str, int]:
+        """Plain dict of the sizes."""
+        return {k: int(v) for k, v in asdict(self).items()}
 
 
 class CoordConv(nn.Module):
@@ -139,9 +143,9 @@ class StateEncoder(nn.Module):
         self.config = config
         self.views = ViewEncoder(config.channels)
         k = config.max_corners
-        self.advice = config.advice
+        self.candidates = config.candidates
         self.corners = nn.Sequential(
-            nn.Linear(1 + 3 * k * 3 + (ADVICE_DIM if config.advice else 0), config.hidden),
+            nn.Linear(1 + 3 * k * 3 + ADVICE_DIM * config.candidates, config.hidden),
             nn.ReLU(),
             nn.Linear(config.hidden, config.hidden),
             nn.ReLU(),
@@ -157,16 +161,18 @@ class StateEncoder(nn.Module):
         r = obs.views.shape[-1]
         v = self.views(obs.views.reshape(b * 3, 1, r, r)).reshape(b, -1)
         inputs = [obs.step, obs.corners.reshape(b, -1), obs.corner_mask.reshape(b, -1)]
-        if self.advice:
-            inputs.append(_advice(obs))
+        if self.candidates:
+            inputs.append(_advice(obs, self.candidates).reshape(b, -1))
         corner_in = torch.cat(inputs, dim=1)
         return torch.cat([self.view_proj(v), self.corners(corner_in)], dim=1)
 
 
-def _advice(obs: Observation) -> torch.Tensor:
-    if obs.advice is None:
+def _advice(obs: Observation, count: int) -> torch.Tensor:
+    if obs.advice is None or tuple(obs.advice.shape[1:]) != (count, ADVICE_DIM):
+        got = None if obs.advice is None else tuple(obs.advice.shape[1:])
         raise OptionError(
-            "this network takes the expert's advice: build observations with advice=True"
+            f"this network chooses among the expert's first {count} cuts: build observations "
+            f"with candidates={count} (their advice is {got})"
         )
     return obs.advice
 
@@ -178,35 +184,39 @@ class Actor(nn.Module):
         super().__init__()
         self.config = config
         self.encoder = StateEncoder(config)
+        outputs = config.candidates + 1 if config.candidates else ACTION_DIM
         self.head = nn.Sequential(
             nn.Linear(self.encoder.out_features, config.hidden),
             nn.ReLU(),
-            nn.Linear(config.hidden, ACTION_DIM),
+            nn.Linear(config.hidden, outputs),
         )
-        if config.advice:  # an untrained residual actor is the expert
+        if config.candidates:  # an untrained chooser is the expert
             nn.init.zeros_(self.head[-1].weight)
             nn.init.zeros_(self.head[-1].bias)
+            prior = torch.zeros(outputs)
+            prior[0] = CHOICE_PRIOR
+            self.register_buffer("prior", prior, persistent=False)
 
     def forward(self, obs: Observation) -> torch.Tensor:
         """Actions, Tensor of shape (B, 5)."""
-        return torch.sigmoid(self.logits(obs))
-
-    def logits(self, obs: Observation) -> torch.Tensor:
-        """Pre-sigmoid outputs, Tensor of shape (B, 5)."""
         return self.outputs(obs)[0]
 
     def outputs(self, obs: Observation) -> tuple[torch.Tensor, torch.Tensor]:
-        """Pre-sigmoid outputs and the network's own part of them, both (B, 5).
+        """Actions (B, 5) and the raw outputs a penalty should act on.
 
-        Without advice the two are the same; with it the second is the
-        residual ``r(s)`` added to the expert's logits (what a penalty on the
-        outputs should act on).
+        The free actor's raw outputs are its pre-sigmoid values (B, 5); a
+        chooser's are its learned scores (B, C + 1), without the prior.
         """
-        free = self.head(self.encoder(obs))
-        if not self.config.advice:
-            return free, free
-        expert = _advice(obs)[:, :ACTION_DIM].clamp(ADVICE_EPS, 1.0 - ADVICE_EPS)
-        return torch.logit(expert) + free, free
+        raw = self.head(self.encoder(obs))
+        if not self.config.candidates:
+            return torch.sigmoid(raw), raw
+        advice = _advice(obs, self.config.candidates)
+        valid = torch.cat(
+            [advice[:, :, 5] > 0.5, torch.ones_like(advice[:, :1, 5], dtype=torch.bool)], 1
+        )
+        scores = (raw + self.prior).masked_fill(~valid, float("-inf"))
+        weights = torch.softmax(scores, dim=1)[:, :-1]  # the stop's action is zeros
+        return torch.einsum("bc,bca->ba", weights, advice[:, :, :ACTION_DIM]), raw
 
 
 class Critic(nn.Module):

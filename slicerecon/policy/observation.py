@@ -4,8 +4,8 @@ An observation of a partition state holds the three silhouettes of the
 remaining region resized to ``R x R`` (:func:`resize_views`), the step
 ``t / max_steps``, per view the ``K`` strongest Harris corners normalised to
 ``[0, 1]`` (:func:`~slicerecon.corners.pad_corners`) with a validity mask,
-and, for actors that take it, the heuristic expert's action at the state
-(:func:`advice_vector`). :class:`~slicerecon.policy.env.CutEnv` builds
+and, for actors that choose among them, the heuristic expert's first cuts
+at the state (:func:`advice_rows`). :class:`~slicerecon.policy.env.CutEnv` builds
 batches of them in training; :func:`observe_state` builds one from a numpy
 :class:`~slicerecon.partition.state.PartitionState` at inference, with the
 same encoding.
@@ -20,14 +20,15 @@ from typing import NamedTuple
 import numpy as np
 import torch
 import torch.nn.functional as F
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from ..corners import harris_corners, pad_corners
 from ..errors import OptionError
-from ..partition.heuristic import expert_action
+from ..partition.cuts import Cut, cut_to_action
+from ..partition.heuristic import expert_cuts
 from ..partition.state import PartitionState
 
-__all__ = ["Observation", "resize_views", "padded_corners", "advice_vector", "observe_state"]
+__all__ = ["Observation", "resize_views", "padded_corners", "advice_rows", "observe_state"]
 
 
 class Observation(NamedTuple):
@@ -43,11 +44,11 @@ class Observation(NamedTuple):
         Corner points per view, ``((row + .5) / M, (col + .5) / N)``; invalid rows 0.
     corner_mask : Tensor of shape (B, 3, K), float32
         1 for the rows that hold a corner.
-    advice : Tensor of shape (B, 6), float32, or None
-        The heuristic expert's action at this state and 1 where it has one
-        (``(x1, y1, x2, y2, c, valid)``; zeros where it has none, which is its
-        stop), for actors that take the expert's advice
-        (:attr:`~slicerecon.policy.networks.NetConfig.advice`); None otherwise.
+    advice : Tensor of shape (B, C, 6), float32, or None
+        The heuristic expert's first ``C`` cuts at this state, best first, as
+        actions with a validity flag (``(x1, y1, x2, y2, c, 1)``; zero rows
+        where it has fewer), for actors that choose among them
+        (:attr:`~slicerecon.policy.networks.NetConfig.candidates`); None otherwise.
     """
 
     views: torch.Tensor
@@ -130,25 +131,30 @@ def padded_corners(
 # -- environment ------------------------------------------------------------------------
 
 
-def advice_vector(actions: ArrayLike, valid: ArrayLike) -> NDArray[np.float32]:
-    """Expert actions and their validity as :attr:`Observation.advice` rows.
+def advice_rows(
+    cuts: Sequence[Cut], image_shapes: Sequence[Sequence[int]], count: int
+) -> NDArray[np.float32]:
+    """Cuts as :attr:`Observation.advice` rows of one state.
 
     Parameters
     ----------
-    actions : ndarray of shape (B, 5)
-        The expert's actions (ignored where ``valid`` is False).
-    valid : ndarray of shape (B,), bool
-        Where the expert has a cut.
+    cuts : sequence of Cut
+        The expert's cuts, best first (at most ``count`` are used).
+    image_shapes : sequence of 3 (M, N)
+        The views' shapes (:func:`~slicerecon.partition.cuts.view_shapes`).
+    count : int
+        Rows ``C``.
 
     Returns
     -------
-    ndarray of shape (B, 6), float32
-        ``(x1, y1, x2, y2, c, 1)`` where valid, zeros (the expert's stop) elsewhere.
+    ndarray of shape (C, 6), float32
+        ``(x1, y1, x2, y2, c, 1)`` per cut
+        (:func:`~slicerecon.partition.cuts.cut_to_action`), zero rows after them.
     """
-    ok = np.asarray(valid, dtype=bool)
-    out = np.zeros((ok.size, 6), dtype=np.float32)
-    out[ok, :5] = np.asarray(actions, dtype=np.float32)[ok]
-    out[ok, 5] = 1.0
+    out = np.zeros((int(count), 6), dtype=np.float32)
+    for row, cut in enumerate(list(cuts)[: int(count)]):
+        out[row, :5] = cut_to_action(cut, image_shapes)
+        out[row, 5] = 1.0
     return out
 
 
@@ -158,7 +164,7 @@ def observe_state(
     resolution: int,
     max_corners: int,
     max_steps: int,
-    advice: bool = False,
+    candidates: int = 0,
     device: str | torch.device = "cpu",
 ) -> Observation:
     """The policy's observation of a numpy :class:`PartitionState` (batch of one).
@@ -167,9 +173,9 @@ def observe_state(
     ``resolution`` (:func:`resize_views`, each view on its own), the step over
     ``max_steps`` and the padded, normalised corners
     (:meth:`PartitionState.padded_corners`). ``state.max_corners`` should equal
-    ``max_corners`` (the strongest corners are kept). With ``advice``, also
-    the heuristic expert's action at the state
-    (:func:`~slicerecon.partition.heuristic.expert_action`, :func:`advice_vector`).
+    ``max_corners`` (the strongest corners are kept). With ``candidates > 0``,
+    also the expert's first cuts at the state
+    (:func:`~slicerecon.partition.heuristic.expert_cuts`, :func:`advice_rows`).
     """
     views = torch.stack(
         [
@@ -182,9 +188,7 @@ def observe_state(
     corners = torch.from_numpy(pts * valid[..., None]).to(torch.float32)[None]
     mask = torch.from_numpy(valid.astype(np.float32))[None]
     hint = None
-    if advice:
-        action = expert_action(state)
-        has = action is not None
-        vec = advice_vector(np.zeros((1, 5)) if action is None else action[None], [has])
-        hint = torch.from_numpy(vec)
+    if candidates:
+        cuts = expert_cuts(state, int(candidates))
+        hint = torch.from_numpy(advice_rows(cuts, state.image_shapes, int(candidates)))[None]
     return Observation(views, step, corners, mask, hint).to(device)

@@ -139,7 +139,7 @@ def plan_policy(
                 resolution=cfg.resolution,
                 max_corners=cfg.max_corners,
                 max_steps=train_steps,
-                advice=cfg.advice,
+                candidates=cfg.candidates,
                 device=device,
             )
             action = actor(obs)[0].double().cpu().numpy()

@@ -145,7 +145,7 @@ def _make_env(
         augment=augment,
         reward=config.reward,
         reward_surface=config.reward_surface,
-        advice=config.advice,
+        candidates=config.candidates,
         device=device,
         seed=seed,
     )
@@ -350,7 +350,7 @@ def train(
             config.buffer_size,
             resolution=config.resolution,
             max_corners=config.max_corners,
-            advice=config.advice,
+            candidates=config.candidates,
         )
         for _ in range(2)
     )

@@ -268,32 +268,32 @@ def test_gain_reward_with_demonstrated_stops_trains_and_stops(tmp_path: Path) ->
     assert bool(out.noop[0]) and out.reward[0].item() == 0.0
 
 
-def test_an_untrained_residual_actor_plans_like_the_heuristic(tmp_path: Path) -> None:
-    """advice: before any update the actor is the expert, through a weights file too."""
+def test_an_untrained_chooser_plans_like_the_heuristic(tmp_path: Path) -> None:
+    """candidates: before any update the actor is the expert, through a weights file too."""
     from slicerecon.partition.planner import plan_partition
     from slicerecon.policy.networks import Actor
     from slicerecon.policy.weights import save_actor
     from slicerecon.shapes import make_shape
 
-    cfg = _il_rl(advice=True, reward="gain", expert_stops=True)
+    cfg = _il_rl(candidates=3, reward="gain", expert_stops=True)
     torch.manual_seed(3)
-    path = save_actor(Actor(cfg.net), tmp_path / "residual.safetensors", extra={"max_steps": 4})
-    assert load_actor(path)[0].config.advice
+    path = save_actor(Actor(cfg.net), tmp_path / "chooser.safetensors", extra={"max_steps": 4})
+    assert load_actor(path)[0].config.candidates == 3
     for family, seed in (("chair", 12345), ("table", 7), ("box", 0)):
         occ = make_shape(family, seed=seed, spacing=2.5).mask
         expert = plan_partition(occ, planner="heuristic", max_parts=5)
         learned = plan_partition(occ, planner="policy", max_parts=5, weights=path)
         assert [p.box for p in learned.parts] == [p.box for p in expert.parts], family
-    # the heuristic has no cut on a box: its stop is the advice, and the actor stops
+    # the heuristic has no cut on a box: the stop is the only choice, and the actor stops
     assert len(learned.parts) == 1
 
 
-def test_residual_actor_trains_keeps_its_advice_and_resumes(tmp_path: Path) -> None:
-    """The advice travels through both buffers, training, a checkpoint and a weights file."""
-    cfg = _il_rl(advice=True, reward="gain", expert_stops=True, total_updates=12)
+def test_chooser_trains_keeps_its_candidates_and_resumes(tmp_path: Path) -> None:
+    """The expert's cuts travel through both buffers, training, a checkpoint and a weights file."""
+    cfg = _il_rl(candidates=3, reward="gain", expert_stops=True, total_updates=12)
     first = train(cfg, out=tmp_path / "run", device="cpu")
     actor, meta = load_actor(first.actor_path)
-    assert actor.config.advice and meta["config"]["advice"] is True
+    assert actor.config.candidates == 3 and meta["config"]["candidates"] == 3
     again = train(cfg.replace(total_updates=16), out=tmp_path / "run", device="cpu", resume=True)
     assert again.n_updates == 16
     env = CutEnv(
@@ -304,12 +304,14 @@ def test_residual_actor_trains_keeps_its_advice_and_resumes(tmp_path: Path) -> N
         max_steps=4,
         augment=False,
     )
-    with pytest.raises(OptionError, match="advice"):
-        actor(env.reset(seed=0))  # an env without advice cannot feed this actor
-    env.advice = True
-    assert tuple(actor(env.observation()).shape) == (1, 5)
-    buffer = ReplayBuffer(8, resolution=32, max_corners=8, advice=True)
+    with pytest.raises(OptionError, match="candidates=3"):
+        actor(env.reset(seed=0))  # an env without the expert's cuts cannot feed this actor
+    env.candidates = 3
     obs = env.observation()
+    action = actor(obs)
+    assert tuple(action.shape) == (1, 5) and obs.advice is not None
+    assert tuple(obs.advice.shape) == (1, 3, 6)
+    buffer = ReplayBuffer(8, resolution=32, max_corners=8, candidates=3)
     one, five = torch.zeros(1), torch.zeros((1, 5))
     buffer.add(obs, five, one, obs, one, five, one)
     batch = buffer.sample(2, generator=torch.Generator().manual_seed(0))
@@ -318,11 +320,35 @@ def test_residual_actor_trains_keeps_its_advice_and_resumes(tmp_path: Path) -> N
         buffer.add(obs._replace(advice=None), five, one, obs, one, five, one)
 
 
+def test_a_chooser_acts_within_the_expert_cuts_and_the_stop() -> None:
+    """Its action is a convex mix of the valid cuts' actions and zeros; invalid rows get none."""
+    from slicerecon.policy.networks import Actor, NetConfig
+    from slicerecon.policy.observation import Observation
+
+    torch.manual_seed(0)
+    actor = Actor(NetConfig(32, 8, 4, 32, candidates=3))
+    torch.nn.init.normal_(actor.head[-1].weight, std=3.0)  # a trained-looking head
+    advice = torch.zeros((4, 3, 6))
+    advice[:, 0] = torch.tensor([0.2, 0.3, 0.4, 0.5, 0.1, 1.0])
+    advice[:2, 1] = torch.tensor([0.6, 0.6, 0.9, 0.9, 0.9, 1.0])
+    obs = Observation(
+        torch.rand((4, 3, 32, 32)), torch.rand((4, 1)), torch.rand((4, 3, 8, 2)),
+        torch.ones((4, 3, 8)), advice,
+    )  # fmt: skip
+    action = actor(obs)
+    lo = torch.zeros(5)
+    hi = torch.maximum(advice[:, 0, :5], advice[:, 1, :5])
+    assert torch.all(action >= lo - 1e-6) and torch.all(action <= hi + 1e-6)
+    # rows 2 and 3 have one valid cut: the action lies on the segment from zeros to it
+    ratio = action[2:] / advice[2:, 0, :5]
+    assert torch.allclose(ratio, ratio[:, :1].expand_as(ratio), atol=1e-5)
+
+
 def test_lookahead_demonstrations_are_cloned(tmp_path: Path) -> None:
     """demo_lookahead: R_D holds the lookahead's choices, and imitation of them trains."""
     from slicerecon.policy.demos import collect_lookahead_demos, episode_state
 
-    cfg = _il(reward="gain", advice=True, demo_lookahead=3, demo_margin=0.0, total_updates=30)
+    cfg = _il(reward="gain", candidates=3, demo_lookahead=3, demo_margin=0.0, total_updates=30)
     result = train(cfg, out=tmp_path / "run", device="cpu")
     assert np.isfinite(float(_rows(result.log_path)[-1]["bc_loss"]))
     env = CutEnv(
@@ -332,9 +358,9 @@ def test_lookahead_demonstrations_are_cloned(tmp_path: Path) -> None:
         resolution=32,
         max_steps=4,
         reward="gain",
-        advice=True,
+        candidates=3,
     )
-    buffer = ReplayBuffer(500, resolution=32, max_corners=8, advice=True)
+    buffer = ReplayBuffer(500, resolution=32, max_corners=8, candidates=3)
     mean_return = collect_lookahead_demos(env, buffer, 4, 0, candidates=3, margin=0.0)
     assert len(buffer) >= 4 and np.isfinite(mean_return)
     batch = buffer.sample(len(buffer), generator=torch.Generator().manual_seed(0))
