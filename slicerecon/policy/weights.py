@@ -118,7 +118,12 @@ def load_actor(
     if raw.get("format") != "slicerecon-actor-1" or "net" not in raw:
         raise FormatError(f"{p} is not a slicerecon actor weights file (no 'net' metadata)")
     meta = {k: (v if k == "format" else json.loads(v)) for k, v in raw.items()}
-    actor = Actor(NetConfig(**meta["net"]))
+    try:
+        actor = Actor(NetConfig(**meta["net"]))
+    except (TypeError, ValueError, OptionError) as exc:
+        raise FormatError(
+            f"{p}: its network sizes {meta['net']} are not this version's ({exc})"
+        ) from exc
     try:
         actor.load_state_dict(tensors)
     except RuntimeError as exc:
