@@ -370,3 +370,24 @@ def test_lookahead_demonstrations_are_cloned(tmp_path: Path) -> None:
     assert episode_state(env, 0).potential() == pytest.approx(env.potential[0], abs=1e-9)
     with pytest.raises(OptionError):
         TrainConfig(demo_lookahead=2, reward_surface="surrogate")
+
+
+def test_weights_of_unknown_network_sizes_give_one_clear_error(tmp_path: Path) -> None:
+    """A weights file from another version (an unknown size field) is a FormatError naming it."""
+    import json
+
+    from safetensors import safe_open
+    from safetensors.torch import load_file, save_file
+
+    from slicerecon.policy.networks import Actor
+    from slicerecon.policy.weights import save_actor
+
+    path = save_actor(Actor(_il().net), tmp_path / "a.safetensors")
+    with safe_open(str(path), framework="pt") as fh:
+        meta = dict(fh.metadata())
+    net = json.loads(meta["net"])
+    net["advice"] = True  # a field an older experiment wrote
+    meta["net"] = json.dumps(net)
+    save_file(load_file(str(path)), str(tmp_path / "b.safetensors"), metadata=meta)
+    with pytest.raises(FormatError, match="advice"):
+        load_actor(tmp_path / "b.safetensors")
