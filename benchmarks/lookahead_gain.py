@@ -1,0 +1,133 @@
+"""How much better than the heuristic expert its one-step lookahead is, where the shape is known.
+
+The lookahead (:func:`slicerecon.partition.lookahead.lookahead_cut`) scores the
+expert's first ``--candidates`` cuts and the stop, each followed by the
+expert to the end, on the known shape, and keeps the expert's choice unless
+another is better by more than ``--margin`` (volume IoU). It is the teacher
+of the ``demo_lookahead`` configs: this measures what there is to learn.
+
+Episodes are drawn as in training by the env of a shipped config (its
+shape pool: the procedural families' training seeds and the real
+development shapes in stretched copies; random 90-degree rotations and
+flips; 6-24 section planes), and each is run twice as a numpy
+:class:`~slicerecon.partition.state.PartitionState` with the exact reward
+surface: by the expert alone, and by the lookahead at every step. Reported:
+the mean IoU of both, the episodes the lookahead improves or worsens, and
+where its gains come from (per family, by kind of choice: another of the
+expert's cuts, or stopping).
+
+    python benchmarks/lookahead_gain.py [--episodes 240] [--config il_rl_choice] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from slicerecon.io.atomic import atomic_path
+from slicerecon.partition.episodes import ShapePool
+from slicerecon.partition.lookahead import expert_value, lookahead_cut
+from slicerecon.policy.config import load_config
+from slicerecon.policy.demos import episode_state
+from slicerecon.policy.env import CutEnv
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default="il_rl_choice")
+    parser.add_argument("--episodes", type=int, default=240)
+    parser.add_argument("--candidates", type=int, default=4)
+    parser.add_argument("--margin", type=float, default=0.002)
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    cfg = load_config(args.config)
+    from slicerecon.shapes import shape_names
+
+    names = list(cfg.shapes) or shape_names()
+    pool = ShapePool.build(
+        names,
+        range(cfg.train_shapes),
+        grid=cfg.grid,
+        real=cfg.real_shapes,
+        real_variants=cfg.real_variants,
+        max_stretch=cfg.max_stretch,
+    )
+    env = CutEnv(
+        pool,
+        n_envs=8,
+        resolution=cfg.resolution,
+        max_corners=cfg.max_corners,
+        max_steps=cfg.max_steps,
+        min_remaining=cfg.min_remaining,
+        planes=(cfg.planes_min, cfg.planes_max),
+        reward="gain",
+        seed=args.seed,
+    )
+    env.reset(seed=args.seed)
+    start = time.perf_counter()
+    expert, teacher = [], []
+    gains: dict[tuple[str, str], list[float]] = collections.defaultdict(list)
+    while len(expert) < args.episodes:
+        for slot in range(env.n_envs):
+            state = episode_state(env, slot)
+            family = pool.names[env.shape_id[slot]]
+            expert.append(expert_value(state))
+            while not state.done:
+                choice = lookahead_cut(state, candidates=args.candidates, margin=args.margin)
+                if choice.value > choice.expert_value:
+                    kind = "stop" if choice.cut is None else "another cut"
+                    gains[(family, kind)].append(choice.value - choice.expert_value)
+                if choice.cut is None:
+                    break
+                state.apply_cut(choice.cut)
+            teacher.append(state.potential())
+        env.reset()
+    seconds = time.perf_counter() - start
+    e, t = np.array(expert), np.array(teacher)
+    diff = t - e
+    lines = [
+        "# The expert's one-step lookahead against the expert (training episodes)",
+        "",
+        "```bash",
+        f"python benchmarks/lookahead_gain.py --episodes {args.episodes} --config {args.config} "
+        f"--candidates {args.candidates} --margin {args.margin} --seed {args.seed}",
+        "```",
+        "",
+        f"{len(e)} episodes drawn as in training by `{args.config}`'s env (grid {cfg.grid}^3, "
+        f"{cfg.planes_min}-{cfg.planes_max} planes, rotations and flips), exact reward surface; "
+        f"{seconds:.0f} s on this machine.",
+        "",
+        "| planner | mean IoU | episodes better by > 0.001 | worse by > 0.001 |",
+        "|---|---:|---:|---:|",
+        f"| expert | {e.mean():.4f} | — | — |",
+        f"| lookahead | {t.mean():.4f} | {int((diff > 0.001).sum())} | "
+        f"{int((diff < -0.001).sum())} |",
+        "",
+        "Where the lookahead's choices gain (per family and kind of choice; a step's gain is "
+        "the IoU its choice leads to less the expert's choice's):",
+        "",
+        "| family | choice | steps | total gain | largest |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for (family, kind), values in sorted(gains.items(), key=lambda kv: -sum(kv[1])):
+        lines.append(
+            f"| {family} | {kind} | {len(values)} | {sum(values):.3f} | {max(values):.3f} |"
+        )
+    text = "\n".join(lines) + "\n"
+    if args.out is None:
+        print(text)
+    else:
+        with atomic_path(args.out) as tmp:
+            Path(tmp).write_text(text)
+        print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
