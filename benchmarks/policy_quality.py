@@ -249,6 +249,15 @@ def main() -> None:
     weights = args.weights_dir
     manifest_path = weights / "manifest.json"
     manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
+    if "heuristic_eval_iou" not in manifest:  # each actor file records it too
+        from slicerecon.policy.weights import load_actor
+
+        for name in LEARNED:
+            if (weights / f"{name}.safetensors").is_file():
+                meta = load_actor(weights / f"{name}.safetensors")[1]
+                if "heuristic_eval_iou" in meta:
+                    manifest["heuristic_eval_iou"] = meta["heuristic_eval_iou"]
+                    break
     args.figures.mkdir(parents=True, exist_ok=True)
     fig1 = args.figures / "policy_iou_vs_contours.png"
     sweep_all = sweep_rows + [
@@ -260,11 +269,20 @@ def main() -> None:
     figure_training(logs, manifest.get("heuristic_eval_iou"), fig2)
 
     errors = [r for r in rows + sweep_rows if "error" in r]
+    shipped = weights.resolve() == Path(WEIGHTS_DIR).resolve()
+    dir_option = "" if shipped else f" --weights-dir {weights}"
+    whose = (
+        "the shipped actors (`slicerecon/policy/weights/`, see its README)"
+        if shipped
+        else f"the actors in `{weights}` (`ddpg`, `il`, `il_rl` are file names there, "
+        "not how each actor was trained)"
+    )
     lines = [
         "# Learned planner against the heuristic (held-out shapes)",
         "",
         f"`python benchmarks/policy_quality.py --seeds {args.seeds} --voxels {args.voxels} "
-        f"--slices {args.slices} --contours {args.contours}` ({elapsed / 60:.1f} min, "
+        f"--slices {args.slices} --contours {args.contours}{dir_option}` "
+        f"({elapsed / 60:.1f} min, "
         f"{args.workers} workers).",
         "",
         f"{len(families)} families x {args.seeds} held-out seed(s) (seeds {HOLDOUT_SEED}+, "
@@ -273,8 +291,7 @@ def main() -> None:
         "as they occupy), ground-truth projections, "
         "the default surface (`sdf` with PCHIP, carved and covering the silhouettes); "
         "`reconstruct()` + `evaluate()` "
-        "(20 000 surface samples). The learned "
-        "planners are the shipped actors (`slicerecon/policy/weights/`, see its README).",
+        f"(20 000 surface samples). The learned planners are {whose}.",
         "",
         "## Volume IoU and Chamfer-L1 (mm) per family",
         "",
