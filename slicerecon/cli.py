@@ -522,7 +522,10 @@ def train(
         str,
         typer.Option(
             "--config",
-            help="TOML file, or a shipped config: ddpg, il, il_rl, ddpg_gain, il_gain, il_rl_gain.",
+            help=(
+                "TOML file, or a shipped config: ddpg, il, il_rl, ddpg_gain, il_gain, "
+                "il_rl_gain, il_rl_choice."
+            ),
         ),
     ] = "il_rl",
     device: Annotated[str, typer.Option(help="cpu or cuda.")] = "cpu",

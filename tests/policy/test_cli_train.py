@@ -99,3 +99,13 @@ def test_train_resume_refuses_an_unsafe_checkpoint_with_one_error_line(
     assert len(errors) == 1 and "Traceback" not in captured.err, captured.err
     assert str(out / "checkpoint.pt") in errors[0] and "loaded safely" in errors[0]
     assert not marker.exists()
+
+
+def test_train_help_names_every_shipped_config(capsys: pytest.CaptureFixture[str]) -> None:
+    from slicerecon.policy.config import CONFIG_NAMES, config_path
+
+    assert main(["train", "--help"]) in (0, None)
+    text = " ".join(capsys.readouterr().out.split())
+    for name in CONFIG_NAMES:
+        assert config_path(name).is_file()
+        assert f"{name}," in text or f"{name}." in text, name
