@@ -140,6 +140,10 @@ class TrainConfig:
     over its first ``n`` cuts and the stop, each finished by the expert and
     scored on the known shape), a teacher at least as good on the states it
     is asked about; the cloning target of the demonstrations is its action."""
+    bc_loss: str = "mse"
+    """The cloning loss: ``mse`` (the paper's squared distance of the actions)
+    or ``choice`` (for a chooser, ``candidates > 0``: the cross-entropy of
+    its scores with the index of the target among its choices)."""
     demo_margin: float = 0.002
     """The lookahead leaves the expert's choice only for an IoU higher by more than this."""
     noise: str = "gaussian"
@@ -240,6 +244,10 @@ class TrainConfig:
             raise OptionError("demo_lookahead and demo_margin must be >= 0")
         if self.demo_lookahead and self.reward_surface != "exact":
             raise OptionError("demo_lookahead scores choices with the exact reward surface")
+        if self.bc_loss not in ("mse", "choice"):
+            raise OptionError(f"bc_loss must be mse or choice (got {self.bc_loss!r})")
+        if self.bc_loss == "choice" and not self.candidates:
+            raise OptionError("bc_loss = choice needs a chooser (candidates > 0)")
         if not 0.0 <= self.explore_stops <= 1.0:
             raise OptionError(f"explore_stops must be in [0, 1] (got {self.explore_stops!r})")
         if min(self.noise_sigma, self.logit_penalty) < 0 or min(self.actor_lr, self.critic_lr) <= 0:

@@ -31,7 +31,7 @@ import torch.nn.functional as F
 
 from ..errors import OptionError
 from .buffers import ReplayBatch
-from .networks import Actor, Critic, NetConfig
+from .networks import Actor, Critic, NetConfig, choice_targets
 from .observation import Observation
 
 __all__ = ["DDPG", "TARGET_UPDATES"]
@@ -84,6 +84,11 @@ class DDPG:
         term: keeps the sigmoid outputs away from saturation, where the
         critic's gradient vanishes and the actor would freeze on a corner of
         the action cube (observed without it).
+    bc_choice : bool
+        For a chooser: the cloning loss is the cross-entropy of its scores
+        with the index of the target among its choices
+        (:func:`~slicerecon.policy.networks.choice_targets`) instead of the
+        squared distance of the mixed action to the target.
     """
 
     def __init__(
@@ -102,6 +107,7 @@ class DDPG:
         target_period: int = 100,
         tau: float = 0.005,
         logit_penalty: float = 1e-3,
+        bc_choice: bool = False,
     ) -> None:
         if target_update not in TARGET_UPDATES:
             raise OptionError(
@@ -124,6 +130,9 @@ class DDPG:
         self.target_period = int(target_period)
         self.tau = float(tau)
         self.logit_penalty = float(logit_penalty)
+        if bc_choice and not net.candidates:
+            raise OptionError("bc_choice needs a chooser (NetConfig.candidates > 0)")
+        self.bc_choice = bool(bc_choice)
         self.actor = Actor(net).to(self.device)
         self.critic = Critic(net).to(self.device)
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
@@ -216,7 +225,13 @@ class DDPG:
                     keep = (q_expert > q_pi).to(pi.dtype)
                 out["q_filter_frac"] = float((keep * mask).sum() / mask.sum().clamp(min=1.0))
                 mask = mask * keep
-            sq = ((pi - batch.expert_actions) ** 2).sum(dim=1)
+            if self.bc_choice:  # cross-entropy on which of the expert's choices is the target
+                _, scores = self.actor.choice_scores(batch.obs)
+                assert batch.obs.advice is not None
+                target = choice_targets(batch.obs.advice, batch.expert_actions)
+                sq = F.cross_entropy(scores, target, reduction="none")
+            else:
+                sq = ((pi - batch.expert_actions) ** 2).sum(dim=1)
             bc_loss = (sq * mask).sum() / (batch.expert_valid * rows).sum().clamp(min=1.0)
             actor_loss = actor_loss + self.bc_weight * bc_loss
             out["bc_loss"] = float(bc_loss.detach())

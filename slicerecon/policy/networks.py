@@ -38,7 +38,15 @@ from torch import nn
 from ..errors import OptionError
 from .observation import Observation
 
-__all__ = ["NetConfig", "CoordConv", "ViewEncoder", "StateEncoder", "Actor", "Critic"]
+__all__ = [
+    "NetConfig",
+    "CoordConv",
+    "ViewEncoder",
+    "StateEncoder",
+    "Actor",
+    "Critic",
+    "choice_targets",
+]
 
 ACTION_DIM = 5
 ADVICE_DIM = 6
@@ -210,13 +218,57 @@ class Actor(nn.Module):
         raw = self.head(self.encoder(obs))
         if not self.config.candidates:
             return torch.sigmoid(raw), raw
+        return self._mix(obs, self._scores(obs, raw)), raw
+
+    def choice_scores(self, obs: Observation) -> tuple[torch.Tensor, torch.Tensor]:
+        """A chooser's actions (B, 5) and its scores (B, C + 1): the cuts', then the stop's.
+
+        Invalid cuts score ``-inf``; the action is the softmax-weighted mean.
+
+        Raises
+        ------
+        OptionError
+            For an actor that is not a chooser (``NetConfig.candidates == 0``).
+        """
+        if not self.config.candidates:
+            raise OptionError("choice_scores needs a chooser (NetConfig.candidates > 0)")
+        scores = self._scores(obs, self.head(self.encoder(obs)))
+        return self._mix(obs, scores), scores
+
+    def _scores(self, obs: Observation, raw: torch.Tensor) -> torch.Tensor:
         advice = _advice(obs, self.config.candidates)
-        valid = torch.cat(
-            [advice[:, :, 5] > 0.5, torch.ones_like(advice[:, :1, 5], dtype=torch.bool)], 1
-        )
-        scores = (raw + self.prior).masked_fill(~valid, float("-inf"))
+        stop = torch.ones_like(advice[:, :1, 5], dtype=torch.bool)
+        valid = torch.cat([advice[:, :, 5] > 0.5, stop], 1)
+        return (raw + self.prior).masked_fill(~valid, float("-inf"))
+
+    def _mix(self, obs: Observation, scores: torch.Tensor) -> torch.Tensor:
         weights = torch.softmax(scores, dim=1)[:, :-1]  # the stop's action is zeros
-        return torch.einsum("bc,bca->ba", weights, advice[:, :, :ACTION_DIM]), raw
+        advice = _advice(obs, self.config.candidates)
+        return torch.einsum("bc,bca->ba", weights, advice[:, :, :ACTION_DIM])
+
+
+def choice_targets(advice: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """Which of a state's choices (its ``C`` cuts, then the stop) each action is.
+
+    Parameters
+    ----------
+    advice : Tensor of shape (B, C, 6)
+        :attr:`~slicerecon.policy.observation.Observation.advice`.
+    actions : Tensor of shape (B, 5)
+        Target actions (the expert's or its lookahead's).
+
+    Returns
+    -------
+    Tensor of shape (B,), int64
+        The index in ``0 .. C`` of the nearest valid choice (``C``: the stop,
+        all zeros).
+    """
+    rows = torch.cat([advice[:, :, :ACTION_DIM], torch.zeros_like(advice[:, :1, :ACTION_DIM])], 1)
+    d2 = ((rows - actions[:, None, :]) ** 2).sum(dim=2)
+    valid = torch.cat(
+        [advice[:, :, 5] > 0.5, torch.ones_like(advice[:, :1, 5], dtype=torch.bool)], 1
+    )
+    return d2.masked_fill(~valid, float("inf")).argmin(dim=1)
 
 
 class Critic(nn.Module):

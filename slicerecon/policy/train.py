@@ -344,6 +344,7 @@ def train(
         target_period=config.target_period,
         tau=config.tau,
         logit_penalty=config.logit_penalty,
+        bc_choice=config.bc_loss == "choice",
     )
     demos, replay = (
         ReplayBuffer(

@@ -391,3 +391,25 @@ def test_weights_of_unknown_network_sizes_give_one_clear_error(tmp_path: Path) -
     save_file(load_file(str(path)), str(tmp_path / "b.safetensors"), metadata=meta)
     with pytest.raises(FormatError, match="advice"):
         load_actor(tmp_path / "b.safetensors")
+
+
+def test_choice_targets_and_the_cross_entropy_cloning_loss(tmp_path: Path) -> None:
+    """bc_loss = choice: targets are matched to the nearest valid choice, and cloning learns it."""
+    from slicerecon.policy.networks import choice_targets
+
+    advice = torch.zeros((3, 2, 6))
+    advice[:, 0] = torch.tensor([0.2, 0.2, 0.8, 0.8, 0.1, 1.0])
+    advice[:2, 1] = torch.tensor([0.5, 0.1, 0.5, 0.9, 0.5, 1.0])
+    targets = torch.tensor(
+        [[0.5, 0.1, 0.5, 0.9, 0.5], [0.0, 0.0, 0.0, 0.0, 0.0], [0.5, 0.1, 0.5, 0.9, 0.5]]
+    )
+    # the second cut of row 2 is invalid: its nearest valid choice is the first cut
+    assert choice_targets(advice, targets).tolist() == [1, 2, 0]
+    cfg = _il(candidates=3, bc_loss="choice", demo_lookahead=3, demo_margin=0.0, reward="gain")
+    result = train(cfg.replace(total_updates=60), out=tmp_path / "run", device="cpu")
+    losses = [float(r["bc_loss"]) for r in _rows(result.log_path)]
+    assert all(np.isfinite(losses)) and losses[-1] <= losses[0]
+    with pytest.raises(OptionError):
+        TrainConfig(bc_loss="choice")  # needs a chooser
+    with pytest.raises(OptionError):
+        TrainConfig(bc_loss="l1")
