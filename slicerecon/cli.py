@@ -524,7 +524,7 @@ def train(
             "--config",
             help=(
                 "TOML file, or a shipped config: ddpg, il, il_rl, ddpg_gain, il_gain, "
-                "il_rl_gain, il_rl_choice."
+                "il_rl_gain, il_rl_choice, il_rl_gpu."
             ),
         ),
     ] = "il_rl",

@@ -33,7 +33,16 @@ __all__ = [
 EVAL_SEED_OFFSET = 10_000
 """Evaluation shapes use seeds from here on; training seeds stay below it."""
 
-CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain", "il_gain", "il_rl_gain", "il_rl_choice")
+CONFIG_NAMES = (
+    "ddpg",
+    "il",
+    "il_rl",
+    "ddpg_gain",
+    "il_gain",
+    "il_rl_gain",
+    "il_rl_choice",
+    "il_rl_gpu",
+)
 """The shipped configs in ``slicerecon/policy/configs/``."""
 
 NOISES = ("gaussian", "ou")

@@ -232,7 +232,7 @@ def test_gain_configs_train_only_on_development_real_shapes() -> None:
     split = Path(__file__).resolve().parents[2] / "benchmarks" / "real_split.toml"
     cases = tomllib.loads(split.read_text())["cases"]
     dev = {name for name, case in cases.items() if case["half"] == "dev"}
-    for name in ("ddpg_gain", "il_gain", "il_rl_gain", "il_rl_choice"):
+    for name in ("ddpg_gain", "il_gain", "il_rl_gain", "il_rl_choice", "il_rl_gpu"):
         cfg = load_config(name)
         assert cfg.name == name and cfg.reward == "gain"
         assert cfg.real_shapes and set(cfg.real_shapes) <= dev, set(cfg.real_shapes) - dev
