@@ -30,11 +30,11 @@ import numpy as np
 import torch
 
 from slicerecon.io.atomic import atomic_path
-from slicerecon.partition.episodes import ShapePool
 from slicerecon.partition.lookahead import expert_value, lookahead_cut
 from slicerecon.policy.config import load_config
 from slicerecon.policy.demos import episode_state
 from slicerecon.policy.env import CutEnv
+from slicerecon.policy.train import training_pool
 
 
 def main() -> None:
@@ -48,17 +48,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     cfg = load_config(args.config)
-    from slicerecon.shapes import shape_names
-
-    names = list(cfg.shapes) or shape_names()
-    pool = ShapePool.build(
-        names,
-        range(cfg.train_shapes),
-        grid=cfg.grid,
-        real=cfg.real_shapes,
-        real_variants=cfg.real_variants,
-        max_stretch=cfg.max_stretch,
-    )
+    pool = training_pool(cfg)
     env = CutEnv(
         pool,
         n_envs=8,

@@ -32,6 +32,7 @@ __all__ = [
     "expert_segments",
     "expert_cuts",
     "expert_cut",
+    "run_expert",
     "expert_action",
 ]
 
@@ -266,6 +267,22 @@ def expert_cut(state: PartitionState) -> Cut | None:
     """
     cuts = expert_cuts(state, 1)
     return cuts[0] if cuts else None
+
+
+def run_expert(state: PartitionState) -> PartitionState:
+    """Apply the expert's cut until the episode ends or it has no useful cut (in place).
+
+    Returns
+    -------
+    PartitionState
+        ``state``, stepped; :meth:`~PartitionState.finish` is left to the caller.
+    """
+    while not state.done:
+        cut = expert_cut(state)
+        if cut is None:
+            break
+        state.apply_cut(cut)
+    return state
 
 
 def expert_action(state: PartitionState) -> NDArray[np.float64] | None:

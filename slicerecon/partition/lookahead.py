@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 from ..errors import OptionError
 from .cuts import Cut
-from .heuristic import expert_cut, expert_cuts
+from .heuristic import expert_cuts, run_expert
 from .state import PartitionState
 
 __all__ = ["Lookahead", "expert_value", "lookahead_cut"]
@@ -66,13 +66,7 @@ def expert_value(state: PartitionState) -> float:
     OptionError
         If ``state`` has no ``reconstruct`` function (no potential).
     """
-    rollout = state.copy()
-    while not rollout.done:
-        cut = expert_cut(rollout)
-        if cut is None:
-            break
-        rollout.apply_cut(cut)
-    return rollout.potential()
+    return run_expert(state.copy()).potential()
 
 
 def lookahead_cut(

@@ -23,7 +23,7 @@ from ..errors import InputError, OptionError
 from ..sampling import pool_any
 from ..sections import Box
 from .cuts import Cut
-from .heuristic import expert_cut
+from .heuristic import run_expert
 from .state import Part, PartitionState, Reconstruct
 
 __all__ = [
@@ -186,12 +186,7 @@ def _plan_heuristic(
         max_steps=max_parts - 1,
         min_remaining=min_remaining,
     )
-    while not state.done:
-        cut = expert_cut(state)
-        if cut is None:
-            break
-        state.apply_cut(cut)
-    return state.finish()
+    return run_expert(state).finish()
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ the same rules, ``tests/policy/test_env.py``), and encodes each state with
 
 from __future__ import annotations
 
+import functools
 import logging
 
 import numpy as np
@@ -27,6 +28,7 @@ from .buffers import ReplayBuffer
 from .env import CutEnv
 from .observation import Observation, observe_state
 from .reward import part_surface_voxels
+from .surrogate import surrogate_reconstruction
 
 __all__ = ["collect_demos", "collect_lookahead_demos", "episode_state"]
 
@@ -102,17 +104,22 @@ def collect_demos(
 def episode_state(env: CutEnv, slot: int) -> PartitionState:
     """A numpy episode on slot ``slot``'s shape, sections and hull, with the env's rules.
 
-    Its reconstruction is the exact part surface
-    (:func:`~slicerecon.policy.reward.part_surface_voxels`, memoised per box),
-    its reward kind, ``lam``, ``max_steps``, ``min_remaining`` and
-    ``max_corners`` the env's.
+    Its reconstruction is the env's reward surface, memoised per box (the
+    exact part surface, :func:`~slicerecon.policy.reward.part_surface_voxels`,
+    or :func:`~slicerecon.policy.surrogate.surrogate_reconstruction`); its
+    reward kind, ``lam``, ``max_steps``, ``min_remaining`` and ``max_corners``
+    are the env's. The env's contract test steps both in lockstep.
     """
     occ, sections, hull = env.episode(slot)
+    if env.reward_surface == "surrogate":
+        make = surrogate_reconstruction(sections, hull)
+    else:
+        make = functools.partial(part_surface_voxels, sections, hull)
     memo: dict[Box, np.ndarray] = {}
 
     def reconstruct(box: Box) -> np.ndarray:
         if box not in memo:
-            memo[box] = part_surface_voxels(sections, hull, box)
+            memo[box] = make(box)
         return memo[box]
 
     return PartitionState(

@@ -61,6 +61,7 @@ __all__ = [
     "load_config",
     "train",
     "evaluate_actor",
+    "training_pool",
 ]
 
 logger = logging.getLogger(__name__)
@@ -122,6 +123,24 @@ def _shape_names(config: TrainConfig) -> list[str]:
             f"unknown shape famil(ies) {', '.join(unknown)}; choose from {', '.join(shape_names())}"
         )
     return names
+
+
+def training_pool(config: TrainConfig) -> ShapePool:
+    """The shapes a run trains on: each family's training seeds and the real shapes' copies.
+
+    Raises
+    ------
+    OptionError
+        For an unknown family.
+    """
+    return ShapePool.build(
+        _shape_names(config),
+        range(config.train_shapes),
+        grid=config.grid,
+        real=config.real_shapes,
+        real_variants=config.real_variants,
+        max_stretch=config.max_stretch,
+    )
 
 
 def _make_env(
@@ -307,14 +326,7 @@ def train(
     np_rng = np.random.default_rng(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
     names = _shape_names(config)
-    train_pool = ShapePool.build(
-        names,
-        range(config.train_shapes),
-        grid=config.grid,
-        real=config.real_shapes,
-        real_variants=config.real_variants,
-        max_stretch=config.max_stretch,
-    )
+    train_pool = training_pool(config)
     eval_pool = ShapePool.build(
         names, range(EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + config.eval_shapes), grid=config.grid
     )

@@ -11,10 +11,9 @@ from slicerecon.partition.cuts import Cut, cut_to_action, snap_action
 from slicerecon.partition.episodes import ShapePool, episode_sections, occupancy_hull
 from slicerecon.partition.heuristic import expert_action
 from slicerecon.partition.state import NOOP_REWARD, PartitionState, iou
+from slicerecon.policy.demos import episode_state
 from slicerecon.policy.env import CutEnv
 from slicerecon.policy.observation import observe_state
-from slicerecon.policy.reward import part_surface_voxels
-from slicerecon.policy.surrogate import surrogate_reconstruction
 from slicerecon.sections import Box
 
 FAMILIES = ("chair", "torus", "two_spheres", "y_branch", "box")
@@ -32,36 +31,14 @@ def big_pool() -> ShapePool:
 
 def _reference(env: CutEnv, i: int, surface: str) -> PartitionState:
     """A numpy episode on the same shape with the same reconstruction as slot ``i``."""
-    occ, sections, hull = env.episode(i)
-    make = (
-        surrogate_reconstruction(sections, hull)
-        if surface == "surrogate"
-        else (lambda box: part_surface_voxels(sections, hull, box))
-    )
-    memo: dict[Box, np.ndarray] = {}
-
-    def recon(box: Box) -> np.ndarray:  # memoised: the final IoU reuses the parts' S_i
-        if box not in memo:
-            memo[box] = make(box)
-        return memo[box]
-
-    state = PartitionState(
-        occ,
-        reconstruct=recon,
-        lam=env.lam,
-        reward=env.reward_kind,
-        max_steps=env.max_steps,
-        min_remaining=env.min_remaining,
-        max_corners=env.max_corners,
-    )
-    state.recon_fn = recon  # type: ignore[attr-defined]
-    return state
+    assert env.reward_surface == surface
+    return episode_state(env, i)
 
 
 def _final_iou(state: PartitionState) -> float:
     union = np.zeros(state.occupancy.shape, dtype=bool)
     for part in state.finish():
-        union[part.box.slices] |= state.recon_fn(part.box)  # type: ignore[attr-defined]
+        union[part.box.slices] |= np.asarray(state.reconstruct(part.box), dtype=bool)
     return iou(union, np.asarray(state.occupancy))
 
 
