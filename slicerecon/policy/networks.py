@@ -36,7 +36,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..errors import OptionError
-from .observation import ADVICE_WIDTH, Observation
+from .observation import Observation
 
 __all__ = [
     "NetConfig",
@@ -49,6 +49,7 @@ __all__ = [
 ]
 
 ACTION_DIM = 5
+ADVICE_DIM = 6
 CHOICE_PRIOR = 8.0
 """Initial score of the expert's own cut (the others and the stop start at 0)."""
 
@@ -152,7 +153,7 @@ class StateEncoder(nn.Module):
         k = config.max_corners
         self.candidates = config.candidates
         self.corners = nn.Sequential(
-            nn.Linear(1 + 3 * k * 3 + ADVICE_WIDTH * config.candidates, config.hidden),
+            nn.Linear(1 + 3 * k * 3 + ADVICE_DIM * config.candidates, config.hidden),
             nn.ReLU(),
             nn.Linear(config.hidden, config.hidden),
             nn.ReLU(),
@@ -175,7 +176,7 @@ class StateEncoder(nn.Module):
 
 
 def _advice(obs: Observation, count: int) -> torch.Tensor:
-    if obs.advice is None or tuple(obs.advice.shape[1:]) != (count, ADVICE_WIDTH):
+    if obs.advice is None or tuple(obs.advice.shape[1:]) != (count, ADVICE_DIM):
         got = None if obs.advice is None else tuple(obs.advice.shape[1:])
         raise OptionError(
             f"this network chooses among the expert's first {count} cuts: build observations "
@@ -251,7 +252,7 @@ def choice_targets(advice: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
 
     Parameters
     ----------
-    advice : Tensor of shape (B, C, 10)
+    advice : Tensor of shape (B, C, 6)
         :attr:`~slicerecon.policy.observation.Observation.advice`.
     actions : Tensor of shape (B, 5)
         Target actions (the expert's or its lookahead's).

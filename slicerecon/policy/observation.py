@@ -24,22 +24,11 @@ from numpy.typing import NDArray
 
 from ..corners import harris_corners, pad_corners
 from ..errors import OptionError
-from ..partition.cuts import Cut, cut_to_action, split
+from ..partition.cuts import Cut, cut_to_action
 from ..partition.heuristic import expert_cuts
 from ..partition.state import PartitionState
-from ..sections import Box
 
-__all__ = [
-    "ADVICE_WIDTH",
-    "Observation",
-    "resize_views",
-    "padded_corners",
-    "advice_rows",
-    "observe_state",
-]
-
-ADVICE_WIDTH = 10
-"""Numbers per row of :attr:`Observation.advice` (:func:`advice_rows`)."""
+__all__ = ["Observation", "resize_views", "padded_corners", "advice_rows", "observe_state"]
 
 
 class Observation(NamedTuple):
@@ -55,11 +44,10 @@ class Observation(NamedTuple):
         Corner points per view, ``((row + .5) / M, (col + .5) / N)``; invalid rows 0.
     corner_mask : Tensor of shape (B, 3, K), float32
         1 for the rows that hold a corner.
-    advice : Tensor of shape (B, C, 10), float32, or None
+    advice : Tensor of shape (B, C, 6), float32, or None
         The heuristic expert's first ``C`` cuts at this state, best first, as
-        actions with a validity flag and what each would make
-        (:func:`advice_rows`; zero rows where it has fewer), for actors that
-        choose among them
+        actions with a validity flag (``(x1, y1, x2, y2, c, 1)``; zero rows
+        where it has fewer), for actors that choose among them
         (:attr:`~slicerecon.policy.networks.NetConfig.candidates`); None otherwise.
     """
 
@@ -143,27 +131,15 @@ def padded_corners(
 # -- environment ------------------------------------------------------------------------
 
 
-def _fill(mask: NDArray[np.bool_]) -> float:
-    """Voxels of ``mask`` over the volume of its bounding box (0 for an empty mask)."""
-    count = int(np.count_nonzero(mask))
-    return count / float(np.prod(Box.of_mask(mask).shape)) if count else 0.0
-
-
 def advice_rows(
-    cuts: Sequence[Cut],
-    remaining: NDArray[np.bool_],
-    image_shapes: Sequence[Sequence[int]],
-    count: int,
+    cuts: Sequence[Cut], image_shapes: Sequence[Sequence[int]], count: int
 ) -> NDArray[np.float32]:
     """Cuts as :attr:`Observation.advice` rows of one state.
 
     Parameters
     ----------
     cuts : sequence of Cut
-        The expert's cuts, best first (at most ``count`` are used); each must
-        remove something from ``remaining``.
-    remaining : ndarray of shape (I, J, K), bool
-        The state's remaining region ``R``.
+        The expert's cuts, best first (at most ``count`` are used).
     image_shapes : sequence of 3 (M, N)
         The views' shapes (:func:`~slicerecon.partition.cuts.view_shapes`).
     count : int
@@ -171,25 +147,14 @@ def advice_rows(
 
     Returns
     -------
-    ndarray of shape (C, 10), float32
-        Per cut ``(x1, y1, x2, y2, c)``
-        (:func:`~slicerecon.partition.cuts.cut_to_action`), 1 (valid), then
-        what the cut would make: ``|W| / |R|``, the fill of ``W``'s and of the
-        rest's bounding boxes (voxels over box volume), and the fill of
-        ``R``'s box; zero rows after the cuts.
+    ndarray of shape (C, 6), float32
+        ``(x1, y1, x2, y2, c, 1)`` per cut
+        (:func:`~slicerecon.partition.cuts.cut_to_action`), zero rows after them.
     """
-    out = np.zeros((int(count), ADVICE_WIDTH), dtype=np.float32)
-    region = np.asarray(remaining, dtype=bool)
-    total = max(int(np.count_nonzero(region)), 1)
-    whole = _fill(region)
+    out = np.zeros((int(count), 6), dtype=np.float32)
     for row, cut in enumerate(list(cuts)[: int(count)]):
-        parts = split(region, cut)
-        if parts is None:
-            raise OptionError(f"cut {cut} removes nothing from the remaining region")
-        w, rest = parts
         out[row, :5] = cut_to_action(cut, image_shapes)
         out[row, 5] = 1.0
-        out[row, 6:] = (np.count_nonzero(w) / total, _fill(w), _fill(rest), whole)
     return out
 
 
@@ -225,6 +190,5 @@ def observe_state(
     hint = None
     if candidates:
         cuts = expert_cuts(state, int(candidates))
-        rows = advice_rows(cuts, state.remaining, state.image_shapes, int(candidates))
-        hint = torch.from_numpy(rows)[None]
+        hint = torch.from_numpy(advice_rows(cuts, state.image_shapes, int(candidates)))[None]
     return Observation(views, step, corners, mask, hint).to(device)

@@ -262,27 +262,3 @@ def test_gpu_env_matches_cpu_env(pool: ShapePool) -> None:
         torch.testing.assert_close(cpu.reward, gpu.reward.cpu())
         assert torch.equal(cpu.done, gpu.done.cpu())
         assert torch.equal(envs[0].remaining, envs[1].remaining.cpu())
-
-
-def test_advice_rows_describe_what_each_expert_cut_makes() -> None:
-    """Each row: the cut's action, valid, |W|/|R|, the fills of W's, the rest's and R's boxes."""
-    from slicerecon.partition.cuts import split
-    from slicerecon.partition.episodes import shape_occupancy
-    from slicerecon.partition.heuristic import expert_cuts
-    from slicerecon.policy.observation import advice_rows
-
-    table = shape_occupancy("table", seed=2, grid=24)
-    state = PartitionState(table, max_corners=12)
-    cuts = expert_cuts(state, 3)
-    assert cuts
-    rows = advice_rows(cuts, state.remaining, state.image_shapes, 4)
-    assert rows.shape == (4, 10) and not rows[len(cuts) :].any()
-    for row, cut in zip(rows, cuts, strict=False):
-        w, rest = split(state.remaining, cut)  # type: ignore[misc]
-        np.testing.assert_allclose(row[:5], cut_to_action(cut, state.image_shapes), atol=1e-6)
-        assert row[5] == 1.0
-        assert row[6] == pytest.approx(w.sum() / table.sum(), abs=1e-6)
-        for fill, mask in ((row[7], w), (row[8], rest), (row[9], table)):
-            assert fill == pytest.approx(mask.sum() / np.prod(Box.of_mask(mask).shape), abs=1e-6)
-    with pytest.raises(OptionError):  # a cut that removes nothing has no row
-        advice_rows([Cut(2, (0.0, 0.0), (0.0, 23.0))], state.remaining, state.image_shapes, 1)
