@@ -282,7 +282,7 @@ class TrainConfig:
 
 
 def config_path(name: str) -> Path:
-    """Path of a shipped config (``ddpg``, ``il``, ``il_rl``)."""
+    """Path of a shipped config (a name in :data:`CONFIG_NAMES`)."""
     if name not in CONFIG_NAMES:
         raise OptionError(f"no shipped config {name!r}; choose one of {', '.join(CONFIG_NAMES)}")
     return Path(__file__).with_name("configs") / f"{name}.toml"
@@ -294,7 +294,7 @@ def load_config(source: str | os.PathLike[str], **overrides: Any) -> TrainConfig
     Parameters
     ----------
     source : str or path-like
-        ``ddpg``, ``il``, ``il_rl`` or a path to a ``.toml`` file whose top-level
+        A name in :data:`CONFIG_NAMES` or a path to a ``.toml`` file whose top-level
         keys are :class:`TrainConfig` fields.
     **overrides
         Fields to replace (``None`` values are ignored).
