@@ -369,7 +369,6 @@ def reconstruct(
             max_parts=max_parts,
             weights=weights,
             max_grid=PLANNING_MAX_GRID,
-            planes=sections.indices if sections.axis == 2 else None,
         )
     implicit_carve = carve and entry.implicit_carve and not smooth
     with _timed(timings, "surface"):

@@ -271,7 +271,6 @@ def plan_partition(
     lam: float = 1.0,
     weights: str | os.PathLike[str] | None = None,
     max_grid: int | None = None,
-    planes: ArrayLike | None = None,
 ) -> Plan:
     """Partition an occupancy grid into cuboid parts.
 
@@ -322,7 +321,7 @@ def plan_partition(
     if weights is not None and not entry.takes_weights:
         raise OptionError(f"weights apply to the policy planner only (planner is {name!r})")
     occ = np.asarray(occupancy)
-    options: dict[str, object] = {} if weights is None else {"weights": weights}
+    options = {} if weights is None else {"weights": weights}
     factor = 1
     if max_grid is not None:
         if isinstance(max_grid, bool) or int(max_grid) < 8:
@@ -332,8 +331,6 @@ def plan_partition(
         if reconstruct is not None:
             raise OptionError("a reward reconstruction needs the full grid: give max_grid=None")
         coarse = pool_any(occ.astype(bool, copy=False), factor)
-        if planes is not None and entry.takes_weights:
-            options["planes"] = (np.asarray(planes, dtype=np.float64) + 0.5) / factor - 0.5
         parts = entry(
             coarse,
             reconstruct=None,
@@ -347,8 +344,6 @@ def plan_partition(
         plan = Plan(name, refined, shape)  # type: ignore[arg-type]
         logger.info("planner %s on a %dx coarser grid: %d parts", name, factor, len(plan.parts))
         return plan
-    if planes is not None and entry.takes_weights:
-        options["planes"] = planes
     parts = entry(
         occ,
         reconstruct=reconstruct,

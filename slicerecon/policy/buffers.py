@@ -77,7 +77,7 @@ class ReplayBuffer:
             self._data[prefix + "corners"] = torch.zeros((n, 3, k, 2))
             self._data[prefix + "mask"] = torch.zeros((n, 3, k))
             if candidates:
-                self._data[prefix + "advice"] = torch.zeros((n, int(candidates), 7))
+                self._data[prefix + "advice"] = torch.zeros((n, int(candidates), 6))
         self.advice = bool(candidates)
         self._data["actions"] = torch.zeros((n, 5))
         self._data["rewards"] = torch.zeros(n)

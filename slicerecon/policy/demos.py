@@ -26,7 +26,7 @@ from ..partition.state import PartitionState
 from ..sections import Box
 from .buffers import ReplayBuffer
 from .env import CutEnv
-from .observation import Observation, observe_state, plane_feature
+from .observation import Observation, observe_state
 from .reward import part_surface_voxels
 from .surrogate import surrogate_reconstruction
 
@@ -177,7 +177,7 @@ def collect_lookahead_demos(
             state = episode_state(env, slot)
             total = 0.0
             while not state.done:
-                obs = _observe(env, state, slot)
+                obs = _observe(env, state)
                 choice = lookahead_cut(state, candidates=candidates, margin=margin)
                 stop = choice.cut is None
                 action = np.zeros(5) if stop else cut_to_action(choice.cut, state.image_shapes)
@@ -190,7 +190,7 @@ def collect_lookahead_demos(
                     obs,
                     act,
                     torch.tensor([result.reward], dtype=torch.float32),
-                    _observe(env, state, slot),
+                    _observe(env, state),
                     torch.tensor([float(result.done)]),
                     act,
                     torch.ones(1),
@@ -203,14 +203,12 @@ def collect_lookahead_demos(
     return float(np.mean(returns))
 
 
-def _observe(env: CutEnv, state: PartitionState, slot: int) -> Observation:
-    z = env.plane_index[slot][env.plane_valid[slot]].cpu().numpy()
+def _observe(env: CutEnv, state: PartitionState) -> Observation:
     return observe_state(
         state,
         resolution=env.resolution,
         max_corners=env.max_corners,
         max_steps=env.max_steps,
         candidates=env.candidates,
-        planes=plane_feature(state.remaining, z),
         device="cpu",
     )

@@ -49,14 +49,7 @@ from ..partition.state import (
     part_rewards,
 )
 from ..sections import Box, CrossSections
-from .observation import (
-    Observation,
-    advice_rows,
-    observe_state,
-    padded_corners,
-    plane_feature,
-    resize_views,
-)
+from .observation import Observation, advice_rows, observe_state, padded_corners, resize_views
 from .reward import REWARD_SURFACES, mask_distances, part_surface_voxels, plane_distances
 from .surrogate import surrogate_parts
 
@@ -499,16 +492,12 @@ class CutEnv:
             :func:`~slicerecon.policy.observation.advice_rows` of
             :func:`~slicerecon.partition.heuristic.expert_cuts`.
         """
-        out = np.zeros((self.n_envs, self.candidates, 7), dtype=np.float32)
+        out = np.zeros((self.n_envs, self.candidates, 6), dtype=np.float32)
         for env in range(self.n_envs):
             cached = self._candidates[env]
             if cached is None:
-                state = self.state_of(env)
-                cuts = expert_cuts(state, self.candidates)
-                z = self.plane_index[env][self.plane_valid[env]].cpu().numpy()
-                cached = advice_rows(
-                    cuts, self.image_shapes, self.candidates, plane_feature(state.remaining, z)
-                )
+                cuts = expert_cuts(self.state_of(env), self.candidates)
+                cached = advice_rows(cuts, self.image_shapes, self.candidates)
                 self._candidates[env] = cached
             out[env] = cached
         return out

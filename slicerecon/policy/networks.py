@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 ACTION_DIM = 5
-ADVICE_DIM = 7
+ADVICE_DIM = 6
 CHOICE_PRIOR = 8.0
 """Initial score of the expert's own cut (the others and the stop start at 0)."""
 

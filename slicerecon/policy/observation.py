@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 import torch.nn.functional as F
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from ..corners import harris_corners, pad_corners
 from ..errors import OptionError
@@ -132,7 +132,7 @@ def padded_corners(
 
 
 def advice_rows(
-    cuts: Sequence[Cut], image_shapes: Sequence[Sequence[int]], count: int, planes: float = 0.0
+    cuts: Sequence[Cut], image_shapes: Sequence[Sequence[int]], count: int
 ) -> NDArray[np.float32]:
     """Cuts as :attr:`Observation.advice` rows of one state.
 
@@ -151,21 +151,11 @@ def advice_rows(
         ``(x1, y1, x2, y2, c, 1)`` per cut
         (:func:`~slicerecon.partition.cuts.cut_to_action`), zero rows after them.
     """
-    out = np.zeros((int(count), 7), dtype=np.float32)
+    out = np.zeros((int(count), 6), dtype=np.float32)
     for row, cut in enumerate(list(cuts)[: int(count)]):
         out[row, :5] = cut_to_action(cut, image_shapes)
         out[row, 5] = 1.0
-    out[:, 6] = planes
     return out
-
-
-def plane_feature(remaining: NDArray[np.bool_], plane_z: ArrayLike) -> float:
-    """Section planes crossing the remaining region's z extent, over 24."""
-    z = np.flatnonzero(np.asarray(remaining).any(axis=(0, 1)))
-    if z.size == 0:
-        return 0.0
-    p = np.asarray(plane_z)
-    return float(np.count_nonzero((p >= z[0]) & (p <= z[-1]))) / 24.0
 
 
 def observe_state(
@@ -175,7 +165,6 @@ def observe_state(
     max_corners: int,
     max_steps: int,
     candidates: int = 0,
-    planes: float = 0.0,
     device: str | torch.device = "cpu",
 ) -> Observation:
     """The policy's observation of a numpy :class:`PartitionState` (batch of one).
@@ -201,7 +190,5 @@ def observe_state(
     hint = None
     if candidates:
         cuts = expert_cuts(state, int(candidates))
-        hint = torch.from_numpy(advice_rows(cuts, state.image_shapes, int(candidates), planes))[
-            None
-        ]
+        hint = torch.from_numpy(advice_rows(cuts, state.image_shapes, int(candidates)))[None]
     return Observation(views, step, corners, mask, hint).to(device)

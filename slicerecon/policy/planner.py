@@ -29,7 +29,7 @@ from ..partition.cuts import Cut
 from ..partition.state import Part, PartitionState
 from ..sections import Box, in_plane_axes
 from .networks import Actor
-from .observation import observe_state, plane_feature
+from .observation import observe_state
 from .weights import load_actor, shipped_weights
 
 __all__ = ["plan_policy", "load_policy"]
@@ -77,7 +77,6 @@ def plan_policy(
     lam: float,
     weights: str | os.PathLike[str] | None = None,
     device: str = "cpu",
-    planes: ArrayLike | None = None,
 ) -> list[Part]:
     """Partition ``occupancy`` with a trained actor (greedy, no exploration noise).
 
@@ -124,7 +123,6 @@ def plan_policy(
         hi = tuple(v - o for v, o in zip(box.hi, off, strict=True))
         return Box(lo, hi)  # type: ignore[arg-type]
 
-    plane_z = None if planes is None else np.asarray(planes, dtype=np.float64) + off[2]
     recon = None if reconstruct is None else (lambda box: reconstruct(to_grid(box)))
     state = PartitionState(
         cube,
@@ -136,10 +134,8 @@ def plan_policy(
     )
     with torch.no_grad():
         while not state.done:
-            feature = 0.0 if plane_z is None else plane_feature(state.remaining, plane_z)
             obs = observe_state(
                 state,
-                planes=feature,
                 resolution=cfg.resolution,
                 max_corners=cfg.max_corners,
                 max_steps=train_steps,

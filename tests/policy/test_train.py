@@ -310,7 +310,7 @@ def test_chooser_trains_keeps_its_candidates_and_resumes(tmp_path: Path) -> None
     obs = env.observation()
     action = actor(obs)
     assert tuple(action.shape) == (1, 5) and obs.advice is not None
-    assert tuple(obs.advice.shape) == (1, 3, 7)
+    assert tuple(obs.advice.shape) == (1, 3, 6)
     buffer = ReplayBuffer(8, resolution=32, max_corners=8, candidates=3)
     one, five = torch.zeros(1), torch.zeros((1, 5))
     buffer.add(obs, five, one, obs, one, five, one)
@@ -328,9 +328,9 @@ def test_a_chooser_acts_within_the_expert_cuts_and_the_stop() -> None:
     torch.manual_seed(0)
     actor = Actor(NetConfig(32, 8, 4, 32, candidates=3))
     torch.nn.init.normal_(actor.head[-1].weight, std=3.0)  # a trained-looking head
-    advice = torch.zeros((4, 3, 7))
-    advice[:, 0, :6] = torch.tensor([0.2, 0.3, 0.4, 0.5, 0.1, 1.0])
-    advice[:2, 1, :6] = torch.tensor([0.6, 0.6, 0.9, 0.9, 0.9, 1.0])
+    advice = torch.zeros((4, 3, 6))
+    advice[:, 0] = torch.tensor([0.2, 0.3, 0.4, 0.5, 0.1, 1.0])
+    advice[:2, 1] = torch.tensor([0.6, 0.6, 0.9, 0.9, 0.9, 1.0])
     obs = Observation(
         torch.rand((4, 3, 32, 32)), torch.rand((4, 1)), torch.rand((4, 3, 8, 2)),
         torch.ones((4, 3, 8)), advice,
@@ -397,9 +397,9 @@ def test_choice_targets_and_the_cross_entropy_cloning_loss(tmp_path: Path) -> No
     """bc_loss = choice: targets are matched to the nearest valid choice, and cloning learns it."""
     from slicerecon.policy.networks import choice_targets
 
-    advice = torch.zeros((3, 2, 7))
-    advice[:, 0, :6] = torch.tensor([0.2, 0.2, 0.8, 0.8, 0.1, 1.0])
-    advice[:2, 1, :6] = torch.tensor([0.5, 0.1, 0.5, 0.9, 0.5, 1.0])
+    advice = torch.zeros((3, 2, 6))
+    advice[:, 0] = torch.tensor([0.2, 0.2, 0.8, 0.8, 0.1, 1.0])
+    advice[:2, 1] = torch.tensor([0.5, 0.1, 0.5, 0.9, 0.5, 1.0])
     targets = torch.tensor(
         [[0.5, 0.1, 0.5, 0.9, 0.5], [0.0, 0.0, 0.0, 0.0, 0.0], [0.5, 0.1, 0.5, 0.9, 0.5]]
     )
