@@ -378,11 +378,7 @@ class PartitionState:
         if self.reconstruct is None:
             raise OptionError("the potential needs a reconstruct function")
         if self._potential is None:
-            union = self._union().copy()
-            if self.remaining.any():
-                box = Box.of_mask(self.remaining)
-                union[box.slices] |= self._reconstruction(box)
-            self._potential = iou(union, self.occupancy)
+            self._potential = self._potential_with(self.remaining)
         return self._potential
 
     def _make_part(self, w: NDArray[np.bool_], cut: Cut | None) -> tuple[Part, dict[str, Any]]:
@@ -410,13 +406,16 @@ class PartitionState:
 
     def _potential_without(self, w: NDArray[np.bool_]) -> float:
         """``Phi`` once ``w`` has left the remaining region (its ``S`` already counted)."""
-        rest = self.remaining & ~w
+        self._potential = self._potential_with(self.remaining & ~w)
+        return self._potential
+
+    def _potential_with(self, rest: NDArray[np.bool_]) -> float:
+        """IoU with ``O`` of the parts' union and ``rest`` reconstructed as one more part."""
         union = self._union().copy()
         if rest.any():
             box = Box.of_mask(rest)
             union[box.slices] |= self._reconstruction(box)
-        self._potential = iou(union, self.occupancy)
-        return self._potential
+        return iou(union, self.occupancy)
 
     def _set_remaining(self, rest: NDArray[np.bool_]) -> None:
         rest.setflags(write=False)
