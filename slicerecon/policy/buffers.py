@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from ..errors import OptionError
-from .observation import Observation
+from .observation import ADVICE_WIDTH, Observation
 
 __all__ = ["ReplayBatch", "ReplayBuffer"]
 
@@ -77,7 +77,7 @@ class ReplayBuffer:
             self._data[prefix + "corners"] = torch.zeros((n, 3, k, 2))
             self._data[prefix + "mask"] = torch.zeros((n, 3, k))
             if candidates:
-                self._data[prefix + "advice"] = torch.zeros((n, int(candidates), 6))
+                self._data[prefix + "advice"] = torch.zeros((n, int(candidates), ADVICE_WIDTH))
         self.advice = bool(candidates)
         self._data["actions"] = torch.zeros((n, 5))
         self._data["rewards"] = torch.zeros(n)

@@ -226,7 +226,7 @@ class DDPG:
                 out["q_filter_frac"] = float((keep * mask).sum() / mask.sum().clamp(min=1.0))
                 mask = mask * keep
             if self.bc_choice:  # cross-entropy on which of the expert's choices is the target
-                _, scores = self.actor.choice_scores(batch.obs)
+                scores = self.actor.choice_scores(batch.obs, raw)
                 assert batch.obs.advice is not None
                 target = choice_targets(batch.obs.advice, batch.expert_actions)
                 sq = F.cross_entropy(scores, target, reduction="none")

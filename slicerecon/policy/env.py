@@ -49,7 +49,14 @@ from ..partition.state import (
     part_rewards,
 )
 from ..sections import Box, CrossSections
-from .observation import Observation, advice_rows, observe_state, padded_corners, resize_views
+from .observation import (
+    ADVICE_WIDTH,
+    Observation,
+    advice_rows,
+    observe_state,
+    padded_corners,
+    resize_views,
+)
 from .reward import REWARD_SURFACES, mask_distances, part_surface_voxels, plane_distances
 from .surrogate import surrogate_parts
 
@@ -492,7 +499,7 @@ class CutEnv:
             :func:`~slicerecon.policy.observation.advice_rows` of
             :func:`~slicerecon.partition.heuristic.expert_cuts`.
         """
-        out = np.zeros((self.n_envs, self.candidates, 6), dtype=np.float32)
+        out = np.zeros((self.n_envs, self.candidates, ADVICE_WIDTH), dtype=np.float32)
         for env in range(self.n_envs):
             cached = self._candidates[env]
             if cached is None:

@@ -36,7 +36,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..errors import OptionError
-from .observation import Observation
+from .observation import ADVICE_WIDTH, Observation
 
 __all__ = [
     "NetConfig",
@@ -49,7 +49,6 @@ __all__ = [
 ]
 
 ACTION_DIM = 5
-ADVICE_DIM = 6
 CHOICE_PRIOR = 8.0
 """Initial score of the expert's own cut (the others and the stop start at 0)."""
 
@@ -153,7 +152,7 @@ class StateEncoder(nn.Module):
         k = config.max_corners
         self.candidates = config.candidates
         self.corners = nn.Sequential(
-            nn.Linear(1 + 3 * k * 3 + ADVICE_DIM * config.candidates, config.hidden),
+            nn.Linear(1 + 3 * k * 3 + ADVICE_WIDTH * config.candidates, config.hidden),
             nn.ReLU(),
             nn.Linear(config.hidden, config.hidden),
             nn.ReLU(),
@@ -176,7 +175,7 @@ class StateEncoder(nn.Module):
 
 
 def _advice(obs: Observation, count: int) -> torch.Tensor:
-    if obs.advice is None or tuple(obs.advice.shape[1:]) != (count, ADVICE_DIM):
+    if obs.advice is None or tuple(obs.advice.shape[1:]) != (count, ADVICE_WIDTH):
         got = None if obs.advice is None else tuple(obs.advice.shape[1:])
         raise OptionError(
             f"this network chooses among the expert's first {count} cuts: build observations "
@@ -218,12 +217,16 @@ class Actor(nn.Module):
         raw = self.head(self.encoder(obs))
         if not self.config.candidates:
             return torch.sigmoid(raw), raw
-        return self._mix(obs, self._scores(obs, raw)), raw
+        advice = _advice(obs, self.config.candidates)
+        weights = torch.softmax(self._scores(advice, raw), dim=1)[:, :-1]  # the stop's is zeros
+        return torch.einsum("bc,bca->ba", weights, advice[:, :, :ACTION_DIM]), raw
 
-    def choice_scores(self, obs: Observation) -> tuple[torch.Tensor, torch.Tensor]:
-        """A chooser's actions (B, 5) and its scores (B, C + 1): the cuts', then the stop's.
+    def choice_scores(self, obs: Observation, raw: torch.Tensor) -> torch.Tensor:
+        """A chooser's scores (B, C + 1), the cuts' then the stop's, from its raw outputs.
 
-        Invalid cuts score ``-inf``; the action is the softmax-weighted mean.
+        ``raw`` is the second output of :meth:`outputs` for ``obs``; the
+        scores add the prior and give invalid cuts ``-inf``; the action is the
+        softmax-weighted mean of the choices' actions.
 
         Raises
         ------
@@ -232,19 +235,16 @@ class Actor(nn.Module):
         """
         if not self.config.candidates:
             raise OptionError("choice_scores needs a chooser (NetConfig.candidates > 0)")
-        scores = self._scores(obs, self.head(self.encoder(obs)))
-        return self._mix(obs, scores), scores
+        return self._scores(_advice(obs, self.config.candidates), raw)
 
-    def _scores(self, obs: Observation, raw: torch.Tensor) -> torch.Tensor:
-        advice = _advice(obs, self.config.candidates)
-        stop = torch.ones_like(advice[:, :1, 5], dtype=torch.bool)
-        valid = torch.cat([advice[:, :, 5] > 0.5, stop], 1)
-        return (raw + self.prior).masked_fill(~valid, float("-inf"))
+    def _scores(self, advice: torch.Tensor, raw: torch.Tensor) -> torch.Tensor:
+        return (raw + self.prior).masked_fill(~_choice_valid(advice), float("-inf"))
 
-    def _mix(self, obs: Observation, scores: torch.Tensor) -> torch.Tensor:
-        weights = torch.softmax(scores, dim=1)[:, :-1]  # the stop's action is zeros
-        advice = _advice(obs, self.config.candidates)
-        return torch.einsum("bc,bca->ba", weights, advice[:, :, :ACTION_DIM])
+
+def _choice_valid(advice: torch.Tensor) -> torch.Tensor:
+    """Which choices exist, (B, C + 1) bool: the valid cuts, then the stop (always)."""
+    stop = torch.ones_like(advice[:, :1, 5], dtype=torch.bool)
+    return torch.cat([advice[:, :, 5] > 0.5, stop], 1)
 
 
 def choice_targets(advice: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
@@ -265,10 +265,7 @@ def choice_targets(advice: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
     """
     rows = torch.cat([advice[:, :, :ACTION_DIM], torch.zeros_like(advice[:, :1, :ACTION_DIM])], 1)
     d2 = ((rows - actions[:, None, :]) ** 2).sum(dim=2)
-    valid = torch.cat(
-        [advice[:, :, 5] > 0.5, torch.ones_like(advice[:, :1, 5], dtype=torch.bool)], 1
-    )
-    return d2.masked_fill(~valid, float("inf")).argmin(dim=1)
+    return d2.masked_fill(~_choice_valid(advice), float("inf")).argmin(dim=1)
 
 
 class Critic(nn.Module):

@@ -28,7 +28,17 @@ from ..partition.cuts import Cut, cut_to_action
 from ..partition.heuristic import expert_cuts
 from ..partition.state import PartitionState
 
-__all__ = ["Observation", "resize_views", "padded_corners", "advice_rows", "observe_state"]
+__all__ = [
+    "ADVICE_WIDTH",
+    "Observation",
+    "resize_views",
+    "padded_corners",
+    "advice_rows",
+    "observe_state",
+]
+
+ADVICE_WIDTH = 6
+"""Numbers per row of :attr:`Observation.advice`: a cut's action (5) and its validity."""
 
 
 class Observation(NamedTuple):
@@ -151,7 +161,7 @@ def advice_rows(
         ``(x1, y1, x2, y2, c, 1)`` per cut
         (:func:`~slicerecon.partition.cuts.cut_to_action`), zero rows after them.
     """
-    out = np.zeros((int(count), 6), dtype=np.float32)
+    out = np.zeros((int(count), ADVICE_WIDTH), dtype=np.float32)
     for row, cut in enumerate(list(cuts)[: int(count)]):
         out[row, :5] = cut_to_action(cut, image_shapes)
         out[row, 5] = 1.0
