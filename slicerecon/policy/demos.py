@@ -176,8 +176,8 @@ def collect_lookahead_demos(
         for slot in range(env.n_envs):
             state = episode_state(env, slot)
             total = 0.0
+            obs = _observe(env, state)
             while not state.done:
-                obs = _observe(env, state)
                 choice = lookahead_cut(state, candidates=candidates, margin=margin)
                 stop = choice.cut is None
                 action = np.zeros(5) if stop else cut_to_action(choice.cut, state.image_shapes)
@@ -186,15 +186,17 @@ def collect_lookahead_demos(
                 result = state.apply_cut(choice.cut)
                 total += result.reward
                 act = torch.from_numpy(np.asarray(action, dtype=np.float32))[None]
+                next_obs = _observe(env, state)
                 buffer.add(
                     obs,
                     act,
                     torch.tensor([result.reward], dtype=torch.float32),
-                    _observe(env, state),
+                    next_obs,
                     torch.tensor([float(result.done)]),
                     act,
                     torch.ones(1),
                 )
+                obs = next_obs
                 if stop:
                     break
             returns.append(total)

@@ -478,6 +478,10 @@ class CutEnv:
         valid : ndarray of shape (B,), bool
             False where the expert has no useful cut.
         """
+        if self.candidates:  # the expert's action is its first cut, listed there already
+            first = self.expert_candidates()[:, 0]
+            valid = first[:, 5] > 0.5
+            return np.where(valid[:, None], first[:, :5], np.float32(0.0)), valid
         actions = np.zeros((self.n_envs, 5), dtype=np.float32)
         valid = np.zeros(self.n_envs, dtype=bool)
         for env in range(self.n_envs):

@@ -203,8 +203,12 @@ def test_episodes_use_the_library_sections_and_hull(pool: ShapePool) -> None:
         np.testing.assert_array_equal(planes, ref.indices.astype(int))
 
 
-def test_expert_action_matches_numpy(pool: ShapePool) -> None:
-    env = CutEnv(pool, n_envs=len(pool), resolution=32, max_corners=12, augment=False)
+@pytest.mark.parametrize("candidates", [0, 3])
+def test_expert_action_matches_numpy(pool: ShapePool, candidates: int) -> None:
+    """With candidates the env reads the expert's action off its first listed cut."""
+    env = CutEnv(
+        pool, n_envs=len(pool), resolution=32, max_corners=12, augment=False, candidates=candidates
+    )
     env.load(list(pool.occupancies))
     actions, valid = env.expert_actions()
     for i, occ in enumerate(pool.occupancies):
