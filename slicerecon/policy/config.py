@@ -209,7 +209,14 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise OptionError(f"{name} must be a positive integer (got {value!r})")
-        for name in ("demo_episodes", "pretrain_updates", "learning_starts", "seed", "candidates"):
+        for name in (
+            "demo_episodes",
+            "pretrain_updates",
+            "learning_starts",
+            "seed",
+            "candidates",
+            "demo_lookahead",
+        ):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise OptionError(f"{name} must be an integer >= 0 (got {value!r})")
@@ -247,10 +254,8 @@ class TrainConfig:
             raise OptionError("rl_weight and bc_weight must be >= 0 and not both 0")
         if not 0 <= self.min_remaining < 1 or self.lam < 0 or not 0 <= self.gamma <= 1:
             raise OptionError("need 0 <= min_remaining < 1, lam >= 0 and 0 <= gamma <= 1")
-        if isinstance(self.demo_lookahead, bool) or not isinstance(self.demo_lookahead, int):
-            raise OptionError(f"demo_lookahead must be an integer (got {self.demo_lookahead!r})")
-        if self.demo_lookahead < 0 or not self.demo_margin >= 0:
-            raise OptionError("demo_lookahead and demo_margin must be >= 0")
+        if not self.demo_margin >= 0:
+            raise OptionError(f"demo_margin must be >= 0 (got {self.demo_margin!r})")
         if self.demo_lookahead and self.reward_surface != "exact":
             raise OptionError("demo_lookahead scores choices with the exact reward surface")
         if self.bc_loss not in ("mse", "choice"):
