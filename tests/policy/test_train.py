@@ -70,6 +70,20 @@ def _il_rl(**changes: object) -> TrainConfig:
     return TrainConfig(**base)  # type: ignore[arg-type]
 
 
+def _tiny_env(
+    families: list[str], seeds: list[int], *, n_envs: int = 1, **options: object
+) -> CutEnv:
+    """An env with TINY's grid and network sizes on the given shapes."""
+    return CutEnv(
+        ShapePool.build(families, seeds, grid=TINY["grid"]),
+        n_envs=n_envs,
+        max_corners=TINY["max_corners"],
+        resolution=TINY["resolution"],
+        max_steps=TINY["max_steps"],
+        **options,  # type: ignore[arg-type]
+    )
+
+
 def _rows(path: Path) -> list[dict[str, str]]:
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))
@@ -249,15 +263,7 @@ def test_gain_reward_with_demonstrated_stops_trains_and_stops(tmp_path: Path) ->
     rows = _rows(result.log_path)
     assert float(rows[-1]["bc_loss"]) < float(rows[0]["bc_loss"])
     # a box has corners but no splitting segment: the expert stops at once, so does its clone
-    env = CutEnv(
-        ShapePool.build(["box"], [0], grid=24),
-        n_envs=1,
-        max_corners=8,
-        resolution=32,
-        max_steps=4,
-        reward="gain",
-        augment=False,
-    )
+    env = _tiny_env(["box"], [0], reward="gain", augment=False)
     obs = env.reset(seed=0, shapes=[0])
     assert env.corner_valid.sum() >= 4
     with torch.no_grad():
@@ -296,14 +302,7 @@ def test_chooser_trains_keeps_its_candidates_and_resumes(tmp_path: Path) -> None
     assert actor.config.candidates == 3 and meta["config"]["candidates"] == 3
     again = train(cfg.replace(total_updates=16), out=tmp_path / "run", device="cpu", resume=True)
     assert again.n_updates == 16
-    env = CutEnv(
-        ShapePool.build(["two_spheres"], [0], grid=24),
-        n_envs=1,
-        max_corners=8,
-        resolution=32,
-        max_steps=4,
-        augment=False,
-    )
+    env = _tiny_env(["two_spheres"], [0], augment=False)
     with pytest.raises(OptionError, match="candidates=3"):
         actor(env.reset(seed=0))  # an env without the expert's cuts cannot feed this actor
     env.candidates = 3
@@ -351,15 +350,7 @@ def test_lookahead_demonstrations_are_cloned(tmp_path: Path) -> None:
     cfg = _il(reward="gain", candidates=3, demo_lookahead=3, demo_margin=0.0, total_updates=30)
     result = train(cfg, out=tmp_path / "run", device="cpu")
     assert np.isfinite(float(_rows(result.log_path)[-1]["bc_loss"]))
-    env = CutEnv(
-        ShapePool.build(["box", "two_spheres", "torus"], [0, 1], grid=24),
-        n_envs=2,
-        max_corners=8,
-        resolution=32,
-        max_steps=4,
-        reward="gain",
-        candidates=3,
-    )
+    env = _tiny_env(["box", "two_spheres", "torus"], [0, 1], n_envs=2, reward="gain", candidates=3)
     buffer = ReplayBuffer(500, resolution=32, max_corners=8, candidates=3)
     mean_return = collect_lookahead_demos(env, buffer, 4, 0, candidates=3, margin=0.0)
     assert len(buffer) >= 4 and np.isfinite(mean_return)
