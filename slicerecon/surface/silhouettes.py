@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from ..errors import EmptyMaskError
 from ..sections import CrossSections
@@ -196,25 +198,34 @@ def _drop_lone_cover(
     shape = np.asarray(union.shape)
     flat = np.unique(np.concatenate([np.ravel_multi_index(w, union.shape) for w, _ in added]))
     coords = np.stack(np.unravel_index(flat, union.shape))  # (3, n)
-    neighbours = []  # per offset: (in-grid mask, flat indices of the neighbours in the grid)
+    n = flat.size
+    anchored = np.zeros(n, dtype=bool)
+    rows, cols = [], []  # 6-neighbour pairs of covered samples (indices into flat)
     for ax in range(3):
         for step in (-1, 1):
             moved = coords.copy()
             moved[ax] += step
-            ok = (moved[ax] >= 0) & (moved[ax] < shape[ax])
-            neighbours.append((ok, np.ravel_multi_index(moved[:, ok], union.shape)))
-    anchored = np.zeros(flat.size, dtype=bool)
-    for ok, nb in neighbours:
-        was_inside = shape_inside[np.unravel_index(nb, union.shape)] & ~np.isin(nb, flat)
-        anchored[np.flatnonzero(ok)[was_inside]] = True
-    while True:
-        held = flat[anchored]
-        grown = anchored.copy()
-        for ok, nb in neighbours:
-            grown[np.flatnonzero(ok)[np.isin(nb, held)]] = True
-        if np.array_equal(grown, anchored):
-            break
-        anchored = grown
+            ok = np.flatnonzero((moved[ax] >= 0) & (moved[ax] < shape[ax]))
+            nb = np.ravel_multi_index(moved[:, ok], union.shape)
+            at = np.minimum(np.searchsorted(flat, nb), n - 1)
+            covered = flat[at] == nb
+            rows.append(ok[covered])
+            cols.append(at[covered])
+            was_inside = shape_inside[np.unravel_index(nb[~covered], union.shape)]
+            anchored[ok[~covered][was_inside]] = True
+    # anchoring spreads through covered neighbours: a component is anchored when any
+    # of its samples is
+    graph = coo_matrix(
+        (
+            np.ones(sum(r.size for r in rows), dtype=np.int8),
+            (np.concatenate(rows), np.concatenate(cols)),
+        ),
+        shape=(n, n),
+    )
+    _, component = connected_components(graph, directed=False)
+    held = np.zeros(int(component.max()) + 1, dtype=bool)
+    held[component[anchored]] = True
+    anchored = held[component]
     lone = flat[~anchored]
     if lone.size == 0:
         return
