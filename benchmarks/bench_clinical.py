@@ -114,7 +114,7 @@ def make_cases(root: Path) -> dict[str, Path]:
 
 
 # -- one case, in a fresh process -----------------------------------------------------
-def in_process(path: str, planes: list[int], repeat: int) -> dict[str, Any]:
+def in_process(path: str, planes: list[int], repeat: int, planner: str) -> dict[str, Any]:
     """Time plain SDF and slicerecon's reconstruct on the same planes, in this process."""
     from plain_sdf import plain_sdf_mesh
 
@@ -132,7 +132,7 @@ def in_process(path: str, planes: list[int], repeat: int) -> dict[str, Any]:
             plain_sdf_mesh(truth.mask, truth.affine, n)
             best_plain = min(best_plain, time.perf_counter() - start)
             start = time.perf_counter()
-            result = reconstruct(sections, projections)
+            result = reconstruct(sections, projections, planner=planner)
             total = time.perf_counter() - start
             if total < best_ours:
                 best_ours, stages = total, dict(result.timings)
@@ -166,10 +166,11 @@ def _timed(command: list[str]) -> tuple[float, float]:
     return seconds, max(after, before) / 1024.0
 
 
-def end_to_end(path: Path, n: int, repeat: int, tmp: Path) -> dict[str, float]:
+def end_to_end(path: Path, n: int, repeat: int, tmp: Path, planner: str) -> dict[str, float]:
     """Fresh-process wall time of ``slicerecon run`` and of the plain SDF script."""
     exe = str(Path(sys.executable).with_name("slicerecon"))
-    ours = [exe, "run", str(path), "--slices", str(n), "-o", str(tmp / "run"), "-q"]
+    ours = [exe, "run", str(path), "--slices", str(n), "--planner", planner]
+    ours += ["-o", str(tmp / "run"), "-q"]
     plain = [sys.executable, str(HERE / "plain_sdf.py"), str(path), str(n), str(tmp / "p.stl")]
     best = {"run_s": np.inf, "plain_s": np.inf}
     for _ in range(repeat):
@@ -178,12 +179,13 @@ def end_to_end(path: Path, n: int, repeat: int, tmp: Path) -> dict[str, float]:
     return best
 
 
-def peak_memory(path: Path, n: int, tmp: Path) -> float:
+def peak_memory(path: Path, n: int, tmp: Path, planner: str) -> float:
     """Peak RSS (MiB) of one fresh ``slicerecon run`` process (measured by a wrapper)."""
     code = (
         "import resource, sys\n"
         "from slicerecon.cli import main\n"
-        f"main(['run', {str(path)!r}, '--slices', '{n}', '-o', {str(tmp / 'mem')!r}, '-q'])\n"
+        f"main(['run', {str(path)!r}, '--slices', '{n}', '--planner', {planner!r}, "
+        f"'-o', {str(tmp / 'mem')!r}, '-q'])\n"
         "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -197,15 +199,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--planes", default="12,24")
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--cases", help="comma-separated case names (default: all)")
+    parser.add_argument("--planner", default="heuristic", help="slicerecon's planner")
     parser.add_argument(
-        "--child", nargs=3, metavar=("PATH", "PLANES", "REPEAT"), help=argparse.SUPPRESS
+        "--child", nargs=4, metavar=("PATH", "PLANES", "REPEAT", "PLANNER"), help=argparse.SUPPRESS
     )
     args = parser.parse_args(argv)
     if args.child:
         import json
 
-        path, planes, repeat = args.child
-        print(json.dumps(in_process(path, [int(p) for p in planes.split(",")], int(repeat))))
+        path, planes, repeat, planner = args.child
+        counts = [int(p) for p in planes.split(",")]
+        print(json.dumps(in_process(path, counts, int(repeat), planner)))
         return 0
     planes = [int(p) for p in args.planes.split(",")]
     rows = []
@@ -217,18 +221,19 @@ def main(argv: list[str] | None = None) -> int:
             path = paths[name]
             counts = CASE_PLANES.get(name, planes)
             print(f"{name}: in process", file=sys.stderr, flush=True)
-            inner = _child([str(path), ",".join(map(str, counts)), str(args.repeat)])
+            inner = _child([str(path), ",".join(map(str, counts)), str(args.repeat), args.planner])
             for n in counts:
                 print(f"{name}, {n} planes: end to end", file=sys.stderr, flush=True)
-                e2e = end_to_end(path, n, args.repeat, tmp)
-                mem = peak_memory(path, n, tmp)
+                e2e = end_to_end(path, n, args.repeat, tmp, args.planner)
+                mem = peak_memory(path, n, tmp, args.planner)
                 rows.append((name, n, inner[str(n)], e2e, mem))
     lines = [
         "Measured by `python benchmarks/bench_clinical.py"
         + (f" --out {args.out}" if args.out else "")
         + "` "
         f"({platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}); "
-        f"best of {args.repeat}; defaults of `slicerecon run`.",
+        f"best of {args.repeat}; defaults of `slicerecon run`"
+        + ("." if args.planner == "heuristic" else f" but `--planner {args.planner}`."),
         "",
         "| case | cropped grid | planes | parts | plain SDF (s) | slicerecon reconstruct (s) "
         "| stages (s) | ratio in process | `slicerecon run` (s) | plain script (s) "

@@ -16,6 +16,13 @@ the mean IoU of both, the episodes the lookahead improves or worsens, and
 where its gains come from (per family, by kind of choice: another of the
 expert's cuts, or stopping).
 
+The same episodes are also run by the lookahead as inference can score it,
+without the shape (:func:`slicerecon.partition.lookahead.plan_lookahead`'s
+values, each with its default margin): on held-out section planes
+(:func:`~slicerecon.partition.lookahead.held_out_value`) and on the
+silhouettes (:func:`~slicerecon.partition.lookahead.silhouette_value`); their
+episodes are read off the same IoU with the shape.
+
     python benchmarks/lookahead_gain.py [--episodes 240] [--config il_rl_choice] [--out FILE]
 """
 
@@ -30,11 +37,29 @@ import numpy as np
 import torch
 
 from slicerecon.io.atomic import atomic_path
-from slicerecon.partition.lookahead import expert_value, lookahead_cut
+from slicerecon.partition.lookahead import (
+    LOOKAHEAD_MARGINS,
+    expert_value,
+    held_out_value,
+    lookahead_cut,
+    silhouette_value,
+)
+from slicerecon.partition.state import PartitionState
 from slicerecon.policy.config import load_config
 from slicerecon.policy.demos import episode_state
 from slicerecon.policy.env import CutEnv
+from slicerecon.policy.reward import part_surface_voxels
 from slicerecon.policy.train import training_pool
+
+
+def _run_lookahead(state: PartitionState, value, candidates: int, margin: float) -> float:  # type: ignore[no-untyped-def]
+    """IoU with the shape of the episode the lookahead scored by ``value`` makes."""
+    while not state.done:
+        choice = lookahead_cut(state, candidates=candidates, margin=margin, value=value)
+        if choice.cut is None:
+            break
+        state.apply_cut(choice.cut)
+    return state.potential()
 
 
 def main() -> None:
@@ -63,12 +88,24 @@ def main() -> None:
     env.reset(seed=args.seed)
     start = time.perf_counter()
     expert, teacher = [], []
+    blind: dict[str, list[float]] = {"planes": [], "silhouettes": []}
     gains: dict[tuple[str, str], list[float]] = collections.defaultdict(list)
     while len(expert) < args.episodes:
         for slot in range(env.n_envs):
             state = episode_state(env, slot)
             family = pool.names[env.shape_id[slot]]
             expert.append(expert_value(state))
+            _, sections, hull = env.episode(slot)
+            values = {
+                "planes": held_out_value(
+                    sections, lambda s, box, hull=hull: part_surface_voxels(s, hull, box)
+                ),
+                "silhouettes": silhouette_value([hull.any(axis=a) for a in range(3)]),
+            }
+            for name, value in values.items():
+                blind[name].append(
+                    _run_lookahead(state.copy(), value, args.candidates, LOOKAHEAD_MARGINS[name])
+                )
             while not state.done:
                 choice = lookahead_cut(state, candidates=args.candidates, margin=args.margin)
                 if choice.value > choice.expert_value:
@@ -99,6 +136,12 @@ def main() -> None:
         f"| expert | {e.mean():.4f} | — | — |",
         f"| lookahead | {t.mean():.4f} | {int((diff > 0.001).sum())} | "
         f"{int((diff < -0.001).sum())} |",
+        *[
+            f"| lookahead on {name}, no shape (margin {LOOKAHEAD_MARGINS[name]}) | "
+            f"{np.mean(v):.4f} | {int((np.array(v) - e > 0.001).sum())} | "
+            f"{int((np.array(v) - e < -0.001).sum())} |"
+            for name, v in blind.items()
+        ],
         "",
         "Where the lookahead's choices gain (per family and kind of choice; a step's gain is "
         "the IoU its choice leads to less the expert's choice's):",

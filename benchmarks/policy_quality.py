@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 HOLDOUT_SEED = 20_000
-PLANNERS = ("none", "heuristic", "ddpg", "il", "il_rl")
+PLANNERS = ("none", "heuristic", "lookahead", "ddpg", "il", "il_rl")
 LEARNED = ("ddpg", "il", "il_rl")
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "slicerecon" / "policy" / "weights"
 
@@ -302,7 +302,7 @@ def main() -> None:
         "| planner | wins | ties | losses | failed | mean IoU difference |",
         "|---|---:|---:|---:|---:|---:|",
     ]
-    for p in ("none", *LEARNED):
+    for p in (q for q in PLANNERS if q != "heuristic"):
         w, t, lo, d = paired(rows, p)
         failed = sum(1 for r in rows if r["planner"] == p and "error" in r)
         lines.append(f"| {p} | {w} | {t} | {lo} | {failed} | {d:+.4f} |")

@@ -72,6 +72,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "sdf-cover-none": {"method": "sdf", "planner": "none"},
     "sdf-no-drift": {"join_drift": False},
     "sdf-policy": {"planner": "policy"},
+    "lookahead": {"planner": "lookahead"},
 }
 """Variant name → keyword arguments of :func:`slicerecon.reconstruct.reconstruct`.
 

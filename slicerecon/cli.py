@@ -145,7 +145,13 @@ SlicesOpt = Annotated[
 ]
 EveryOpt = Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")]
 AxisOpt = Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")]
-PlannerOpt = Annotated[str, typer.Option(help="heuristic, none or policy (learned planner).")]
+PlannerOpt = Annotated[
+    str,
+    typer.Option(
+        help="heuristic, lookahead (the heuristic checked on held-out planes), none or policy "
+        "(learned planner)."
+    ),
+]
 MethodOpt = Annotated[str, typer.Option(help=_METHOD_HELP)]
 InterpolationOpt = Annotated[
     str,

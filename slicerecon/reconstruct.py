@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import trimesh
@@ -33,7 +33,10 @@ from .inputs import (
 )
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget
 from .partition.planner import planner_names
-from .sections import CrossSections, Projections, Volume, axis_index
+from .sections import Box, CrossSections, Projections, Volume, axis_index
+
+if TYPE_CHECKING:
+    from .partition.lookahead import PlanningSurface
 from .surface.methods import method_entry, method_names
 
 __all__ = [
@@ -58,8 +61,10 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 PLANNERS = tuple(planner_names())
-"""Planner names (the registry of :mod:`slicerecon.partition.planner`, with the
-learned planner registered by :mod:`slicerecon.policy`, which this module imports)."""
+"""Planner names when this module was imported (the registry of
+:mod:`slicerecon.partition.planner`, with the learned planner registered by
+:mod:`slicerecon.policy`, which this module imports). :func:`reconstruct`
+checks against the registry itself, so planners registered later are accepted."""
 METHODS = method_names()
 """Surface method names (:data:`slicerecon.surface.methods.METHODS`)."""
 WHOLE_SHAPE_METHODS = method_names(per_part=False)
@@ -186,7 +191,7 @@ class ReconstructConfig:
             raise OptionError(f"--every must be at least 1 (got {self.every})")
         axis_index(self.axis)
         for name, value, choices in (
-            ("planner", self.planner, PLANNERS),
+            ("planner", self.planner, tuple(planner_names())),
             ("method", self.method, METHODS),
             ("format", self.mesh_format, MESH_FORMATS),
             ("interpolation", self.interpolation, INTERPOLATIONS),
@@ -256,6 +261,40 @@ def planning_occupancy(sections: CrossSections, projections: Projections) -> np.
     from .sampling import visual_hull
 
     return _exact_on_planes(visual_hull(projections, sections.grid_shape), sections)
+
+
+def _planning_surface(
+    sections: CrossSections, hull: np.ndarray, *, interpolation: str, join_drift: bool
+) -> Callable[[int], PlanningSurface]:
+    """The sections, hull and part surface on the planning grid (a ``SurfaceFactory``).
+
+    For the planners that score their choices on reconstructions
+    (:func:`slicerecon.partition.lookahead.plan_lookahead`): the signed-distance
+    part surface with this call's interpolation and drift joining, extended
+    along the hull and carved by it; on a pooled grid the sections and the
+    hull are pooled the same way (:func:`~slicerecon.sampling.pool_sections`).
+    """
+    from .partition.lookahead import PlanningSurface
+    from .sampling import pool_any, pool_sections
+    from .surface.part import part_voxels
+
+    def surface(factor: int) -> PlanningSurface:
+        grid_hull = pool_any(hull, factor)
+
+        def part(part_sections: CrossSections, box: Box) -> np.ndarray:
+            voxels = part_voxels(
+                part_sections,
+                box,
+                method="sdf",
+                hull=grid_hull,
+                interpolation=interpolation,
+                join_drift=join_drift,
+            )
+            return voxels & grid_hull[box.slices]
+
+        return PlanningSurface(pool_sections(sections, factor), grid_hull, part)
+
+    return surface
 
 
 def _exact_on_planes(hull: np.ndarray, sections: CrossSections) -> np.ndarray:
@@ -343,11 +382,11 @@ def reconstruct(
     -------
     Reconstruction
     """
-    from .partition.planner import plan_partition
+    from .partition.planner import plan_partition, planner_entry
     from .surface.part import reconstruct_surface
 
-    if planner not in PLANNERS:
-        raise OptionError(f"planner must be one of {', '.join(PLANNERS)} (got {planner!r})")
+    if planner not in planner_names():
+        raise OptionError(f"planner must be one of {', '.join(planner_names())} (got {planner!r})")
     entry = method_entry(method)
     if not entry.per_part:
         return _reconstruct_whole_shape(sections, projections, method=method, smooth=smooth)
@@ -362,6 +401,11 @@ def reconstruct(
         # No planner's choice at inference depends on the reward's reconstruction
         # term (it is what training optimises), so parts are not reconstructed
         # twice: the plan's rewards hold IoU(W_i, O) only.
+        surface = None
+        if planner_entry(planner).needs_surface:
+            surface = _planning_surface(
+                sections, hull, interpolation=interpolation, join_drift=join_drift
+            )
         plan = plan_partition(
             occupancy,
             planner=planner,
@@ -369,6 +413,7 @@ def reconstruct(
             max_parts=max_parts,
             weights=weights,
             max_grid=PLANNING_MAX_GRID,
+            surface=surface,
         )
     implicit_carve = carve and entry.implicit_carve and not smooth
     with _timed(timings, "surface"):

@@ -52,6 +52,7 @@ from .sections import (
 
 __all__ = [
     "pool_any",
+    "pool_sections",
     "visual_hull",
     "dense_count",
     "evenly_spaced_planes",
@@ -444,6 +445,49 @@ def pool_any(mask: NDArray[np.bool_], factor: int) -> NDArray[np.bool_]:
         shape = out.shape[:axis] + (out.shape[axis] // factor, factor) + out.shape[axis + 1 :]
         out = out.reshape(shape).any(axis=axis + 1)
     return out
+
+
+def pool_sections(sections: CrossSections, factor: int) -> CrossSections:
+    """The cross-sections on the grid :func:`pool_any` makes, ``factor`` times coarser.
+
+    Each plane's mask is any-pooled in-plane; its position moves to the
+    coarse grid's index coordinates (a fine index ``i`` lies at
+    ``(i + 0.5) / factor - 0.5``); the affine maps the coarse voxel centres to
+    the centres of their blocks, so distances in mm are kept.
+
+    Parameters
+    ----------
+    sections : CrossSections
+    factor : int
+        Block size (>= 1) along every axis.
+
+    Returns
+    -------
+    CrossSections
+        On a grid of shape ``ceil(grid_shape / factor)``; ``sections`` itself
+        when ``factor`` is 1.
+
+    Raises
+    ------
+    OptionError
+        For ``factor < 1``.
+    """
+    f = int(factor)
+    if f < 1:
+        raise OptionError(f"factor must be >= 1 (got {factor})")
+    if f == 1:
+        return sections
+    masks = np.stack([pool_any(m, f) for m in sections.masks])
+    affine = np.array(sections.affine, dtype=np.float64)
+    affine[:3, 3] = affine[:3, :3] @ np.full(3, (f - 1) / 2.0) + affine[:3, 3]
+    affine[:3, :3] = affine[:3, :3] * f
+    return CrossSections(
+        masks,
+        (np.asarray(sections.indices) + 0.5) / f - 0.5,
+        sections.axis,
+        affine,
+        tuple(-(-int(n) // f) for n in sections.grid_shape),
+    )
 
 
 def visual_hull(projections: Projections, grid_shape: tuple[int, int, int]) -> NDArray[np.bool_]:

@@ -161,3 +161,21 @@ def test_mni_white_matter_hybrid_beats_loft() -> None:
     result, hybrid = _run(wm, slices=16, method="hybrid")
     _assert_closed_manifold(result.mesh)
     assert hybrid.volume_iou > loft.volume_iou
+
+
+def test_lookahead_planner_end_to_end_and_on_a_pooled_grid() -> None:
+    """``planner="lookahead"`` gives a closed mesh whose plan covers the occupancy, on the
+    grid itself and on a pooled planning grid (its sections and hull pooled alike)."""
+    from slicerecon.partition.planner import plan_partition
+    from slicerecon.reconstruct import _planning_surface, planning_occupancy
+    from slicerecon.sampling import visual_hull
+
+    result, metrics = _run(make_shape("y_branch"), slices=10, planner="lookahead", method="sdf")
+    _assert_closed_manifold(result.mesh)
+    assert metrics.volume_iou > 0.8
+    occupancy = planning_occupancy(result.sections, result.projections)
+    assert result.plan.planner == "lookahead" and result.plan.covers(occupancy)
+    hull = visual_hull(result.projections, result.sections.grid_shape)
+    surface = _planning_surface(result.sections, hull, interpolation="pchip", join_drift=True)
+    pooled = plan_partition(occupancy, planner="lookahead", max_grid=16, surface=surface)
+    assert pooled.covers(occupancy) and pooled.grid_shape == occupancy.shape

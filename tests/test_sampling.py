@@ -13,6 +13,8 @@ from slicerecon.errors import EmptyMaskError, OptionError
 from slicerecon.sampling import (
     dense_count,
     evenly_spaced_planes,
+    pool_any,
+    pool_sections,
     projections_from_sections,
     projections_from_volume,
     sample_sections,
@@ -243,3 +245,23 @@ def test_pool_any_sets_a_cell_exactly_when_its_block_holds_a_voxel(factor: int) 
     for index in np.ndindex(pooled.shape):
         block = mask[tuple(slice(i * factor, (i + 1) * factor) for i in index)]
         assert pooled[index] == block.any()
+
+
+def test_pooled_sections_keep_their_planes_in_millimetres(ball: Volume) -> None:
+    """Pooling moves each plane to the coarse index of the same world position; masks are
+    any-pooled in-plane; the grid is ceil(shape / factor)."""
+    sections = sample_sections(ball, n=7, axis="z")
+    assert pool_sections(sections, 1) is sections
+    coarse = pool_sections(sections, 3)
+    assert coarse.grid_shape == (37, 37, 17)
+    for fine_idx, coarse_idx, mask, fine in zip(
+        sections.indices, coarse.indices, coarse.masks, sections.masks, strict=True
+    ):
+        fine_world = sections.affine @ np.array([54.0, 55.0, fine_idx, 1.0])
+        coarse_world = coarse.affine @ np.array(
+            [(54.0 + 0.5) / 3 - 0.5, (55.5) / 3 - 0.5, coarse_idx, 1.0]
+        )
+        np.testing.assert_allclose(coarse_world, fine_world, atol=1e-9)
+        np.testing.assert_array_equal(mask, pool_any(fine, 3))
+    with pytest.raises(OptionError):
+        pool_sections(sections, 0)

@@ -24,6 +24,7 @@ from ..sampling import pool_any
 from ..sections import Box
 from .cuts import Cut
 from .heuristic import run_expert
+from .lookahead import PlanningSurface, plan_lookahead
 from .state import Part, PartitionState, Reconstruct
 
 __all__ = [
@@ -153,6 +154,11 @@ class Plan:
             ) from exc
 
 
+SurfaceFactory = Callable[[int], PlanningSurface]
+"""``surface(factor) -> PlanningSurface``: the sections, hull and part surface on the
+planning grid, the occupancy's grid pooled ``factor`` times (1: the grid itself);
+what the planners that need a surface score their choices on."""
+
 PlannerFn = Callable[..., list[Part]]
 """``planner(occupancy, *, reconstruct, max_parts, min_remaining, lam) -> list of Part``."""
 
@@ -206,6 +212,10 @@ class PlannerEntry:
         Whether running it imports torch.
     takes_weights : bool
         Whether it accepts ``weights=`` (a trained actor).
+    needs_surface : bool
+        Whether it scores its choices on reconstructions: it is called with
+        ``surface=`` (a :class:`~slicerecon.partition.lookahead.PlanningSurface`
+        on the grid it plans on) and ``reconstruct=None``.
     summary : str
         One line for help texts.
     """
@@ -215,6 +225,7 @@ class PlannerEntry:
     partitions: bool = True
     needs_torch: bool = False
     takes_weights: bool = False
+    needs_surface: bool = False
     summary: str = ""
 
     def __call__(self, occupancy: NDArray[np.bool_], **options: Any) -> list[Part]:
@@ -254,6 +265,14 @@ register_planner(
     )
 )
 register_planner(PlannerEntry("heuristic", _plan_heuristic, summary="the paper's heuristic expert"))
+register_planner(
+    PlannerEntry(
+        "lookahead",
+        plan_lookahead,
+        needs_surface=True,
+        summary="the heuristic expert with a one-step lookahead scored on held-out planes",
+    )
+)
 
 
 def planner_names() -> list[str]:
@@ -271,6 +290,7 @@ def plan_partition(
     lam: float = 1.0,
     weights: str | os.PathLike[str] | None = None,
     max_grid: int | None = None,
+    surface: SurfaceFactory | None = None,
 ) -> Plan:
     """Partition an occupancy grid into cuboid parts.
 
@@ -301,6 +321,10 @@ def plan_partition(
         the occupancy it holds (:func:`_refine`). The boxes still cover the
         occupancy; cut positions are known to ``f`` voxels. Planning cost falls
         by about ``f³``; grids no larger than ``max_grid`` are planned as they are.
+    surface : callable, optional
+        :data:`SurfaceFactory`, for the planners that score their choices on
+        reconstructions (``PlannerEntry.needs_surface``, e.g. ``"lookahead"``);
+        called once with the pooling factor.
 
     Returns
     -------
@@ -310,7 +334,8 @@ def plan_partition(
     Raises
     ------
     OptionError
-        For an unknown planner name or ``max_parts < 1``.
+        For an unknown planner name, ``max_parts < 1``, or a planner that needs
+        a surface without ``surface`` (or with ``reconstruct`` as well).
     EmptyMaskError
         If the occupancy is empty.
     """
@@ -321,12 +346,19 @@ def plan_partition(
     if weights is not None and not entry.takes_weights:
         raise OptionError(f"weights apply to the policy planner only (planner is {name!r})")
     occ = np.asarray(occupancy)
-    options = {} if weights is None else {"weights": weights}
+    options: dict[str, Any] = {} if weights is None else {"weights": weights}
     factor = 1
     if max_grid is not None:
         if isinstance(max_grid, bool) or int(max_grid) < 8:
             raise OptionError(f"max_grid must be at least 8 voxels (got {max_grid})")
         factor = max(1, -(-max(occ.shape) // int(max_grid)))
+    if entry.needs_surface:
+        if surface is None or reconstruct is not None:
+            raise OptionError(
+                f"planner {name!r} scores its choices on reconstructions: give surface= "
+                "(and no reconstruct=)"
+            )
+        options["surface"] = surface(factor)
     if factor > 1:
         if reconstruct is not None:
             raise OptionError("a reward reconstruction needs the full grid: give max_grid=None")

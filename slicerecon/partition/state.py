@@ -411,11 +411,32 @@ class PartitionState:
 
     def _potential_with(self, rest: NDArray[np.bool_]) -> float:
         """IoU with ``O`` of the parts' union and ``rest`` reconstructed as one more part."""
+        return iou(self._union_with(rest), self.occupancy)
+
+    def _union_with(self, rest: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """The parts' union and ``rest`` reconstructed as one more part (a new array)."""
         union = self._union().copy()
         if rest.any():
             box = Box.of_mask(rest)
             union[box.slices] |= self._reconstruction(box)
-        return iou(union, self.occupancy)
+        return union
+
+    def reconstruction(self) -> NDArray[np.bool_]:
+        """The reconstruction the potential scores: the parts' ``S`` and ``R`` as a last part.
+
+        Returns
+        -------
+        ndarray of shape (I, J, K), bool
+            A new array; after :meth:`finish`, the finished partition's reconstruction.
+
+        Raises
+        ------
+        OptionError
+            Without a ``reconstruct`` function.
+        """
+        if self.reconstruct is None:
+            raise OptionError("the reconstruction needs a reconstruct function")
+        return self._union_with(self.remaining)
 
     def _set_remaining(self, rest: NDArray[np.bool_]) -> None:
         rest.setflags(write=False)

@@ -40,7 +40,7 @@ def test_heuristic_planner_covers_and_respects_max_parts() -> None:
 
 
 def test_unknown_planner_lists_the_choices() -> None:
-    with pytest.raises(OptionError, match="heuristic, none"):
+    with pytest.raises(OptionError, match="heuristic, lookahead, none"):
         plan_partition(t_shape(), planner="magic")
     with pytest.raises(OptionError, match="max_parts"):
         plan_partition(t_shape(), max_parts=0)
