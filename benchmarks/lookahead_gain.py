@@ -42,24 +42,14 @@ from slicerecon.partition.lookahead import (
     expert_value,
     held_out_value,
     lookahead_cut,
+    run_lookahead,
     silhouette_value,
 )
-from slicerecon.partition.state import PartitionState
 from slicerecon.policy.config import load_config
 from slicerecon.policy.demos import episode_state
 from slicerecon.policy.env import CutEnv
 from slicerecon.policy.reward import part_surface_voxels
 from slicerecon.policy.train import training_pool
-
-
-def _run_lookahead(state: PartitionState, value, candidates: int, margin: float) -> float:  # type: ignore[no-untyped-def]
-    """IoU with the shape of the episode the lookahead scored by ``value`` makes."""
-    while not state.done:
-        choice = lookahead_cut(state, candidates=candidates, margin=margin, value=value)
-        if choice.cut is None:
-            break
-        state.apply_cut(choice.cut)
-    return state.potential()
 
 
 def main() -> None:
@@ -104,7 +94,12 @@ def main() -> None:
             }
             for name, value in values.items():
                 blind[name].append(
-                    _run_lookahead(state.copy(), value, args.candidates, LOOKAHEAD_MARGINS[name])
+                    run_lookahead(
+                        state.copy(),
+                        candidates=args.candidates,
+                        margin=LOOKAHEAD_MARGINS[name],
+                        value=value,
+                    ).potential()
                 )
             while not state.done:
                 choice = lookahead_cut(state, candidates=args.candidates, margin=args.margin)

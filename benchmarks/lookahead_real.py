@@ -36,7 +36,7 @@ from independent_eval import Truth, score_mesh  # noqa: E402
 from real_anatomy import SPLIT_FILE, _seed, load_case, load_split  # noqa: E402
 
 from slicerecon.io.atomic import atomic_path  # noqa: E402
-from slicerecon.partition.lookahead import lookahead_cut, plan_lookahead  # noqa: E402
+from slicerecon.partition.lookahead import plan_lookahead, run_lookahead  # noqa: E402
 from slicerecon.partition.planner import PlannerEntry, register_planner  # noqa: E402
 from slicerecon.partition.state import Part, PartitionState, iou  # noqa: E402
 from slicerecon.reconstruct import prepare_inputs, reconstruct  # noqa: E402
@@ -58,14 +58,8 @@ def _plan_oracle(occupancy: np.ndarray, *, surface: Any, **common: Any) -> list[
         max_steps=int(common["max_parts"]) - 1,
         min_remaining=float(common["min_remaining"]),
     )
-    while not state.done:
-        choice = lookahead_cut(
-            state, candidates=4, margin=0.002, value=lambda s: iou(s.reconstruction(), truth)
-        )
-        if choice.cut is None:
-            break
-        state.apply_cut(choice.cut)
-    return state.finish()
+    value = lambda s: iou(s.reconstruction(), truth)  # noqa: E731
+    return run_lookahead(state, candidates=4, margin=0.002, value=value).finish()
 
 
 def _plan_silhouettes(occupancy: np.ndarray, **options: Any) -> list[Part]:

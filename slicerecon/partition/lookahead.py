@@ -40,6 +40,7 @@ __all__ = [
     "StateValue",
     "expert_value",
     "lookahead_cut",
+    "run_lookahead",
     "held_out_value",
     "silhouette_value",
     "plan_lookahead",
@@ -163,6 +164,26 @@ def lookahead_cut(
         stop_value,
     )
     return Lookahead(chosen, best_value, values[0], len(cuts) + 1)
+
+
+def run_lookahead(
+    state: PartitionState,
+    *,
+    candidates: int = 4,
+    margin: float = 0.002,
+    value: StateValue | None = None,
+) -> PartitionState:
+    """Step ``state`` by :func:`lookahead_cut` until the episode ends or it stops; return it.
+
+    The state is stepped in place (not finished: call ``finish()``). The
+    arguments are :func:`lookahead_cut`'s.
+    """
+    while not state.done:
+        choice = lookahead_cut(state, candidates=candidates, margin=margin, value=value)
+        if choice.cut is None:
+            break
+        state.apply_cut(choice.cut)
+    return state
 
 
 PartSurface = Callable[[CrossSections, Box], NDArray[np.bool_]]
@@ -417,9 +438,4 @@ def plan_lookahead(
         min_remaining=min_remaining,
     )
     step_margin = LOOKAHEAD_MARGINS[value] if margin is None else float(margin)
-    while not state.done:
-        choice = lookahead_cut(state, candidates=candidates, margin=step_margin, value=score)
-        if choice.cut is None:
-            break
-        state.apply_cut(choice.cut)
-    return state.finish()
+    return run_lookahead(state, candidates=candidates, margin=step_margin, value=score).finish()

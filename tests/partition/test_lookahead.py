@@ -15,6 +15,7 @@ from slicerecon.partition.lookahead import (
     held_out_value,
     lookahead_cut,
     plan_lookahead,
+    run_lookahead,
     silhouette_value,
 )
 from slicerecon.partition.planner import plan_partition
@@ -29,12 +30,7 @@ def _episode(family: str, seed: int, planes: int = 8) -> PartitionState:
 
 
 def _lookahead_episode(state: PartitionState, margin: float) -> float:
-    while not state.done:
-        choice = lookahead_cut(state, candidates=3, margin=margin)
-        if choice.cut is None:
-            break
-        state.apply_cut(choice.cut)
-    return state.potential()
+    return run_lookahead(state, candidates=3, margin=margin).potential()
 
 
 @pytest.mark.parametrize(("family", "seed"), [("chair", 1), ("table", 2), ("lamp", 3), ("lung", 4)])
@@ -150,11 +146,7 @@ def test_planned_lookahead_scores_no_lower_than_expert(value: str, family: str, 
         occ, reconstruct=lambda box: surface.part(surface.sections, box), max_steps=5
     )
     expert = expert_value(state, score)
-    while not state.done:
-        choice = lookahead_cut(state, candidates=4, margin=0.0, value=score)
-        if choice.cut is None:
-            break
-        state.apply_cut(choice.cut)
+    run_lookahead(state, candidates=4, margin=0.0, value=score)
     assert score(state) >= expert - 1e-12
     common = {"reconstruct": None, "max_parts": 6, "min_remaining": 0.02, "lam": 1.0}
     parts = plan_lookahead(occ, surface=surface, value=value, margin=0.0, **common)
