@@ -228,8 +228,8 @@ def main(argv: list[str] | None = None) -> int:
                 mem = peak_memory(path, n, tmp, args.planner)
                 rows.append((name, n, inner[str(n)], e2e, mem))
     lines = [
-        "Measured by `python benchmarks/bench_clinical.py"
-        + (f" --out {args.out}" if args.out else "")
+        "Measured by `"
+        + shlex.join(["python", "benchmarks/bench_clinical.py", *(argv or sys.argv[1:])])
         + "` "
         f"({platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}); "
         f"best of {args.repeat}; defaults of `slicerecon run`"

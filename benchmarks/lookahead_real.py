@@ -105,7 +105,8 @@ def main() -> None:
         f"{args.planes} planes along z)",
         "",
         "```bash",
-        f"python benchmarks/lookahead_real.py --half {args.half} --planes {args.planes}",
+        f"python benchmarks/lookahead_real.py --half {args.half} --planes {args.planes}"
+        + ("" if args.out is None else f" --out {args.out}"),
         "```",
         "",
         f"{len(rows)} cases, ground-truth projections, the default surface; volume IoU by "
