@@ -58,6 +58,7 @@ DEFAULT_LABEL = "sdf + heuristic (default)"
 VARIANTS = (
     Variant(DEFAULT_LABEL, "sdf", "heuristic"),
     Variant("sdf + heuristic (carve only)", "sdf", "heuristic", cover=False),
+    Variant("sdf + lookahead", "sdf", "lookahead"),
     Variant("hybrid + heuristic", "hybrid", "heuristic"),
     Variant("loft + heuristic", "loft", "heuristic"),
     Variant("loft + heuristic (uncarved)", "loft", "heuristic", carve=False),
