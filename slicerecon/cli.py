@@ -546,6 +546,20 @@ def train(
     threads: Annotated[
         int | None, typer.Option("--threads", help="torch CPU threads (default: torch's).")
     ] = None,
+    pool: Annotated[
+        Path | None,
+        typer.Option(
+            "--pool",
+            help="Read the training shapes from this file (made by --write-pool) instead of "
+            "building them: for machines without the real shapes' packages.",
+        ),
+    ] = None,
+    write_pool: Annotated[
+        Path | None,
+        typer.Option(
+            "--write-pool", help="Build the config's training shapes, write them here and exit."
+        ),
+    ] = None,
 ) -> None:
     """Train the learned cut planner (DDPG / imitation / DDPG from demonstrations)."""
     from rich.console import Console
@@ -559,7 +573,7 @@ def train(
     )
 
     from .errors import OptionError
-    from .policy.train import load_config
+    from .policy.train import load_config, training_pool
     from .policy.train import train as run_training
 
     if device not in ("cpu", "cuda"):
@@ -571,6 +585,16 @@ def train(
 
         torch.set_num_threads(threads)
     cfg = load_config(config, total_updates=steps, seed=seed)
+    if write_pool is not None:
+        if pool is not None:
+            raise OptionError("give --pool or --write-pool, not both")
+        built = training_pool(cfg)
+        built.save(write_pool)
+        typer.echo(json.dumps({"pool": str(write_pool), "grids": len(built), "grid": built.grid}))
+        return
+    shapes = None
+    if pool is not None:
+        shapes = training_pool(cfg, pool)  # checked before anything is written
     outdir = out if out is not None else Path("runs") / cfg.name
     columns = (
         TextColumn(f"[bold]{cfg.name}"),
@@ -591,7 +615,9 @@ def train(
             )
             bar.update(task, completed=done, total=total, info=info)
 
-        result = run_training(cfg, out=outdir, device=device, resume=resume, progress=progress)
+        result = run_training(
+            cfg, out=outdir, device=device, resume=resume, progress=progress, pool=shapes
+        )
     typer.echo(
         json.dumps(
             {

@@ -14,8 +14,10 @@ ground-truth projections. Everything here is numpy; the torch environment
 from __future__ import annotations
 
 import logging
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -266,6 +268,63 @@ class ShapePool:
             raise OptionError("the shape pool is empty (no family and no installed real shape)")
         logger.info("shape pool: %d grids of %d^3", len(grids), grid)
         return cls(np.stack(grids), tuple(out_names), tuple(out_seeds))
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the pool to an ``.npz`` file (bit-packed grids, names, seeds), atomically.
+
+        For training on a machine without the real shapes' packages
+        (``slicerecon train --write-pool`` here, ``--pool`` there).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
+        from ..io.atomic import atomic_path
+
+        out = Path(path)
+        with atomic_path(out) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(
+                fh,
+                bits=np.packbits(self.occupancies, axis=None),
+                shape=np.asarray(self.occupancies.shape, dtype=np.int64),
+                names=np.asarray(self.names, dtype=str),
+                seeds=np.asarray(self.seeds, dtype=np.int64),
+            )
+        return out
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> ShapePool:
+        """Read a pool written by :meth:`save`.
+
+        Raises
+        ------
+        InputError
+            If the file does not exist.
+        FormatError
+            If it is not such a pool (missing or inconsistent arrays).
+        """
+        from ..errors import FormatError
+
+        src = Path(path)
+        if not src.is_file():
+            raise InputError(f"no shape pool file at {src}")
+        try:
+            with np.load(src, allow_pickle=False) as data:
+                shape = tuple(int(n) for n in data["shape"])
+                bits, names, seeds = data["bits"], data["names"], data["seeds"]
+        except (OSError, KeyError, ValueError, EOFError) as exc:
+            raise FormatError(f"{src} is not a shape pool written by slicerecon") from exc
+        if (
+            len(shape) != 4
+            or min(shape) < 1
+            or shape[1:] != (shape[1],) * 3
+            or bits.size * 8 < int(np.prod(shape))
+            or not (len(names) == len(seeds) == shape[0])
+        ):
+            raise FormatError(f"{src} is a damaged shape pool (its arrays do not fit together)")
+        occ = np.unpackbits(bits, count=int(np.prod(shape))).reshape(shape).astype(bool)
+        return cls(occ, tuple(str(n) for n in names), tuple(int(k) for k in seeds))
 
     def __len__(self) -> int:
         return int(self.occupancies.shape[0])

@@ -125,22 +125,48 @@ def _shape_names(config: TrainConfig) -> list[str]:
     return names
 
 
-def training_pool(config: TrainConfig) -> ShapePool:
+def training_pool(
+    config: TrainConfig, pool_file: str | os.PathLike[str] | None = None
+) -> ShapePool:
     """The shapes a run trains on: each family's training seeds and the real shapes' copies.
+
+    Parameters
+    ----------
+    config : TrainConfig
+    pool_file : path-like, optional
+        Read the pool from this file (:meth:`ShapePool.save`) instead of
+        building it: for machines without the real shapes' packages. It must
+        hold exactly the grids the config lists (families and seeds, every
+        real shape's copies) on the config's grid.
 
     Raises
     ------
     OptionError
-        For an unknown family.
+        For an unknown family, or a pool file that is not this config's pool.
+    InputError, FormatError
+        For a missing or unreadable pool file.
     """
-    return ShapePool.build(
-        _shape_names(config),
-        range(config.train_shapes),
-        grid=config.grid,
-        real=config.real_shapes,
-        real_variants=config.real_variants,
-        max_stretch=config.max_stretch,
-    )
+    if pool_file is None:
+        return ShapePool.build(
+            _shape_names(config),
+            range(config.train_shapes),
+            grid=config.grid,
+            real=config.real_shapes,
+            real_variants=config.real_variants,
+            max_stretch=config.max_stretch,
+        )
+    pool = ShapePool.load(pool_file)
+    listed = [(n, s) for n in _shape_names(config) for s in range(config.train_shapes)]
+    listed += [(f"real:{n}", k) for n in config.real_shapes for k in range(config.real_variants)]
+    held = list(zip(pool.names, pool.seeds, strict=True))
+    if pool.grid != config.grid or held != listed:
+        missing = sorted({f"{n}/{s}" for n, s in listed} - {f"{n}/{s}" for n, s in held})
+        raise OptionError(
+            f"{pool_file} is not the shape pool of config {config.name!r}: grid {pool.grid} "
+            f"(config {config.grid}), {len(held)} grids (config {len(listed)})"
+            + (f", missing {', '.join(missing[:5])}" if missing else "")
+        )
+    return pool
 
 
 def _make_env(
@@ -281,6 +307,7 @@ def train(
     device: str | torch.device = "cpu",
     resume: bool = False,
     progress: Callable[[int, int, dict[str, float]], None] | None = None,
+    pool: ShapePool | None = None,
 ) -> TrainResult:
     """Train an actor-critic cut planner (see the module docstring).
 
@@ -298,6 +325,9 @@ def train(
         data only, never code.
     progress : callable, optional
         ``progress(n_updates, total_updates, last_metrics)`` after every update.
+    pool : ShapePool, optional
+        The training shapes (default: :func:`training_pool` of ``config``; a
+        pool read from a file with it, checked against the config).
 
     Returns
     -------
@@ -326,7 +356,7 @@ def train(
     np_rng = np.random.default_rng(config.seed)
     gen = torch.Generator().manual_seed(config.seed)
     names = _shape_names(config)
-    train_pool = training_pool(config)
+    train_pool = training_pool(config) if pool is None else pool
     eval_pool = ShapePool.build(
         names, range(EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + config.eval_shapes), grid=config.grid
     )

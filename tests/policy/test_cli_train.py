@@ -109,3 +109,37 @@ def test_train_help_names_every_shipped_config(capsys: pytest.CaptureFixture[str
     for name in CONFIG_NAMES:
         assert config_path(name).is_file()
         assert f"{name}," in text or f"{name}." in text, name
+
+
+def test_a_written_pool_trains_without_building_and_is_checked(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--write-pool writes the config's training shapes; --pool trains on them; a pool of
+    another config, or a damaged file, is refused with one error line."""
+    from slicerecon.partition.episodes import ShapePool
+    from slicerecon.policy.config import load_config
+    from slicerecon.policy.train import training_pool
+
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text(TINY_TOML)
+    pool = tmp_path / "pool.npz"
+    assert main(["train", "--config", str(cfg), "--write-pool", str(pool)]) == 0
+    assert json.loads(capsys.readouterr().out) == {"pool": str(pool), "grids": 4, "grid": 20}
+    built = training_pool(load_config(str(cfg)))
+    loaded = ShapePool.load(pool)
+    assert loaded.names == built.names and loaded.seeds == built.seeds
+    assert (loaded.occupancies == built.occupancies).all()
+    out = tmp_path / "run"
+    args = ["train", "--config", str(cfg), "--out", str(out), "--pool", str(pool)]
+    assert main([*args, "--threads", "1"]) == 0
+    assert json.loads(capsys.readouterr().out)["updates"] == 6
+
+    other = tmp_path / "other.toml"
+    other.write_text(TINY_TOML.replace("train_shapes = 2", "train_shapes = 3"))
+    assert main(["train", "--config", str(other), "--out", str(out), "--pool", str(pool)]) == 2
+    assert "is not the shape pool of config" in capsys.readouterr().err
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a pool")
+    assert main(["train", "--config", str(cfg), "--out", str(out), "--pool", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a shape pool" in err[0]
