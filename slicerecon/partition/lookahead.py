@@ -150,9 +150,9 @@ def lookahead_cut(
         branch.apply_cut(cut)
         values.append(expert_value(branch, value))
     best_cut, best_value = cuts[0], values[0]
-    for cut, value in zip(cuts[1:], values[1:], strict=True):
-        if value > best_value + margin:
-            best_cut, best_value = cut, value
+    for cut, score in zip(cuts[1:], values[1:], strict=True):
+        if score > best_value + margin:
+            best_cut, best_value = cut, score
     chosen: Cut | None = best_cut
     if stop_value > best_value + margin:
         chosen, best_value = None, stop_value
