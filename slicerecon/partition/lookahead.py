@@ -21,6 +21,7 @@ since at inference ``O`` is what is being reconstructed.
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -246,7 +247,7 @@ def held_out_value(sections: CrossSections, part: PartSurface, *, folds: int = 3
     sections : CrossSections
         All the cross-sections, on the grid of the states to be scored.
     part : callable
-        :data:`PartSurface`; its results are memoised per (group, box).
+        :data:`PartSurface` (boolean results); they are memoised per (group, box).
     folds : int, optional
         Groups of held-out planes (>= 2).
 
@@ -264,14 +265,14 @@ def held_out_value(sections: CrossSections, part: PartSurface, *, folds: int = 3
     if int(folds) < 2:
         raise OptionError(f"folds must be >= 2 (got {folds})")
     n = sections.n_planes
-    groups: list[tuple[list[int], CrossSections, dict[Box, NDArray[np.bool_]]]] = []
+    groups: list[tuple[list[int], Callable[[Box], NDArray[np.bool_]]]] = []
     for group in range(int(folds)):
         held = [i for i in range(1, n - 1) if i % int(folds) == group]
         if not held:
             continue
         keep = [i for i in range(n) if i not in held]
         subset = replace(sections, masks=sections.masks[keep], indices=sections.indices[keep])
-        groups.append((held, subset, {}))
+        groups.append((held, functools.cache(functools.partial(part, subset))))
     layers = np.clip(np.round(sections.indices), 0, sections.grid_shape[sections.axis] - 1)
 
     def value(state: PartitionState) -> float:
@@ -283,12 +284,10 @@ def held_out_value(sections: CrossSections, part: PartSurface, *, folds: int = 3
             return 1.0
         boxes = _state_boxes(state)
         inter = union = 0
-        for held, subset, memo in groups:
+        for held, reconstruct in groups:
             recon = np.zeros(sections.grid_shape, dtype=bool)
             for box in boxes:
-                if box not in memo:
-                    memo[box] = np.asarray(part(subset, box), dtype=bool)
-                recon[box.slices] |= memo[box]
+                recon[box.slices] |= reconstruct(box)
             for i in held:
                 layer = np.take(recon, int(layers[i]), axis=sections.axis)
                 inter += int(np.count_nonzero(layer & sections.masks[i]))
@@ -419,17 +418,14 @@ def plan_lookahead(
             f"the planning surface's grid {surface.sections.grid_shape} is not the "
             f"occupancy's {occ.shape}"
         )
-    memo: dict[Box, NDArray[np.bool_]] = {}
-
-    def part(box: Box) -> NDArray[np.bool_]:
-        if box not in memo:
-            memo[box] = np.asarray(surface.part(surface.sections, box), dtype=bool)
-        return memo[box]
-
+    # held-out planes reconstruct each group's parts themselves; only the silhouettes
+    # score the state's own reconstruction (rollouts ask for the same boxes again)
+    part = None
     if value == "planes":
         score = held_out_value(surface.sections, surface.part)
     else:
         score = silhouette_value([surface.hull.any(axis=a) for a in range(3)])
+        part = functools.cache(functools.partial(surface.part, surface.sections))
     state = PartitionState(
         occ,
         reconstruct=part,

@@ -23,7 +23,6 @@ from ..errors import OptionError
 from ..partition.cuts import cut_to_action
 from ..partition.lookahead import lookahead_cut
 from ..partition.state import PartitionState
-from ..sections import Box
 from .buffers import ReplayBuffer
 from .env import CutEnv
 from .observation import Observation, observe_state
@@ -115,16 +114,9 @@ def episode_state(env: CutEnv, slot: int) -> PartitionState:
         make = surrogate_reconstruction(sections, hull)
     else:
         make = functools.partial(part_surface_voxels, sections, hull)
-    memo: dict[Box, np.ndarray] = {}
-
-    def reconstruct(box: Box) -> np.ndarray:
-        if box not in memo:
-            memo[box] = make(box)
-        return memo[box]
-
     return PartitionState(
         occ,
-        reconstruct=reconstruct,
+        reconstruct=functools.cache(make),
         lam=env.lam,
         reward=env.reward_kind,
         max_steps=env.max_steps,
