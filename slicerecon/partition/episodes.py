@@ -28,6 +28,7 @@ from ..sections import Box, CrossSections, Volume
 
 __all__ = [
     "SECTION_AXIS",
+    "REAL_PREFIX",
     "ShapePool",
     "fit_to_cube",
     "shape_occupancy",
@@ -205,6 +206,10 @@ def real_occupancy(
     raise OptionError(f"could not fit real shape {name!r} into a {grid}^3 grid")
 
 
+REAL_PREFIX = "real:"
+"""What a real shape's name starts with in a :class:`ShapePool`."""
+
+
 @dataclass(frozen=True)
 class ShapePool:
     """Occupancy grids training episodes are drawn from.
@@ -248,26 +253,46 @@ class ShapePool:
         if int(real_variants) < 1 or not float(max_stretch) >= 1.0:
             raise OptionError("real_variants must be >= 1 and max_stretch >= 1")
         grids, out_names, out_seeds = [], [], []
-        for name in names:
-            for seed in seeds:
-                grids.append(shape_occupancy(name, seed=int(seed), grid=grid))
-                out_names.append(str(name))
-                out_seeds.append(int(seed))
-        for name in real:
-            for k in range(int(real_variants)):
-                rng = np.random.default_rng(k)
-                stretch = (1.0, 1.0, 1.0) if k == 0 else rng.uniform(1.0, max_stretch, 3)
+        skipped: set[str] = set()
+        for label, seed in cls.listing(names, seeds, real=real, real_variants=real_variants):
+            if not label.startswith(REAL_PREFIX):
+                grids.append(shape_occupancy(label, seed=seed, grid=grid))
+            else:
+                name = label[len(REAL_PREFIX) :]
+                if name in skipped:
+                    continue
+                rng = np.random.default_rng(seed)
+                stretch = (1.0, 1.0, 1.0) if seed == 0 else rng.uniform(1.0, max_stretch, 3)
                 try:
                     grids.append(real_occupancy(name, grid=grid, stretch=stretch))
                 except DependencyError as exc:
                     logger.warning("real shape %s skipped: %s", name, exc)
-                    break
-                out_names.append(f"real:{name}")
-                out_seeds.append(k)
+                    skipped.add(name)
+                    continue
+            out_names.append(label)
+            out_seeds.append(seed)
         if not grids:
             raise OptionError("the shape pool is empty (no family and no installed real shape)")
         logger.info("shape pool: %d grids of %d^3", len(grids), grid)
         return cls(np.stack(grids), tuple(out_names), tuple(out_seeds))
+
+    @staticmethod
+    def listing(
+        names: Sequence[str],
+        seeds: Sequence[int],
+        *,
+        real: Sequence[str] = (),
+        real_variants: int = 1,
+    ) -> list[tuple[str, int]]:
+        """The (name, seed) of every grid :meth:`build` makes when every real shape is installed.
+
+        Each family with each seed, then each real shape's variants ``0 ..
+        real_variants - 1`` named ``"real:<name>"`` (:data:`REAL_PREFIX`), in
+        :meth:`build`'s order.
+        """
+        listed = [(str(name), int(seed)) for name in names for seed in seeds]
+        listed += [(f"{REAL_PREFIX}{name}", k) for name in real for k in range(int(real_variants))]
+        return listed
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """Write the pool to an ``.npz`` file (bit-packed grids, names, seeds), atomically.

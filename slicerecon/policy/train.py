@@ -156,8 +156,12 @@ def training_pool(
             max_stretch=config.max_stretch,
         )
     pool = ShapePool.load(pool_file)
-    listed = [(n, s) for n in _shape_names(config) for s in range(config.train_shapes)]
-    listed += [(f"real:{n}", k) for n in config.real_shapes for k in range(config.real_variants)]
+    listed = ShapePool.listing(
+        _shape_names(config),
+        range(config.train_shapes),
+        real=config.real_shapes,
+        real_variants=config.real_variants,
+    )
     held = list(zip(pool.names, pool.seeds, strict=True))
     if pool.grid != config.grid or held != listed:
         missing = sorted({f"{n}/{s}" for n, s in listed} - {f"{n}/{s}" for n, s in held})
