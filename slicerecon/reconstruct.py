@@ -34,10 +34,10 @@ from .inputs import (
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget
 from .partition.planner import planner_names
 from .sections import Box, CrossSections, Projections, Volume, axis_index
+from .surface.methods import method_entry, method_names
 
 if TYPE_CHECKING:
     from .partition.lookahead import PlanningSurface
-from .surface.methods import method_entry, method_names
 
 __all__ = [
     "ReconstructConfig",
