@@ -171,7 +171,7 @@ class ReconstructConfig:
     @property
     def selectors(self) -> list[int | str]:
         """The structures ``label`` (or ``roi``) names: comma-separated numbers or names."""
-        from .io.selection import parse_selector
+        from .selection import parse_selector
 
         text = self.label if self.label is not None else self.roi
         if text is None:
@@ -622,8 +622,8 @@ def run_case(
             write_json(out / "metrics.json", metrics.to_dict())
         grid = data if isinstance(data, Volume) else None
         labels, labels_affine = _label_grid(result, sections, grid, value)
-        from .io.labelmap import Structure
         from .io.outputs import dicom_image_series, write_label_outputs
+        from .labels import Structure
 
         structure = described if described is not None else Structure(value, name)
         outputs = write_label_outputs(

@@ -1,6 +1,6 @@
 """Every structure of an input at once: shared planes, joint resolution, one label map.
 
-:func:`reconstruct_structures` takes a :class:`~slicerecon.io.labelmap.LabelMap`
+:func:`reconstruct_structures` takes a :class:`~slicerecon.labels.LabelMap`
 (several labels of a label map, or every segment of a SEG) and
 
 1. chooses the planes **once**, over the extent of all the structures together
@@ -33,8 +33,8 @@ import trimesh
 from numpy.typing import NDArray
 
 from .errors import InputError, OptionError
-from .io.labelmap import LabelMap, Structure
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB
+from .labels import LabelMap, Structure
 from .sections import CrossSections, Volume
 
 __all__ = [

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..errors import FormatError, InputError, LabelError, OptionError
 from ..sections import CrossSections, Volume
+from ..selection import parse_selector
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid, reading
-from .selection import parse_selector
 
 __all__ = [
     "DICOM_KINDS",
@@ -159,7 +159,7 @@ def load_input(
         (``.stl`` / ``.ply`` / ``.obj`` / ``.off``).
     label : int or str, optional
         The structure to keep, by number or name
-        (:func:`slicerecon.io.selection.choose_structure`): a label value (NIfTI,
+        (:func:`slicerecon.selection.choose_structure`): a label value (NIfTI,
         NRRD, VTI, DICOM series), a segment name (``.seg.nrrd``), a SegmentNumber
         or SegmentLabel (SEG), a ROINumber or ROIName (RTSTRUCT). Default: every
         non-zero voxel of a label map, the only segment or ROI.

@@ -22,9 +22,9 @@ from numpy.typing import DTypeLike, NDArray
 
 from ..errors import EmptyMaskError, FormatError, InputError, LabelError, OptionError
 from ..sections import Volume
+from ..selection import parse_selector
 from .atomic import atomic_path
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid
-from .selection import parse_selector
 
 __all__ = ["NiftiInfo", "nifti_labels", "read_nifti", "write_nifti"]
 

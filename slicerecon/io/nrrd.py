@@ -47,8 +47,9 @@ from ..errors import (
     InputError,
     LabelError,
 )
+from ..labels import LabelMap, Structure
 from ..sections import Volume
-from .labelmap import LabelMap, Structure
+from ..selection import choose_structure, parse_selector
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_grid, reading
 from .nrrd_header import (
     COMPRESSED,
@@ -60,7 +61,6 @@ from .nrrd_header import (
     pynrrd_module,
     read_header,
 )
-from .selection import choose_structure, parse_selector
 
 __all__ = [
     "NrrdInfo",
@@ -331,7 +331,7 @@ def read_nrrd(
         As for :func:`read_nrrd_label_map`.
     label : int or str, optional
         The structure, by value or, for a segmentation, by segment name
-        (:func:`slicerecon.io.selection.choose_structure`). Default: every
+        (:func:`slicerecon.selection.choose_structure`). Default: every
         non-zero voxel.
     memory_budget_gb : float
         As for :func:`read_nrrd_label_map`.

@@ -16,9 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import OptionError
+from ..labels import LPS_TO_RAS, Structure, structure_colour
 from ..sections import check_affine
 from .atomic import atomic_path
-from .labelmap import LPS_TO_RAS, Structure, structure_colour
 from .nrrd import label_values, labels_dtype
 from .nrrd_header import pynrrd_module
 
@@ -70,7 +70,7 @@ def write_seg_nrrd(
         structure without voxels is written as an empty segment. An unnamed
         structure is called ``Segment_<value>`` (as Slicer calls it) and one
         without a colour gets the default of its position
-        (:func:`~slicerecon.io.labelmap.structure_colour`, the palette of every written
+        (:func:`~slicerecon.labels.structure_colour`, the palette of every written
         segmentation).
     path : path-like
         The file, ending in ``.nrrd`` (``.seg.nrrd`` by convention).

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import SlicereconError
-from .labelmap import LPS_TO_RAS, Structure
+from ..labels import LPS_TO_RAS, Structure
 
 __all__ = ["LabelOutputs", "dicom_image_series", "write_label_outputs"]
 

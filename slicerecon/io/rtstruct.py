@@ -33,12 +33,12 @@ from ..errors import (
     OptionError,
     SlicereconError,
 )
+from ..labels import Structure
 from ..sections import CrossSections
+from ..selection import choose_structure, parse_selector
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
-from .labelmap import Structure
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 from .polygons import sections_from_polygons
-from .selection import choose_structure, parse_selector
 
 __all__ = ["list_rois", "read_rtstruct", "read_rtstruct_structures", "roi_contours"]
 

@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import EmptyMaskError, FormatError, InputError
+from ..labels import Structure
 from ..sections import CrossSections
 from .atomic import atomic_path
 from .dicom.derived import (
@@ -66,7 +67,6 @@ from .dicom.derived import (
     load_source_series,
 )
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
-from .labelmap import Structure
 
 __all__ = ["RTSTRUCT_SOP_CLASS_UID", "write_rtstruct"]
 
@@ -250,7 +250,7 @@ def write_rtstruct(
         One per label value (every non-zero value of ``labels`` needs one), in
         the order the ROIs are listed. ROINumber is the value; ROIName the
         name (else ``"Structure <value>"``); ROIDisplayColor the colour (else
-        one of :data:`~slicerecon.io.labelmap.DEFAULT_COLOURS`). A
+        one of :data:`~slicerecon.labels.DEFAULT_COLOURS`). A
         structure without voxels becomes an ROI without contours.
     source_images : path-like or sequence of pydicom.Dataset or path-like
         The image series: its directory, or its images (datasets, headers

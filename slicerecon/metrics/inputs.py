@@ -208,8 +208,6 @@ class MetricInput:
     def rasterize(self, affine: NDArray[np.float64], shape: tuple[int, int, int]) -> NDArray:
         """Occupancy of the voxel centres of a grid, ndarray of shape ``shape``, bool."""
         if isinstance(self.shape, Volume):
-            from .volume import resample_nearest
-
             return resample_nearest(self.shape, affine, shape)
         return mesh_to_mask(self.shape, affine, shape)
 
@@ -253,3 +251,59 @@ def as_rng(seed: int | np.random.Generator) -> np.random.Generator:
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
         raise OptionError(f"seed must be an integer or a numpy Generator (got {seed!r})")
     return np.random.default_rng(int(seed))
+
+
+def place(
+    mask: NDArray[np.bool_], offset: NDArray[np.int64], shape: tuple[int, int, int]
+) -> NDArray[np.bool_]:
+    """Copy ``mask`` into a grid of ``shape`` whose voxel 0 is ``mask``'s voxel ``offset``."""
+    out = np.zeros(shape, dtype=bool)
+    src_lo = np.maximum(offset, 0)
+    src_hi = np.minimum(offset + np.asarray(shape), mask.shape)
+    if np.any(src_hi <= src_lo):
+        return out
+    dst_lo = src_lo - offset
+    dst_hi = src_hi - offset
+    out[dst_lo[0] : dst_hi[0], dst_lo[1] : dst_hi[1], dst_lo[2] : dst_hi[2]] = mask[
+        src_lo[0] : src_hi[0], src_lo[1] : src_hi[1], src_lo[2] : src_hi[2]
+    ]
+    return out
+
+
+def resample_nearest(
+    volume: Volume, affine: NDArray[np.float64], shape: tuple[int, int, int]
+) -> NDArray[np.bool_]:
+    """Nearest-neighbour value of ``volume`` at every voxel centre of a grid.
+
+    A voxel centre takes the value of the volume's voxel whose cell holds it
+    (index rounded half up); centres outside the volume's grid are background.
+    """
+    to_src = np.linalg.inv(volume.affine) @ affine  # grid index -> volume index
+    linear, shift = to_src[:3, :3], to_src[:3, 3]
+    if np.allclose(linear, np.eye(3), atol=1e-9) and np.allclose(shift, np.rint(shift), atol=1e-6):
+        # Same lattice: an exact integer shift.
+        return place(volume.mask, np.rint(shift).astype(np.int64), shape)
+
+    out = np.zeros(shape, dtype=bool)
+    lo, hi = volume.bounding_box_vox()
+    corners = volume.index_to_world(lo - 0.5 + CUBE_CORNERS * (hi - lo))
+    ijk = corners @ np.linalg.inv(affine)[:3, :3].T + np.linalg.inv(affine)[:3, 3]
+    first = np.clip(np.floor(ijk.min(axis=0)).astype(np.int64), 0, shape)
+    last = np.clip(np.ceil(ijk.max(axis=0)).astype(np.int64) + 1, 0, shape)
+    if np.any(last <= first):
+        return out
+    jj, kk = np.meshgrid(np.arange(first[1], last[1]), np.arange(first[2], last[2]), indexing="ij")
+    plane = np.stack([np.zeros_like(jj), jj, kk], axis=-1).astype(np.float64)  # (J, K, 3)
+    rows = max(1, CHUNK_VOXELS // max(1, jj.size))
+    src_shape = np.asarray(volume.shape)
+    for i0 in range(int(first[0]), int(last[0]), rows):
+        ii = np.arange(i0, min(i0 + rows, int(last[0])), dtype=np.float64)
+        grid = np.broadcast_to(plane, (len(ii), *plane.shape)).copy()
+        grid[..., 0] = ii[:, None, None]
+        src = np.floor(grid @ linear.T + shift + 0.5).astype(np.int64)
+        inside = np.all((src >= 0) & (src < src_shape), axis=-1)
+        values = np.zeros(inside.shape, dtype=bool)
+        hit = src[inside]
+        values[inside] = volume.mask[hit[:, 0], hit[:, 1], hit[:, 2]]
+        out[i0 : i0 + len(ii), first[1] : last[1], first[2] : last[2]] = values
+    return out

@@ -25,9 +25,10 @@ from slicerecon.errors import (
 )
 from slicerecon.io import detect_kind, load_input
 from slicerecon.io.describe import describe_input
-from slicerecon.io.labelmap import Structure, read_label_map
+from slicerecon.io.labelmap import read_label_map
 from slicerecon.io.nrrd import nrrd_info, read_nrrd_label_map
 from slicerecon.io.nrrd_writer import write_seg_nrrd
+from slicerecon.labels import Structure
 
 nrrd = pytest.importorskip("nrrd")
 

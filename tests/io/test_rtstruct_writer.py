@@ -10,9 +10,9 @@ import pydicom
 import pytest
 
 from slicerecon.errors import EmptyMaskError, GeometryError, InputError, LabelError
-from slicerecon.io.labelmap import DEFAULT_COLOURS, Structure
 from slicerecon.io.rtstruct import list_rois, read_rtstruct
 from slicerecon.io.rtstruct_writer import write_rtstruct
+from slicerecon.labels import DEFAULT_COLOURS, Structure
 
 
 def _oblique_affine(spacing=(0.7, 1.2, 3.0), origin=(55.0, -80.5, 12.25), tilt=0.0):

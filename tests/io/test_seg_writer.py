@@ -13,7 +13,8 @@ import pytest
 from slicerecon.errors import EmptyMaskError, GeometryError, LabelError, OptionError
 from slicerecon.io.dicom import read_dicom_seg, write_seg
 from slicerecon.io.dicom.derived import labels_on_series, load_source_series
-from slicerecon.io.labelmap import DEFAULT_COLOURS, Structure, read_label_map
+from slicerecon.io.labelmap import read_label_map
+from slicerecon.labels import DEFAULT_COLOURS, Structure
 
 
 def _oblique_affine(spacing=(0.7, 1.2, 3.0), origin=(55.0, -80.5, 12.25), tilt=None):

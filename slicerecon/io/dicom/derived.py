@@ -39,8 +39,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...errors import FormatError, GeometryError, InputError, LabelError, OptionError
+from ...labels import Structure, structure_colour
 from ...sections import check_affine
-from ..labelmap import Structure, structure_colour
 from ..limits import check_geometry
 from .geometry import require_path
 from .series import _layout, _scan_series, _Slice, _slice_from

@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 
 from ...errors import EmptyMaskError, FormatError, GeometryError, InputError
 from ...sections import Volume
+from ...selection import choose_structure, parse_selector
 from ..limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid
-from ..selection import choose_structure, parse_selector
 from .geometry import (
     ORIENTATION_TOLERANCE,
     POSITION_TOLERANCE_MM,

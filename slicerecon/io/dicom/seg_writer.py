@@ -17,7 +17,7 @@ Segments
 * SegmentLabel: the structure's name, else ``"Structure <value>"``.
 * RecommendedDisplayCIELabValue: the structure's colour (RGB converted to
   CIELab by highdicom), else one of
-  :data:`~slicerecon.io.labelmap.DEFAULT_COLOURS`.
+  :data:`~slicerecon.labels.DEFAULT_COLOURS`.
 * SegmentedPropertyCategory / Type: SCT 85756007 "Tissue" / SCT 85756007
   "Tissue" (3D Slicer's code for a segment of unknown kind: slicerecon does
   not know what a structure is).
@@ -41,8 +41,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ...errors import DependencyError, EmptyMaskError
+from ...labels import Structure
 from ..atomic import atomic_path
-from ..labelmap import Structure
 from .derived import check_label_map, display_colour, labels_on_series, load_source_series
 
 __all__ = ["SEG_ALGORITHM_NAME", "write_seg"]

@@ -45,8 +45,8 @@ from numpy.typing import NDArray
 
 from ...errors import EmptyMaskError, FormatError, GeometryError, InputError, LabelError
 from ...sections import Volume
+from ...selection import parse_selector
 from ..limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid, reading
-from ..selection import parse_selector
 from .geometry import (
     ORIENTATION_TOLERANCE,
     POSITION_TOLERANCE_MM,

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LabelError, OptionError
+from .errors import LabelError, OptionError
 
 __all__ = ["choose_structure", "parse_selector"]
 
