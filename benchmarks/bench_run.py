@@ -29,9 +29,10 @@ import tracemalloc
 from pathlib import Path
 from typing import Any
 
+from slicerecon.case import run_case
 from slicerecon.io.mesh import write_mesh
 from slicerecon.io.nifti import read_nifti, write_nifti
-from slicerecon.reconstruct import ReconstructConfig, run_case
+from slicerecon.reconstruct import ReconstructConfig
 from slicerecon.sections import Volume
 from slicerecon.shapes import make_shape
 from slicerecon.surface.marching import volume_to_mesh

@@ -4,7 +4,7 @@ The label map ``frog_tissues.vti`` (inside the installed pyvista package; read
 by slicerecon's own VTI reader) holds 15 tissues (labels 1-15) and a few
 hundred stray voxels with labels 16-29, which are left out here. The script
 
-* runs :func:`slicerecon.structures.reconstruct_structures` on labels 1-15 at
+* runs :func:`slicerecon.case.reconstruct_structures` on labels 1-15 at
   ``--planes`` planes along z, chosen once over their union, and scores each
   tissue's joint share against its own mask (:func:`slicerecon.metrics.evaluate`);
 * reconstructs each tissue on the same planes by plain signed-distance
@@ -28,12 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from slicerecon.case import crop_to_structure, reconstruct_structures
 from slicerecon.io.labelmap import read_label_map
 from slicerecon.metrics import evaluate
 from slicerecon.realshapes import FROG_TISSUES, frog_tissues_path
 from slicerecon.reconstruct import PLAIN_SDF, reconstruct
 from slicerecon.sections import CrossSections, Volume
-from slicerecon.structures import crop_to_structure, reconstruct_structures
 
 NAMES = {v: k for k, v in FROG_TISSUES.items()}
 

@@ -36,8 +36,8 @@ from independent_eval import Truth, score_mesh  # noqa: E402
 from real_anatomy import SPLIT_FILE, _seed, load_case, load_split  # noqa: E402
 
 from slicerecon.io.atomic import atomic_path  # noqa: E402
+from slicerecon.partition import planner as planner_registry  # noqa: E402
 from slicerecon.partition.lookahead import plan_lookahead, run_lookahead  # noqa: E402
-from slicerecon.partition.planner import PlannerEntry, register_planner  # noqa: E402
 from slicerecon.partition.state import Part, PartitionState, iou  # noqa: E402
 from slicerecon.reconstruct import prepare_inputs, reconstruct  # noqa: E402
 
@@ -72,8 +72,13 @@ def main() -> None:
     parser.add_argument("--planes", type=int, default=12)
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
-    register_planner(PlannerEntry("oracle", _plan_oracle, needs_surface=True))
-    register_planner(PlannerEntry("lookahead-silhouettes", _plan_silhouettes, needs_surface=True))
+    # the two measuring planners exist only in this benchmark: added to the registry here
+    planner_registry.PLANNERS["oracle"] = planner_registry.PlannerEntry(
+        "oracle", _plan_oracle, needs_surface=True
+    )
+    planner_registry.PLANNERS["lookahead-silhouettes"] = planner_registry.PlannerEntry(
+        "lookahead-silhouettes", _plan_silhouettes, needs_surface=True
+    )
     protocol, cases = load_split(SPLIT_FILE)
     names = [n for n, c in cases.items() if c["half"] == args.half]
     start = time.perf_counter()

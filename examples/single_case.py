@@ -18,8 +18,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+from slicerecon.case import run_case
 from slicerecon.io.nifti import write_nifti
-from slicerecon.reconstruct import ReconstructConfig, run_case
+from slicerecon.reconstruct import ReconstructConfig
 from slicerecon.shapes import make_shape
 
 

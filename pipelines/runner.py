@@ -197,7 +197,7 @@ def process_case(
     CaseResult
         Status ``ok`` or ``failed`` (small: no arrays, no meshes).
     """
-    from slicerecon.reconstruct import run_case
+    from slicerecon.case import run_case
 
     job = Job(case, case.name if folder is None else folder, config, key)
     final = Path(outdir) / job.folder
@@ -236,7 +236,11 @@ def process_case(
                 "input": str(case.path),
                 "key": key,
                 "slicerecon_version": __version__,
-                "mesh": CaseFiles(staging).mesh(config.mesh_format).name,
+                "meshes": [
+                    str(record["mesh"])
+                    for record in summary.get("structures") or []
+                    if record.get("mesh")
+                ],
                 "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                 "result": result.to_json(),
             }
@@ -266,7 +270,7 @@ def finished_result(outdir: Path, job: Job) -> CaseResult | None:
     -------
     CaseResult or None
         Status ``skipped``, read from the case folder; None when the folder
-        has no ``done.json`` with this key or its mesh is gone.
+        has no ``done.json`` with this key or one of its meshes is gone.
     """
     files = CaseFiles(outdir / job.folder)
     try:
@@ -275,7 +279,10 @@ def finished_result(outdir: Path, job: Job) -> CaseResult | None:
         return None
     if not isinstance(done, dict) or done.get("key") != job.key:
         return None
-    if not (files.directory / str(done.get("mesh", ""))).is_file():
+    meshes = done.get("meshes", [done.get("mesh", "")])
+    if not isinstance(meshes, list) or not meshes:
+        return None
+    if not all((files.directory / str(name)).is_file() for name in meshes):
         return None
     stored = read_case(files.directory, name=job.folder)
     if not stored.ok:

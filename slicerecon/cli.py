@@ -239,7 +239,7 @@ def run(
     its image series also gets seg.dcm, and an RTSTRUCT input rtstruct.dcm.
     """
     with ctrl_c_after():
-        from .reconstruct import run_case
+        from .case import run_case
 
     config = _reconstruct_config(locals())
     with StageProgress(enabled=not quiet) as progress:
@@ -411,7 +411,7 @@ def evaluate(
     from .metrics import evaluate as evaluate_metrics
 
     if label is None:
-        from .structures import evaluate_structures
+        from .case import evaluate_structures
 
         per_structure = evaluate_structures(
             prediction, ground_truth, n_points=n_points, seed=seed, memory_budget_gb=max_memory

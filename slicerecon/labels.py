@@ -10,14 +10,15 @@ these types and writers consume them; this module knows no file format.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from .errors import LabelError
 from .sections import Volume, check_affine
 from .selection import choose_structure, parse_selector
 
@@ -26,6 +27,7 @@ __all__ = [
     "LPS_TO_RAS",
     "LabelMap",
     "Structure",
+    "as_labels",
     "structure_colour",
 ]
 
@@ -133,6 +135,48 @@ class LabelMap:
     def __post_init__(self) -> None:
         object.__setattr__(self, "affine", check_affine(self.affine))
 
+    @classmethod
+    def from_array(
+        cls,
+        labels: ArrayLike,
+        affine: ArrayLike,
+        *,
+        names: Mapping[int, str] | None = None,
+        colours: Mapping[int, tuple[int, int, int]] | None = None,
+        coordinates: str = "RAS",
+    ) -> LabelMap:
+        """A label map of an integer array: one structure per non-zero value.
+
+        Parameters
+        ----------
+        labels : ndarray of shape (I, J, K)
+            Integer (or boolean, or integer-valued float) label values, 0 background.
+        affine : ndarray of shape (4, 4)
+            Voxel index → world mm.
+        names, colours : mapping of int, optional
+            Names and display colours (RGB 0-255) by value.
+        coordinates : {"RAS", "LPS"}
+            The world frame of ``affine``.
+
+        Raises
+        ------
+        LabelError
+            Not a 3-D array of integer values.
+        GeometryError
+            A bad affine.
+        """
+        data = np.asarray(labels)
+        if data.ndim != 3:
+            raise LabelError(f"a label map must be a 3-D array (got shape {data.shape})")
+        if data.dtype.kind not in "biuf":
+            raise LabelError(f"a label map must hold numbers (got dtype {data.dtype})")
+        if data.dtype.kind == "f" and (
+            not np.all(np.isfinite(data)) or np.any(data != np.round(data))
+        ):
+            raise LabelError("a label map holds integer values; this array does not")
+        values = as_labels(data.astype(np.uint8) if data.dtype.kind == "b" else data)
+        return cls(values, affine, _structures_of(values, names, colours), coordinates)
+
     @property
     def shape(self) -> tuple[int, int, int]:
         """Grid shape ``(I, J, K)``."""
@@ -165,3 +209,36 @@ class LabelMap:
         keep = np.isin(self.labels, [s.value for s in chosen])
         labels = np.where(keep, self.labels, 0).astype(self.labels.dtype, copy=False)
         return LabelMap(labels, self.affine, tuple(chosen), self.coordinates)
+
+
+def _structures_of(
+    labels: NDArray[np.integer],
+    names: Mapping[int, str] | None = None,
+    colours: Mapping[int, tuple[int, int, int]] | None = None,
+) -> tuple[Structure, ...]:
+    values = np.unique(labels)
+    return tuple(
+        Structure(int(v), (names or {}).get(int(v), ""), (colours or {}).get(int(v)))
+        for v in values
+        if v != 0
+    )
+
+
+def as_labels(values: NDArray[Any]) -> NDArray[np.integer]:
+    """Integer labels in the smallest signed or unsigned type that holds them.
+
+    Parameters
+    ----------
+    values : ndarray, integer, boolean or integer-valued float
+        A label map's values.
+
+    Returns
+    -------
+    ndarray, integer
+        The same values (an integer array is returned as it is).
+    """
+    data = np.asarray(values)
+    if data.dtype.kind in "iu":
+        return data
+    lo, hi = (int(data.min()), int(data.max())) if data.size else (0, 0)
+    return data.astype(np.result_type(np.min_scalar_type(lo), np.min_scalar_type(hi)))

@@ -16,7 +16,8 @@ A *results folder* holds *case folders* at any depth (hidden folders and
       report.html              the HTML report
       report_assets/           the report's figures as PNG files
       <case>/                  a finished case (what ``slicerecon run`` writes)
-        mesh.<fmt>  plan.json  metrics.json  preview.png  [done.json]
+        mesh.<fmt> or meshes/<value>_<name>.<fmt>  structures.json  plan.json
+        [metrics.json]  labels.nii.gz  labels.seg.nrrd  preview.png  [done.json]
       <case>/                  a failed case
         error.json
       <case>/<config>/         several configurations of one case
@@ -27,7 +28,14 @@ A case folder is one that holds ``plan.json`` (finished) or ``error.json``
 folder's path relative to the results folder, with ``/`` separators
 (``liver_003`` for a batch, ``liver_003/loft`` for one method of
 ``evaluate-dataset``). ``done.json`` is the runner's completion marker: it
-holds the resume key and the :meth:`CaseResult.to_json` record of the run.
+holds the resume key, the case's mesh files and the :meth:`CaseResult.to_json`
+record of the run.
+
+One schema serves one structure and many (:mod:`slicerecon.case_outputs`
+writes it): a case of one structure has ``mesh.<fmt>``, a case of several has
+``meshes/<value>_<name>.<fmt>``, and ``structures.json`` lists every structure
+with its mesh's path; ``metrics.json`` holds the case's metrics at its top
+level (the mean over the structures) and each structure's under ``structures``.
 
 Records
 -------
@@ -65,6 +73,7 @@ __all__ = [
     "STATUSES",
     "SUMMARY_COLUMNS",
     "SUMMARY_CSV",
+    "STRUCTURES_FILE",
     "SUMMARY_JSON",
     "CaseFiles",
     "CaseResult",
@@ -72,6 +81,7 @@ __all__ = [
     "ResultsLayout",
     "Status",
     "collect_results",
+    "mesh_file",
     "read_case",
     "write_summary",
 ]
@@ -85,8 +95,12 @@ METRICS_FILE = "metrics.json"
 """A finished case's metrics against the ground truth (when it was known)."""
 PREVIEW_FILE = "preview.png"
 """A finished case's preview image."""
+STRUCTURES_FILE = "structures.json"
+"""A finished case's structures: names, statuses, volumes and mesh paths."""
 MESH_STEM = "mesh"
-"""A finished case's mesh is ``mesh.<format>``."""
+"""A finished case of one structure has its mesh in ``mesh.<format>``."""
+MESHES_DIR = "meshes"
+"""A finished case of several structures has one mesh per structure in ``meshes/``."""
 MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off")
 """Mesh suffixes looked for in a case folder, in this order."""
 ERROR_FILE = "error.json"
@@ -138,6 +152,28 @@ SUMMARY_COLUMNS = (
 
 
 # -- where the files are ------------------------------------------------------------------
+def mesh_file(label: str, mesh_format: str, *, several: bool) -> str:
+    """A structure's mesh path relative to its case folder.
+
+    Parameters
+    ----------
+    label : str
+        The structure's ``<value>_<name>`` (:attr:`slicerecon.labels.Structure.label`).
+    mesh_format : str
+        ``stl``, ``ply`` or ``obj``.
+    several : bool
+        Whether the case has several structures.
+
+    Returns
+    -------
+    str
+        ``mesh.<format>`` for one structure, ``meshes/<label>.<format>`` for several.
+    """
+    if several:
+        return f"{MESHES_DIR}/{label}.{mesh_format}"
+    return f"{MESH_STEM}.{mesh_format}"
+
+
 @dataclass(frozen=True)
 class CaseFiles:
     """The files of one case folder.
@@ -166,6 +202,11 @@ class CaseFiles:
         return self.directory / PREVIEW_FILE
 
     @property
+    def structures(self) -> Path:
+        """``structures.json``."""
+        return self.directory / STRUCTURES_FILE
+
+    @property
     def error(self) -> Path:
         """``error.json``."""
         return self.directory / ERROR_FILE
@@ -180,8 +221,26 @@ class CaseFiles:
         return self.directory / f"{MESH_STEM}.{mesh_format}"
 
     def find_mesh(self) -> Path | None:
-        """The first ``mesh.<suffix>`` of :data:`MESH_SUFFIXES` that exists, or None."""
-        return _first_file(self.directory, MESH_STEM, MESH_SUFFIXES)
+        """The case's mesh: ``mesh.<suffix>`` (the first of :data:`MESH_SUFFIXES` that
+        exists), else the first structure's mesh of ``structures.json``, or None."""
+        found = _first_file(self.directory, MESH_STEM, MESH_SUFFIXES)
+        if found is not None:
+            return found
+        meshes = self.meshes()
+        return meshes[0] if meshes else None
+
+    def meshes(self) -> list[Path]:
+        """Every structure's mesh that ``structures.json`` lists and that exists, in order."""
+        try:
+            payload = _read_json(self.structures)
+        except (OSError, ValueError):
+            return []
+        found = []
+        for record in payload.get("structures") or []:
+            name = record.get("mesh") if isinstance(record, dict) else None
+            if isinstance(name, str) and (self.directory / name).is_file():
+                found.append(self.directory / name)
+        return found
 
     def find_preview(self) -> Path | None:
         """``preview.png`` when it exists, else None."""
@@ -628,11 +687,13 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
     if files.metrics.is_file():
         try:
             raw = _read_json(files.metrics)
-            if isinstance(raw.get("structures"), dict):  # several structures and their mean
+            if isinstance(raw.get("structures"), dict):  # each structure, and their mean
                 per_structure = {
                     str(k): _numbers(v) for k, v in raw["structures"].items() if isinstance(v, dict)
                 }
-                raw = raw.get("mean") or {}
+                raw = raw.get("mean") or raw
+                if len(per_structure) < 2:
+                    per_structure = None
             metrics = _numbers(raw)
         except (OSError, ValueError) as exc:
             record = FailureRecord.from_json(

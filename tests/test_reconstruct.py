@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from slicerecon.metrics import evaluate
+from slicerecon.options import ReconstructOptions
 from slicerecon.reconstruct import prepare_inputs, reconstruct
 from slicerecon.sections import Volume
 from slicerecon.shapes import analytic_volume, make_shape
@@ -176,6 +177,6 @@ def test_lookahead_planner_end_to_end_and_on_a_pooled_grid() -> None:
     occupancy = planning_occupancy(result.sections, result.projections)
     assert result.plan.planner == "lookahead" and result.plan.covers(occupancy)
     hull = visual_hull(result.projections, result.sections.grid_shape)
-    surface = _planning_surface(result.sections, hull, interpolation="pchip", join_drift=True)
+    surface = _planning_surface(result.sections, hull, ReconstructOptions())
     pooled = plan_partition(occupancy, planner="lookahead", max_grid=16, surface=surface)
     assert pooled.covers(occupancy) and pooled.grid_shape == occupancy.shape

@@ -25,10 +25,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from slicerecon.case import run_case
 from slicerecon.cli import main
 from slicerecon.io.mesh import read_mesh
 from slicerecon.io.nifti import write_nifti
-from slicerecon.reconstruct import ReconstructConfig, run_case
+from slicerecon.reconstruct import ReconstructConfig
 from slicerecon.report import collect_results, write_report
 from slicerecon.shapes import make_shape
 from slicerecon.surface.marching import volume_to_mesh

@@ -13,13 +13,13 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
+from slicerecon.case import NO_PLANE, reconstruct_structures
 from slicerecon.cli import main
 from slicerecon.io.labelmap import read_label_map
 from slicerecon.rasterize import mesh_to_mask
 from slicerecon.reconstruct import reconstruct
 from slicerecon.sampling import projections_from_volume
 from slicerecon.sections import CrossSections
-from slicerecon.structures import NO_PLANE, reconstruct_structures
 
 SPACING = (0.8, 0.8, 2.0)
 

@@ -18,13 +18,12 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, LabelError
-from ..labels import LPS_TO_RAS, LabelMap, Structure
+from ..labels import LPS_TO_RAS, LabelMap, as_labels
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 
 __all__ = [
@@ -37,28 +36,6 @@ logger = logging.getLogger(__name__)
 
 LABEL_MAP_KINDS = ("nifti", "nrrd", "vti", "dicom-series", "dicom-seg")
 """Input kinds (:func:`slicerecon.io.detect_kind`) that hold dense structures."""
-
-
-def _structures(
-    labels: NDArray[np.integer],
-    names: dict[int, str] | None = None,
-    colours: dict[int, tuple[int, int, int]] | None = None,
-) -> tuple[Structure, ...]:
-    values = np.unique(labels)
-    return tuple(
-        Structure(int(v), (names or {}).get(int(v), ""), (colours or {}).get(int(v)))
-        for v in values
-        if v != 0
-    )
-
-
-def _as_labels(values: NDArray[Any]) -> NDArray[np.integer]:
-    """Integer labels in the smallest signed or unsigned type that holds them."""
-    data = np.asarray(values)
-    if data.dtype.kind in "iu":
-        return data
-    lo, hi = (int(data.min()), int(data.max())) if data.size else (0, 0)
-    return data.astype(np.result_type(np.min_scalar_type(lo), np.min_scalar_type(hi)))
 
 
 def read_label_map(
@@ -103,8 +80,7 @@ def _read_label_map(
         from .nifti import read_label_values
 
         values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
-        labels, frame = _as_labels(values), "RAS"
-        result = LabelMap(labels, affine, _structures(labels), frame)
+        result = LabelMap.from_array(values, affine)
     elif kind.kind == "nrrd":
         from .nrrd import read_nrrd_label_map
 
@@ -113,8 +89,7 @@ def _read_label_map(
         from .vti import read_vti
 
         image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
-        labels = _as_labels(np.asarray(image.values))
-        result = LabelMap(labels, image.affine, _structures(labels), "RAS")
+        result = LabelMap.from_array(np.asarray(image.values), image.affine)
     elif kind.kind == "dicom-series":
         from .dicom import read_dicom_series_values
 
@@ -123,8 +98,7 @@ def _read_label_map(
         )
         if np.any(values != np.round(values)):
             raise LabelError(f"{kind.path} is not a label map: its pixel values are not integers")
-        labels = _as_labels(np.round(values))
-        result = LabelMap(labels, affine, _structures(labels), "LPS")
+        result = LabelMap.from_array(np.round(values), affine, coordinates="LPS")
     else:
         result = _read_seg_segments(kind.path, memory_budget_gb)
     if not result.structures:
@@ -164,7 +138,7 @@ def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
         logger.warning(
             "%s: segments overlap on %d voxels; each goes to the later segment", path, overlap
         )
-    return LabelMap(labels, affine, _structures(labels, names), "LPS")
+    return LabelMap.from_array(labels, affine, names=names, coordinates="LPS")
 
 
 def write_label_map(
@@ -195,7 +169,7 @@ def write_label_map(
 
     from .atomic import atomic_path
 
-    values = _as_labels(np.asarray(labels))
+    values = as_labels(np.asarray(labels))
     if values.dtype.itemsize > 2 or values.dtype.kind == "i" and values.min() >= 0:
         values = values.astype(np.uint16 if values.max() < 2**16 else np.int32)
     aff = np.asarray(affine, dtype=np.float64)

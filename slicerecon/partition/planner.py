@@ -1,15 +1,21 @@
 """Partition planners: turn an occupancy grid into cuboid parts (``plan.json``).
 
-A planner is a :class:`PlannerEntry` in :data:`PLANNERS` (a function and what it
-needs); :func:`plan_partition` looks it up by name. ``"none"`` is the paper's
-no-projection baseline (one part, the bounding box of the shape);
-``"heuristic"`` runs the heuristic expert to the end of an episode. The learned
-planner ``"policy"`` lives in :mod:`slicerecon.policy`, which registers it when
-imported (without importing torch): this package imports nothing of it.
+A planner is a :class:`PlannerEntry` in :data:`PLANNERS`, a literal registry
+complete at import (as trimesh's engines): its function and its capabilities;
+:func:`plan_partition` looks it up by name and behaviour follows the entry's
+capabilities, never its name. ``"none"`` is the paper's no-projection baseline
+(one part, the bounding box of the shape); ``"heuristic"`` runs the heuristic
+expert to the end of an episode; ``"lookahead"`` checks the expert by a
+one-step lookahead. The learned planner ``"policy"`` is listed by the name of
+its function (``"slicerecon.policy.planner:plan_policy"``), imported with torch
+only when it first runs: this package imports nothing of the policy package.
+
+Add a planner by adding its entry to :data:`PLANNERS` (``docs/architecture.md``).
 """
 
 from __future__ import annotations
 
+import importlib
 import logging
 import os
 from collections.abc import Callable
@@ -35,7 +41,6 @@ __all__ = [
     "plan_partition",
     "planner_entry",
     "planner_names",
-    "register_planner",
 ]
 
 logger = logging.getLogger(__name__)
@@ -203,9 +208,11 @@ class PlannerEntry:
     ----------
     name : str
         The ``--planner`` value.
-    plan : callable
+    plan : callable or str
         ``plan(occupancy, *, reconstruct, max_parts, min_remaining, lam, **options)
-        -> list of Part``.
+        -> list of Part``, or ``"module:function"`` naming it: imported on first
+        use (:meth:`load`), so that an entry whose function needs torch costs
+        nothing until it runs.
     partitions : bool
         Whether it may make more than one part (False for the one-part baseline).
     needs_torch : bool
@@ -221,31 +228,48 @@ class PlannerEntry:
     """
 
     name: str
-    plan: PlannerFn
+    plan: PlannerFn | str
     partitions: bool = True
     needs_torch: bool = False
     takes_weights: bool = False
     needs_surface: bool = False
     summary: str = ""
 
+    def load(self) -> PlannerFn:
+        """The planner function (imported now when :attr:`plan` names it)."""
+        if callable(self.plan):
+            return self.plan
+        module, _, name = self.plan.partition(":")
+        return getattr(importlib.import_module(module), name)  # type: ignore[no-any-return]
+
     def __call__(self, occupancy: NDArray[np.bool_], **options: Any) -> list[Part]:
-        return self.plan(occupancy, **options)
+        return self.load()(occupancy, **options)
 
 
-PLANNERS: dict[str, PlannerEntry | PlannerFn] = {}
-"""Registered planners by name (:func:`register_planner`). Higher layers add
-their own: the learned planner is registered by :mod:`slicerecon.policy` on import,
-so this module never knows the policy package."""
-
-
-def register_planner(entry: PlannerEntry) -> PlannerEntry:
-    """Add a planner to :data:`PLANNERS` (replacing one of the same name); return it."""
-    PLANNERS[entry.name] = entry
-    return entry
+PLANNERS: dict[str, PlannerEntry] = {
+    "none": PlannerEntry(
+        "none", _plan_none, partitions=False, summary="one part: the no-projection baseline"
+    ),
+    "heuristic": PlannerEntry("heuristic", _plan_heuristic, summary="the paper's heuristic expert"),
+    "lookahead": PlannerEntry(
+        "lookahead",
+        plan_lookahead,
+        needs_surface=True,
+        summary="the heuristic expert with a one-step lookahead scored on held-out planes",
+    ),
+    "policy": PlannerEntry(
+        "policy",
+        "slicerecon.policy.planner:plan_policy",
+        needs_torch=True,
+        takes_weights=True,
+        summary="a trained actor (docs/policy.md)",
+    ),
+}
+"""Every planner by name, with its capabilities (:class:`PlannerEntry`)."""
 
 
 def planner_entry(name: str) -> PlannerEntry:
-    """The registry entry of ``name`` (a bare function registered by hand is wrapped).
+    """The registry entry of ``name``.
 
     Raises
     ------
@@ -257,22 +281,6 @@ def planner_entry(name: str) -> PlannerEntry:
         raise OptionError(f"unknown planner {name!r}; choose one of: {', '.join(planner_names())}")
     found = PLANNERS[key]
     return found if isinstance(found, PlannerEntry) else PlannerEntry(key, found)
-
-
-register_planner(
-    PlannerEntry(
-        "none", _plan_none, partitions=False, summary="one part: the no-projection baseline"
-    )
-)
-register_planner(PlannerEntry("heuristic", _plan_heuristic, summary="the paper's heuristic expert"))
-register_planner(
-    PlannerEntry(
-        "lookahead",
-        plan_lookahead,
-        needs_surface=True,
-        summary="the heuristic expert with a one-step lookahead scored on held-out planes",
-    )
-)
 
 
 def planner_names() -> list[str]:

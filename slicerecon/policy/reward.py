@@ -28,13 +28,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import OptionError
+from ..options import ReconstructOptions
 from ..partition.episodes import SECTION_AXIS, episode_sections, occupancy_hull
 from ..sections import Box, CrossSections
 
 __all__ = [
     "REWARD_SURFACES",
-    "SURFACE_METHOD",
     "SURFACE_INTERPOLATION",
+    "SURFACE_METHOD",
+    "SURFACE_OPTIONS",
     "part_surface_voxels",
     "episode_reconstruction",
     "plane_distances",
@@ -44,13 +46,14 @@ __all__ = [
 REWARD_SURFACES = ("exact", "surrogate")
 """How the training environment reconstructs a part for the reward."""
 
-SURFACE_METHOD = "sdf"
-"""The per-part surface of inference (``ReconstructConfig.method``'s default)."""
-
-SURFACE_INTERPOLATION = "pchip"
-"""Its interpolation across planes (``ReconstructConfig.interpolation``'s default)."""
-SURFACE_JOIN_DRIFT = True
-"""Whether drifting regions are joined (``ReconstructConfig.join_drift``'s default)."""
+SURFACE_OPTIONS = ReconstructOptions()
+"""The per-part surface of inference: the defaults of the one options bundle."""
+SURFACE_METHOD = SURFACE_OPTIONS.method
+"""Its method (``ReconstructOptions.method``'s default)."""
+SURFACE_INTERPOLATION = SURFACE_OPTIONS.interpolation
+"""Its interpolation across planes (``ReconstructOptions.interpolation``'s default)."""
+SURFACE_JOIN_DRIFT = SURFACE_OPTIONS.join_drift
+"""Whether drifting regions are joined (``ReconstructOptions.join_drift``'s default)."""
 
 
 def part_surface_voxels(
@@ -76,14 +79,7 @@ def part_surface_voxels(
     """
     from ..surface.part import part_voxels
 
-    voxels = part_voxels(
-        sections,
-        box,
-        method=SURFACE_METHOD,
-        hull=hull,
-        interpolation=SURFACE_INTERPOLATION,
-        join_drift=SURFACE_JOIN_DRIFT,
-    )
+    voxels = part_voxels(sections, box, SURFACE_OPTIONS, hull=hull)
     return voxels & hull[box.slices]
 
 

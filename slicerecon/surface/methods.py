@@ -1,13 +1,19 @@
-"""The surface methods: one registry of names and what each method does and needs.
+"""The surface methods: one literal registry of names, what each does and what it needs.
 
-Every ``--method`` value is a :class:`MethodEntry` in :data:`METHODS`. Per-part
-methods (``sdf``, ``loft``, ``hybrid``) reconstruct each part of a plan
-(:mod:`slicerecon.surface.part`); whole-shape methods (``poisson``,
-``sdf-hull``, ``itk-mci``) reconstruct all the sections at once and skip the
-planner and the carve (:mod:`slicerecon.surface.baselines`, whose functions
-are named here and imported only when used). Add a method by adding an entry
-(and, for a per-part method, its branch in :mod:`slicerecon.surface.part`).
-This module imports nothing heavy, so the command line can validate names.
+Every ``--method`` value is a :class:`MethodEntry` in :data:`METHODS`, complete
+at import. Per-part methods reconstruct each part of a plan
+(:mod:`slicerecon.surface.part`): ``sdf`` as one signed-distance field
+(``implicit``), ``loft`` and ``hybrid`` as one solid per part (``part_solid``
+names the function), united. Whole-shape methods (``poisson``, ``sdf-hull``,
+``itk-mci``) reconstruct all the sections at once and skip the planner and
+the carve (``function`` names their implementation in
+:mod:`slicerecon.surface.baselines`). Implementations are named as
+``"module:function"`` and imported only when used, so this module imports
+nothing heavy and the command line can validate names. Callers choose what to
+do by an entry's capabilities, never by its name.
+
+Add a method by adding its entry to :data:`METHODS` and writing the function it
+names (``docs/architecture.md``).
 """
 
 from __future__ import annotations
@@ -24,7 +30,6 @@ __all__ = [
     "MethodEntry",
     "method_entry",
     "method_names",
-    "register_method",
 ]
 
 
@@ -41,11 +46,18 @@ class MethodEntry:
         shape at once, with no planner).
     carved : bool
         ``--carve`` applies (intersection with the visual hull).
-    implicit_carve : bool
-        The carve happens in the signed-distance field (one marching cubes)
-        instead of by a mesh Boolean.
+    implicit : bool
+        The surface is the zero level set of one signed-distance field over
+        all the parts: carved (and covered) in the field, its occupancy known
+        without rasterizing, and several structures resolved jointly on their
+        fields (:mod:`slicerecon.surface.joint`).
     needs_itk : bool
         Needs the optional ``itk`` extra.
+    part_solid : str
+        For per-part methods that are not implicit: ``"module:function"`` of
+        ``function(sections, box, *, extend_to_box, hull, interpolation,
+        join_drift) -> manifold3d.Manifold or None``, one part's solid in
+        voxel index coordinates.
     function : str
         For whole-shape methods: ``"module:function"`` of its implementation,
         ``function(sections, projections, **options) -> trimesh.Trimesh``.
@@ -56,8 +68,9 @@ class MethodEntry:
     name: str
     per_part: bool
     carved: bool
-    implicit_carve: bool = False
+    implicit: bool = False
     needs_itk: bool = False
+    part_solid: str = ""
     function: str = ""
     summary: str = ""
 
@@ -65,18 +78,69 @@ class MethodEntry:
         """The whole-shape implementation (imported now)."""
         if not self.function:
             raise OptionError(f"method {self.name!r} reconstructs per part; it has no function")
-        module, _, name = self.function.partition(":")
-        return getattr(importlib.import_module(module), name)  # type: ignore[no-any-return]
+        return _load(self.function)
+
+    def load_part_solid(self) -> Callable[..., Any]:
+        """The per-part solid function of a method that is not implicit (imported now)."""
+        if not self.part_solid:
+            raise OptionError(f"method {self.name!r} makes no per-part solid")
+        return _load(self.part_solid)
 
 
-METHODS: dict[str, MethodEntry] = {}
-"""Registered surface methods by name, in the order help texts list them."""
+def _load(reference: str) -> Callable[..., Any]:
+    module, _, name = reference.partition(":")
+    return getattr(importlib.import_module(module), name)  # type: ignore[no-any-return]
 
 
-def register_method(entry: MethodEntry) -> MethodEntry:
-    """Add a method to :data:`METHODS` (replacing one of the same name); return it."""
-    METHODS[entry.name] = entry
-    return entry
+_BASELINES = "slicerecon.surface.baselines"
+_PART = "slicerecon.surface.part"
+
+METHODS: dict[str, MethodEntry] = {
+    "sdf": MethodEntry(
+        "sdf",
+        per_part=True,
+        carved=True,
+        implicit=True,
+        summary="signed-distance interpolation across planes (the default)",
+    ),
+    "loft": MethodEntry(
+        "loft",
+        per_part=True,
+        carved=True,
+        part_solid=f"{_PART}:loft_part_solid",
+        summary="contour lofting, the paper's method",
+    ),
+    "hybrid": MethodEntry(
+        "hybrid",
+        per_part=True,
+        carved=True,
+        part_solid=f"{_PART}:hybrid_part_solid",
+        summary="loft where contours correspond simply, sdf elsewhere",
+    ),
+    "poisson": MethodEntry(
+        "poisson",
+        per_part=False,
+        carved=False,
+        function=f"{_BASELINES}:poisson",
+        summary="screened Poisson reconstruction of the contour points",
+    ),
+    "sdf-hull": MethodEntry(
+        "sdf-hull",
+        per_part=False,
+        carved=False,
+        function=f"{_BASELINES}:sdf_hull",
+        summary="signed-distance interpolation intersected with the visual hull",
+    ),
+    "itk-mci": MethodEntry(
+        "itk-mci",
+        per_part=False,
+        carved=False,
+        needs_itk=True,
+        function=f"{_BASELINES}:itk_mci",
+        summary="ITK morphological contour interpolation (3D Slicer's Fill between slices)",
+    ),
+}
+"""Every surface method by name, in the order help texts list them."""
 
 
 def method_entry(name: str) -> MethodEntry:
@@ -96,55 +160,3 @@ def method_entry(name: str) -> MethodEntry:
 def method_names(*, per_part: bool | None = None) -> tuple[str, ...]:
     """Registered names, all or only the per-part (``True``) / whole-shape (``False``) ones."""
     return tuple(n for n, e in METHODS.items() if per_part is None or e.per_part == per_part)
-
-
-_BASELINES = "slicerecon.surface.baselines"
-
-register_method(
-    MethodEntry(
-        "sdf",
-        per_part=True,
-        carved=True,
-        implicit_carve=True,
-        summary="signed-distance interpolation across planes (the default)",
-    )
-)
-register_method(
-    MethodEntry("loft", per_part=True, carved=True, summary="contour lofting, the paper's method")
-)
-register_method(
-    MethodEntry(
-        "hybrid",
-        per_part=True,
-        carved=True,
-        summary="loft where contours correspond simply, sdf elsewhere",
-    )
-)
-register_method(
-    MethodEntry(
-        "poisson",
-        per_part=False,
-        carved=False,
-        function=f"{_BASELINES}:poisson",
-        summary="screened Poisson reconstruction of the contour points",
-    )
-)
-register_method(
-    MethodEntry(
-        "sdf-hull",
-        per_part=False,
-        carved=False,
-        function=f"{_BASELINES}:sdf_hull",
-        summary="signed-distance interpolation intersected with the visual hull",
-    )
-)
-register_method(
-    MethodEntry(
-        "itk-mci",
-        per_part=False,
-        carved=False,
-        needs_itk=True,
-        function=f"{_BASELINES}:itk_mci",
-        summary="ITK morphological contour interpolation (3D Slicer's Fill between slices)",
-    )
-)

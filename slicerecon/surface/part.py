@@ -19,6 +19,11 @@ Methods
     appears, vanishes or merges many-to-many between consecutive planes),
     ``"sdf"`` otherwise.
 
+Which of them runs, and how the signed-distance ones interpolate, is read off
+one :class:`~slicerecon.options.ReconstructOptions` bundle passed whole; the
+method's capabilities (:data:`slicerecon.surface.methods.METHODS`: ``implicit``
+or a ``part_solid`` function) choose the code path, never its name.
+
 Both use the same extent semantics along the section axis (see
 ``docs/method.md``): with ``extend_to_box=True`` the first / last plane in
 the box is extended to the box faces and a box holding no plane is filled by
@@ -39,17 +44,19 @@ import trimesh
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, InputError, OptionError
+from ..options import ReconstructOptions
 from ..sections import Box, CrossSections, Volume
 from .loft import correspondence_is_simple, loft_solid
 from .merge import check_closed, from_manifold, to_manifold, union_solids
-from .methods import method_names
+from .methods import MethodEntry, method_names
 from .sdf import SdfField, sdf_field, sdf_mesh, sdf_parts_surface
 from .smooth import taubin_smooth
 
 __all__ = [
     "METHODS",
-    "VOXEL_METHODS",
     "Surface",
+    "hybrid_part_solid",
+    "loft_part_solid",
     "part_voxels",
     "reconstruct_part",
     "reconstruct_parts",
@@ -62,14 +69,19 @@ METHODS = method_names(per_part=True)
 """Surface methods of :func:`reconstruct_part` and :func:`reconstruct_parts` (the per-part
 entries of :data:`slicerecon.surface.methods.METHODS`)."""
 
-VOXEL_METHODS = ("sdf", "loft")
-"""Methods of :func:`part_voxels` (``"sdf"`` is the cheap one)."""
+DEFAULT_OPTIONS = ReconstructOptions()
 
 
-def _check_method(method: str, choices: tuple[str, ...]) -> str:
-    if not isinstance(method, str) or method.strip().lower() not in choices:
-        raise OptionError(f"method must be one of {', '.join(choices)} (got {method!r})")
-    return method.strip().lower()
+def _per_part(options: ReconstructOptions) -> MethodEntry:
+    if not isinstance(options, ReconstructOptions):
+        raise OptionError(f"expected ReconstructOptions (got {type(options).__name__})")
+    entry = options.method_entry
+    if not entry.per_part:
+        raise OptionError(
+            f"method must be one of {', '.join(METHODS)} (got {options.method!r}: a "
+            "whole-shape method, see slicerecon.surface.baselines)"
+        )
+    return entry
 
 
 def _check_inputs(sections: CrossSections, box: Box) -> None:
@@ -79,15 +91,58 @@ def _check_inputs(sections: CrossSections, box: Box) -> None:
         raise InputError(f"expected a slicerecon Box (got {type(box).__name__})")
 
 
-def reconstruct_part(
+def loft_part_solid(
     sections: CrossSections,
     box: Box,
     *,
-    method: str = "loft",
+    extend_to_box: bool,
+    hull: NDArray[np.bool_] | None,
+    options: ReconstructOptions,
+) -> manifold3d.Manifold | None:
+    """One part of the ``"loft"`` method as a solid in voxel index coordinates (or None)."""
+    return loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
+
+
+def hybrid_part_solid(
+    sections: CrossSections,
+    box: Box,
+    *,
+    extend_to_box: bool,
+    hull: NDArray[np.bool_] | None,
+    options: ReconstructOptions,
+) -> manifold3d.Manifold | None:
+    """One part of the ``"hybrid"`` method as a solid in voxel index coordinates (or None).
+
+    Lofted where the contours of consecutive planes correspond simply
+    (:func:`~slicerecon.surface.loft.correspondence_is_simple`), else the
+    signed-distance surface with the options' interpolation and drift joining.
+    """
+    if correspondence_is_simple(sections, box):
+        return loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
+    try:
+        mesh = sdf_mesh(
+            sections,
+            box=box,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=options.interpolation,
+            join_drift=options.join_drift,
+        )
+    except EmptyMaskError:
+        return None
+    logger.debug("part %s: contours split, merge or appear; signed-distance surface", box.to_dict())
+    index_mesh = mesh.copy()
+    index_mesh.apply_transform(np.linalg.inv(sections.affine))
+    return to_manifold(index_mesh)
+
+
+def reconstruct_part(
+    sections: CrossSections,
+    box: Box,
+    options: ReconstructOptions = DEFAULT_OPTIONS,
+    *,
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
-    interpolation: str = "linear",
-    join_drift: bool = False,
 ) -> trimesh.Trimesh | None:
     """Reconstruct one part from the sections inside its box.
 
@@ -97,8 +152,9 @@ def reconstruct_part(
         All cross-sections of the shape.
     box : Box
         The part's cuboid on the reference grid.
-    method : {"hybrid", "loft", "sdf"}, default "loft"
-        Surface method (see the module docstring).
+    options : ReconstructOptions, optional
+        ``method`` (a per-part one: ``sdf``, ``loft``, ``hybrid``),
+        ``interpolation`` and ``join_drift`` apply.
     extend_to_box : bool, default True
         Extend the part to the box faces along the section axis.
     hull : ndarray of shape sections.grid_shape, bool, optional
@@ -114,14 +170,14 @@ def reconstruct_part(
     Raises
     ------
     OptionError
-        If ``method`` is unknown or the box lies outside the grid.
+        A whole-shape method, or a box outside the grid.
     """
-    method = _check_method(method, METHODS)
+    entry = _per_part(options)
     _check_inputs(sections, box)
-    if method == "hybrid":
-        method = "loft" if correspondence_is_simple(sections, box) else "sdf"
-    if method == "loft":
-        solid = loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
+    if not entry.implicit:
+        solid = entry.load_part_solid()(
+            sections, box, extend_to_box=extend_to_box, hull=hull, options=options
+        )
         return None if solid is None else from_manifold(solid, transform=sections.affine)
     try:
         return sdf_mesh(
@@ -129,8 +185,8 @@ def reconstruct_part(
             box=box,
             extend_to_box=extend_to_box,
             hull=hull,
-            interpolation=interpolation,
-            join_drift=join_drift,
+            interpolation=options.interpolation,
+            join_drift=options.join_drift,
         )
     except EmptyMaskError:
         return None
@@ -139,12 +195,10 @@ def reconstruct_part(
 def part_voxels(
     sections: CrossSections,
     box: Box,
+    options: ReconstructOptions = DEFAULT_OPTIONS,
     *,
-    method: str = "sdf",
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
-    interpolation: str = "linear",
-    join_drift: bool = False,
 ) -> NDArray[np.bool_]:
     """Voxel occupancy of a part's reconstruction on the reference grid, inside its box.
 
@@ -154,10 +208,11 @@ def part_voxels(
         All cross-sections of the shape.
     box : Box
         The part's cuboid; must lie inside the reference grid.
-    method : {"sdf", "loft"}, default "sdf"
-        ``"sdf"``: signed-distance interpolation sampled at the voxel centres
-        (fast: a few ms for a 100³ box). ``"loft"``: the lofted mesh
-        rasterized at the voxel centres (slower, exact for the loft).
+    options : ReconstructOptions, optional
+        An implicit method (``sdf``): its signed-distance field sampled at the
+        voxel centres (fast: a few ms for a 100³ box), with the options'
+        ``interpolation`` and ``join_drift``. Any other per-part method: its
+        mesh rasterized at the voxel centres (slower, exact for that surface).
     extend_to_box, hull
         As for :func:`reconstruct_part`.
 
@@ -170,9 +225,9 @@ def part_voxels(
     Raises
     ------
     OptionError
-        If ``method`` is unknown or the box does not lie inside the grid.
+        A whole-shape method, or a box that does not lie inside the grid.
     """
-    method = _check_method(method, VOXEL_METHODS)
+    entry = _per_part(options)
     _check_inputs(sections, box)
     if any(lo < 0 for lo in box.lo) or any(
         hi > n for hi, n in zip(box.hi, sections.grid_shape, strict=True)
@@ -180,19 +235,19 @@ def part_voxels(
         raise OptionError(
             f"box {box.to_dict()} must lie inside the reference grid {sections.grid_shape}"
         )
-    if method == "sdf":
+    if entry.implicit:
         field, _ = sdf_field(
             sections,
             box=box,
             extend_to_box=extend_to_box,
             hull=hull,
-            interpolation=interpolation,
-            join_drift=join_drift,
+            interpolation=options.interpolation,
+            join_drift=options.join_drift,
         )
         return field < 0
     from ..rasterize import mesh_to_mask
 
-    mesh = reconstruct_part(sections, box, method="loft", extend_to_box=extend_to_box, hull=hull)
+    mesh = reconstruct_part(sections, box, options, extend_to_box=extend_to_box, hull=hull)
     if mesh is None:
         return np.zeros(box.shape, dtype=bool)
     affine = sections.affine.copy()
@@ -203,13 +258,10 @@ def part_voxels(
 def reconstruct_parts(
     sections: CrossSections,
     boxes: Sequence[Box],
+    options: ReconstructOptions = DEFAULT_OPTIONS,
     *,
-    method: str = "loft",
-    smooth: bool = False,
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
-    interpolation: str = "linear",
-    join_drift: bool = False,
     carve: NDArray[np.bool_] | None = None,
     upsample: int = 1,
     cover: bool = False,
@@ -222,21 +274,20 @@ def reconstruct_parts(
         All cross-sections of the shape.
     boxes : sequence of Box
         The parts' cuboids (they may touch or overlap).
-    method : {"hybrid", "loft", "sdf"}, default "loft"
-        Surface method of the parts (see the module docstring).
-    smooth : bool, default False
-        Taubin-smooth the merged mesh (:func:`~slicerecon.surface.smooth.taubin_smooth`
-        with its defaults).
-    extend_to_box, hull, interpolation
+    options : ReconstructOptions, optional
+        ``method`` (per part), ``interpolation``, ``join_drift`` and ``smooth``
+        (Taubin-smooth the merged mesh, :func:`~slicerecon.surface.smooth.taubin_smooth`)
+        apply; the carve is given as a hull here (``carve``), not read off the options.
+    extend_to_box, hull
         As for :func:`reconstruct_part`.
     carve : ndarray of shape sections.grid_shape, bool, optional
-        ``method="sdf"`` only: intersect the union with this visual hull in the
+        Implicit methods only: intersect the union with this visual hull in the
         implicit domain (:func:`~slicerecon.surface.sdf.sdf_parts_mesh`).
     upsample : int, default 1
-        ``method="sdf"`` only: field samples per voxel along the section axis
+        Implicit methods only: field samples per voxel along the section axis
         (:func:`~slicerecon.surface.sdf.sdf_field`).
     cover : bool, default False
-        ``method="sdf"`` with ``carve`` only: also fill the silhouettes whose
+        Implicit methods with ``carve`` only: also fill the silhouettes whose
         rays lie in the section planes (:func:`~slicerecon.surface.sdf.sdf_parts_mesh`).
 
     Returns
@@ -247,19 +298,17 @@ def reconstruct_parts(
     Raises
     ------
     OptionError
-        If ``boxes`` is empty or ``method`` unknown.
+        If ``boxes`` is empty, the method is a whole-shape one, or ``carve``
+        is given for a method that is not implicit.
     EmptyMaskError
         If no box holds section foreground.
     """
     return reconstruct_surface(
         sections,
         boxes,
-        method=method,
-        smooth=smooth,
+        options,
         extend_to_box=extend_to_box,
         hull=hull,
-        interpolation=interpolation,
-        join_drift=join_drift,
         carve=carve,
         upsample=upsample,
         cover=cover,
@@ -290,13 +339,10 @@ class Surface(NamedTuple):
 def reconstruct_surface(
     sections: CrossSections,
     boxes: Sequence[Box],
+    options: ReconstructOptions = DEFAULT_OPTIONS,
     *,
-    method: str = "loft",
-    smooth: bool = False,
     extend_to_box: bool = True,
     hull: NDArray[np.bool_] | None = None,
-    interpolation: str = "linear",
-    join_drift: bool = False,
     carve: NDArray[np.bool_] | None = None,
     upsample: int = 1,
     keep_field: bool = False,
@@ -304,37 +350,41 @@ def reconstruct_surface(
 ) -> Surface:
     """As :func:`reconstruct_parts`, with the occupancy when the method gives it for free.
 
-    Parameters and errors as :func:`reconstruct_parts`.
+    ``keep_field`` keeps an implicit method's signed-distance field
+    (:attr:`Surface.field`). Parameters and errors as :func:`reconstruct_parts`.
     """
-    method = _check_method(method, METHODS)
+    entry = _per_part(options)
     boxes = list(boxes)
     if not boxes:
         raise OptionError("give at least one box (part) to reconstruct")
     for box in boxes:
         _check_inputs(sections, box)
-    if carve is not None and method != "sdf":
-        raise OptionError("an implicit carve applies to method 'sdf' only; carve the mesh instead")
+    if carve is not None and not entry.implicit:
+        raise OptionError(
+            f"an implicit carve applies to implicit methods only (not {options.method!r}); "
+            "carve the mesh instead"
+        )
     occupancy, field = None, None
-    if method == "hybrid":
+    if entry.implicit:
+        # Implicit union: the minimum of the parts' signed distances, meshed once.
+        surface = sdf_parts_surface(
+            sections,
+            boxes,
+            extend_to_box=extend_to_box,
+            hull=hull,
+            interpolation=options.interpolation,
+            join_drift=options.join_drift,
+            carve=carve,
+            upsample=upsample,
+            keep_field=keep_field,
+            cover=cover,
+        )
+        mesh, occupancy, field = surface.mesh, surface.occupancy, surface.field
+    else:
+        part_solid = entry.load_part_solid()
         solids = [
-            _hybrid_solid(
-                sections,
-                b,
-                extend_to_box=extend_to_box,
-                hull=hull,
-                interpolation=interpolation,
-                join_drift=join_drift,
-            )
+            part_solid(sections, b, extend_to_box=extend_to_box, hull=hull, options=options)
             for b in boxes
-        ]
-        kept = [s for s in solids if s is not None]
-        if not kept:
-            raise EmptyMaskError("no part's box holds any section foreground")
-        mesh = from_manifold(union_solids(kept), transform=sections.affine)
-        check_closed(mesh, "reconstruct_parts")
-    elif method == "loft":
-        solids = [
-            loft_solid(sections, box=b, extend_to_box=extend_to_box, hull=hull) for b in boxes
         ]
         kept = [s for s in solids if s is not None]
         if not kept:
@@ -343,51 +393,7 @@ def reconstruct_surface(
         # exactly coplanar, and mapped to world mm once.
         mesh = from_manifold(union_solids(kept), transform=sections.affine)
         check_closed(mesh, "reconstruct_parts")
-    else:
-        # Implicit union: the minimum of the parts' signed distances, meshed once.
-        surface = sdf_parts_surface(
-            sections,
-            boxes,
-            extend_to_box=extend_to_box,
-            hull=hull,
-            interpolation=interpolation,
-            join_drift=join_drift,
-            carve=carve,
-            upsample=upsample,
-            keep_field=keep_field,
-            cover=cover,
-        )
-        mesh, occupancy, field = surface.mesh, surface.occupancy, surface.field
-    logger.debug("merged %d parts (%s): %d faces", len(boxes), method, len(mesh.faces))
-    if smooth:
+    logger.debug("merged %d parts (%s): %d faces", len(boxes), options.method, len(mesh.faces))
+    if options.smooth:
         mesh, occupancy, field = taubin_smooth(mesh), None, None
     return Surface(mesh, occupancy, field)
-
-
-def _hybrid_solid(
-    sections: CrossSections,
-    box: Box,
-    *,
-    extend_to_box: bool,
-    hull: NDArray[np.bool_] | None,
-    interpolation: str = "linear",
-    join_drift: bool = False,
-) -> manifold3d.Manifold | None:
-    """One part of the ``"hybrid"`` method as a solid in voxel index coordinates."""
-    if correspondence_is_simple(sections, box):
-        return loft_solid(sections, box=box, extend_to_box=extend_to_box, hull=hull)
-    try:
-        mesh = sdf_mesh(
-            sections,
-            box=box,
-            extend_to_box=extend_to_box,
-            hull=hull,
-            interpolation=interpolation,
-            join_drift=join_drift,
-        )
-    except EmptyMaskError:
-        return None
-    logger.debug("part %s: contours split, merge or appear; signed-distance surface", box.to_dict())
-    index_mesh = mesh.copy()
-    index_mesh.apply_transform(np.linalg.inv(sections.affine))
-    return to_manifold(index_mesh)

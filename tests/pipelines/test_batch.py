@@ -681,7 +681,7 @@ def test_a_result_left_aside_by_a_killed_publish_is_restored(tmp_path):
 
 
 def test_interrupted_in_process_batch_keeps_finished_cases_and_resumes(tmp_path, monkeypatch):
-    import slicerecon.reconstruct as reconstruct
+    import slicerecon.case as reconstruct
 
     indir = tmp_path / "in"
     for name, radius in (("a", 5.0), ("b", 6.0), ("c", 5.5)):

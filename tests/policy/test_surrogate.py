@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from slicerecon.options import ReconstructOptions
 from slicerecon.partition.episodes import ShapePool, episode_sections, occupancy_hull
 from slicerecon.partition.state import PartitionState, iou
 from slicerecon.policy.reward import (
@@ -21,6 +22,9 @@ from slicerecon.reconstruct import ReconstructConfig
 from slicerecon.sections import Box, CrossSections
 from slicerecon.surface.drift import consecutive_drifting_pairs
 from slicerecon.surface.part import part_voxels
+
+PCHIP_PRISMS = ReconstructOptions(interpolation="pchip", join_drift=False)
+"""The surrogate's surface: PCHIP across planes, drifting regions not joined."""
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +64,10 @@ def test_part_surface_is_part_voxels_carved_by_the_hull(pool: ShapePool) -> None
     recon, sections, hull = episode_reconstruction(occ, 9)
     box = Box.of_mask(occ)
     expected = part_voxels(
-        sections, box, method="sdf", hull=hull, interpolation="pchip", join_drift=True
+        sections,
+        box,
+        ReconstructOptions(method="sdf", interpolation="pchip", join_drift=True),
+        hull=hull,
     )
     np.testing.assert_array_equal(recon(box), expected & hull[box.slices])
     np.testing.assert_array_equal(part_surface_voxels(sections, hull, box), recon(box))
@@ -97,7 +104,7 @@ def test_surrogate_differs_from_prism_extensions_only_by_outside_distances(
         sections, hull = episode_sections(occ, 10), occupancy_hull(occ)
         surrogate = surrogate_reconstruction(sections, hull)
         for box, _ in _random_parts(occ, rng):
-            prism = part_voxels(sections, box, hull=None, interpolation="pchip")
+            prism = part_voxels(sections, box, PCHIP_PRISMS, hull=None)
             differ += int(np.count_nonzero(surrogate(box) != (prism & hull[box.slices])))
             total += int(np.prod(box.shape))
     assert differ <= 1e-3 * total
@@ -136,7 +143,7 @@ def test_surrogate_handles_empty_planes_and_boxes_between_planes() -> None:
         Box((5, 4, 10), (13, 12, 23)),
     ]
     for box in boxes:
-        prism = part_voxels(sections, box, hull=None, interpolation="pchip") & hull[box.slices]
+        prism = part_voxels(sections, box, PCHIP_PRISMS, hull=None) & hull[box.slices]
         np.testing.assert_array_equal(surrogate(box), prism)
 
 

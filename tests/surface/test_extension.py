@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from slicerecon.errors import GeometryError
+from slicerecon.options import ReconstructOptions
 from slicerecon.rasterize import mesh_to_mask
 from slicerecon.sampling import projections_from_volume, visual_hull
 from slicerecon.sections import Box, CrossSections, Volume
@@ -13,6 +14,11 @@ from slicerecon.shapes.primitives import slanted_rod
 from slicerecon.surface.extension import LayerMap, extension_maps, interpolate_maps
 from slicerecon.surface.loft import loft_solid
 from slicerecon.surface.part import reconstruct_part
+
+
+def _linear(method: str) -> ReconstructOptions:
+    """A per-part method with classic linear interpolation and no drift joining."""
+    return ReconstructOptions(method=method, interpolation="linear", join_drift=False)
 
 
 def _tube(slope: float, radius: float = 6.0, shape: tuple[int, int, int] = (60, 30, 64)) -> Volume:
@@ -60,8 +66,8 @@ def test_extension_follows_a_slanted_tube(method: str) -> None:
     tube = _tube(slope=0.5)
     sections = _sections(tube, [24, 40])
     box = Box((0, 0, 2), (60, 30, 62))
-    guided = reconstruct_part(sections, box, method=method, hull=_hull(tube))
-    prism = reconstruct_part(sections, box, method=method)
+    guided = reconstruct_part(sections, box, _linear(method), hull=_hull(tube))
+    prism = reconstruct_part(sections, box, _linear(method))
     assert guided is not None and prism is not None
     assert guided.is_watertight and guided.is_volume
     assert len(guided.split(only_watertight=False)) == 1
@@ -149,7 +155,7 @@ def test_loft_and_sdf_extensions_agree() -> None:
     slabs = np.r_[2:24, 41:62]
     masks = []
     for method in ("loft", "sdf"):
-        mesh = reconstruct_part(sections, box, method=method, hull=hull)
+        mesh = reconstruct_part(sections, box, _linear(method), hull=hull)
         masks.append(mesh_to_mask(mesh, tube.affine, tube.shape)[:, :, slabs])
     agreement = (masks[0] & masks[1]).sum() / (masks[0] | masks[1]).sum()
     assert agreement >= 0.9
@@ -163,7 +169,7 @@ def test_a_plane_on_the_box_face_needs_no_extension(method: str) -> None:
     masks = np.stack([tube.mask[:, :, 10]] * 3)
     sections = CrossSections(masks, np.array([2.5, 10.0, 20.0]), 2, tube.affine, tube.shape)
     box = Box((0, 0, 3), (60, 30, 25))
-    mesh = reconstruct_part(sections, box, method=method, hull=_hull(tube))
+    mesh = reconstruct_part(sections, box, _linear(method), hull=_hull(tube))
     assert mesh is not None and mesh.is_watertight and mesh.is_volume
     z = mesh.bounds[:, 2]
     assert z[0] == pytest.approx(2.5, abs=0.51) and z[1] == pytest.approx(24.5, abs=0.51)

@@ -7,10 +7,14 @@ import pytest
 
 from slicerecon import shapes
 from slicerecon.errors import EmptyMaskError, OptionError
+from slicerecon.options import ReconstructOptions
 from slicerecon.sampling import sample_sections
 from slicerecon.sections import Box, CrossSections
 from slicerecon.surface.part import part_voxels
 from slicerecon.surface.sdf import sdf_interpolate, sdf_mesh, sdf_parts_mesh
+
+LINEAR = ReconstructOptions(interpolation="linear", join_drift=False)
+"""Classic signed-distance interpolation: linear across planes, no drift joining."""
 
 
 def _disc(shape: tuple[int, int], centre: tuple[float, float], radius: float) -> np.ndarray:
@@ -43,7 +47,7 @@ def test_box_with_one_plane_is_a_full_prism_to_its_faces() -> None:
     disc = _disc((40, 40), (20, 20), 9)
     sections = _sections([disc, disc, disc], [5, 20, 35], 41)
     box = Box((0, 0, 14), (40, 40, 27))
-    inside = part_voxels(sections, box)
+    inside = part_voxels(sections, box, LINEAR)
     assert inside.shape == (40, 40, 13)
     for layer in range(inside.shape[2]):
         np.testing.assert_array_equal(inside[:, :, layer], disc)
@@ -75,7 +79,7 @@ def test_without_a_box_the_shape_spans_first_to_last_plane() -> None:
 def test_box_between_planes_is_filled_by_their_slab() -> None:
     disc = _disc((30, 30), (15, 15), 8)
     sections = _sections([disc, disc], [4, 20], 30)
-    inside = part_voxels(sections, Box((0, 0, 8), (30, 30, 14)))
+    inside = part_voxels(sections, Box((0, 0, 8), (30, 30, 14)), LINEAR)
     for layer in range(inside.shape[2]):
         np.testing.assert_array_equal(inside[:, :, layer], disc)
 

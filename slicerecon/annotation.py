@@ -1,0 +1,438 @@
+"""The annotation: which planes were drawn, where they lie in world mm, and what they hold.
+
+An :class:`Annotation` is what every reader produces and every reconstruction
+consumes: a set of :class:`AnnotatedPlane` for any number of structures
+(:class:`~slicerecon.labels.Structure`), on a reference voxel grid (the grid the
+result is written on). Each plane has its own pose in world millimetres
+(:class:`PlanePose`: any orientation), its own in-plane pixel grid, and a 2-D
+mask per structure drawn on it. Which planes were annotated is explicit: a
+plane that annotates a structure and holds none of it means "the structure is
+not here", which is information, not a missing plane. ``structures`` of a
+plane says which structures it speaks for (all of the annotation's, for a
+label map whose annotator marked whole slices; the ROI drawn on it, for an
+RTSTRUCT whose ROIs are contoured on their own slices).
+
+``exclusive`` says how the structures relate: a label map is a partition (no
+voxel belongs to two structures, and touching structures share their
+interface); RTSTRUCT ROIs and SEG segments may overlap or nest (BODY ⊃ organ ⊃
+GTV) and are reconstructed independently.
+
+A stack of planes perpendicular to one axis of the reference grid is the common
+case: :meth:`Annotation.cross_sections` gives a structure's planes as
+:class:`~slicerecon.sections.CrossSections` (with its positions along that
+axis), and :func:`annotation_from_sections` builds the annotation back from
+them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import GeometryError, InputError, LabelError
+from .labels import Structure
+from .sections import AXIS_NAMES, CrossSections, check_affine, in_plane_axes
+from .selection import choose_structure, parse_selector
+
+__all__ = [
+    "AnnotatedPlane",
+    "Annotation",
+    "PlanePose",
+    "annotation_from_sections",
+]
+
+ANGLE_TOLERANCE = 1e-3
+"""Two plane normals whose cross product is below this (radians, about) are parallel."""
+
+
+def _readonly(array: ArrayLike, dtype: Any) -> NDArray[Any]:
+    out = np.array(array, dtype=dtype, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class PlanePose:
+    """Where a plane lies in world mm and how its pixels map there.
+
+    Parameters
+    ----------
+    affine : ndarray of shape (4, 4)
+        Pixel index ``(r, c, 0, 1)`` → world mm ``(x, y, z, 1)``: columns 0
+        and 1 are the steps of one pixel along rows and columns (mm), column 2
+        is the plane's unit normal, column 3 the centre of pixel ``(0, 0)``.
+    shape : tuple of 2 int
+        Pixels along rows and columns ``(M, N)``.
+    """
+
+    affine: NDArray[np.float64]
+    shape: tuple[int, int]
+
+    def __post_init__(self) -> None:
+        affine = check_affine(self.affine)
+        normal = affine[:3, 2]
+        if not np.isclose(np.linalg.norm(normal), 1.0, atol=1e-6):
+            raise GeometryError("a plane pose's third column must be its unit normal")
+        for column in (0, 1):
+            if abs(float(np.dot(affine[:3, column], normal))) > 1e-6 * np.linalg.norm(
+                affine[:3, column]
+            ):
+                raise GeometryError("a plane's pixel axes must lie in the plane")
+        object.__setattr__(self, "affine", affine)
+        shape = tuple(int(s) for s in self.shape)
+        if len(shape) != 2 or min(shape) < 1:
+            raise GeometryError(f"a plane needs two positive pixel counts (got {self.shape})")
+        object.__setattr__(self, "shape", shape)
+
+    @property
+    def normal(self) -> NDArray[np.float64]:
+        """Unit normal in world coordinates, ndarray of shape (3,)."""
+        return self.affine[:3, 2].copy()
+
+    @property
+    def offset_mm(self) -> float:
+        """Signed distance of the plane from the world origin along :attr:`normal`, mm."""
+        return float(np.dot(self.affine[:3, 3], self.affine[:3, 2]))
+
+    @property
+    def pixel_spacing(self) -> NDArray[np.float64]:
+        """Pixel size along rows and columns, mm, ndarray of shape (2,)."""
+        return np.linalg.norm(self.affine[:3, :2], axis=0)
+
+    def to_world(self, points_px: ArrayLike) -> NDArray[np.float64]:
+        """Map pixel coordinates, ndarray of shape (n, 2), to world mm, shape (n, 3)."""
+        pts = np.asarray(points_px, dtype=np.float64).reshape(-1, 2)
+        return pts @ self.affine[:3, :2].T + self.affine[:3, 3]
+
+    def is_parallel(self, other: PlanePose) -> bool:
+        """Whether two planes have the same orientation (normals parallel or opposite)."""
+        return float(np.linalg.norm(np.cross(self.normal, other.normal))) < ANGLE_TOLERANCE
+
+
+@dataclass(frozen=True, eq=False)
+class AnnotatedPlane:
+    """One drawn plane: its pose and each structure's mask on its pixels.
+
+    Parameters
+    ----------
+    pose : PlanePose
+    masks : mapping of int to ndarray of shape pose.shape, bool
+        Structure value → foreground pixels; a structure absent from the
+        mapping (or with an empty mask) is not on this plane.
+    structures : frozenset of int or None
+        The structures this plane annotates (None: every structure of the
+        annotation). A plane annotating a structure it holds no pixel of says
+        that structure is absent there.
+    """
+
+    pose: PlanePose
+    masks: Mapping[int, NDArray[np.bool_]] = field(default_factory=dict)
+    structures: frozenset[int] | None = None
+
+    def __post_init__(self) -> None:
+        masks: dict[int, NDArray[np.bool_]] = {}
+        for value, mask in self.masks.items():
+            arr = np.asarray(mask)
+            if arr.shape != self.pose.shape:
+                raise GeometryError(
+                    f"structure {value}'s mask has shape {arr.shape}, the plane {self.pose.shape}"
+                )
+            if arr.any():
+                masks[int(value)] = _readonly(arr, bool)
+        object.__setattr__(self, "masks", masks)
+        if self.structures is not None:
+            object.__setattr__(self, "structures", frozenset(int(v) for v in self.structures))
+
+    def annotates(self, value: int) -> bool:
+        """Whether this plane speaks for structure ``value`` (holding it or not)."""
+        return self.structures is None or value in self.structures
+
+    def mask(self, value: int) -> NDArray[np.bool_]:
+        """Structure ``value``'s pixels, ndarray of shape pose.shape, bool (all False if absent)."""
+        found = self.masks.get(value)
+        return found if found is not None else np.zeros(self.pose.shape, dtype=bool)
+
+
+@dataclass(frozen=True, eq=False)
+class Annotation:
+    """Annotated planes of any number of structures, on a reference grid.
+
+    Parameters
+    ----------
+    planes : tuple of AnnotatedPlane
+    structures : tuple of Structure
+        Every structure the annotation holds, in order.
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm of the reference grid (where results are written).
+    grid_shape : tuple of 3 int
+        Shape of the reference grid.
+    coordinates : {"RAS", "LPS"}
+        The world frame of every affine here.
+    exclusive : bool
+        True for a partition (a label map: structures never overlap); False
+        when structures may overlap or nest (RTSTRUCT ROIs, SEG segments).
+    source : str
+        How the input was read, in words (for the one line ``run`` and ``info`` print).
+    """
+
+    planes: tuple[AnnotatedPlane, ...]
+    structures: tuple[Structure, ...]
+    affine: NDArray[np.float64]
+    grid_shape: tuple[int, int, int]
+    coordinates: str = "RAS"
+    exclusive: bool = True
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "planes", tuple(self.planes))
+        object.__setattr__(self, "structures", tuple(self.structures))
+        object.__setattr__(self, "affine", check_affine(self.affine))
+        shape = tuple(int(s) for s in self.grid_shape)
+        if len(shape) != 3 or min(shape) < 1:
+            raise GeometryError(f"grid_shape must be three positive sizes (got {self.grid_shape})")
+        object.__setattr__(self, "grid_shape", shape)
+        values = [s.value for s in self.structures]
+        if len(set(values)) != len(values):
+            raise InputError(f"structure values must be unique (got {values})")
+
+    # -- what it holds -------------------------------------------------------------------
+    @property
+    def values(self) -> tuple[int, ...]:
+        """The structures' values, in order."""
+        return tuple(s.value for s in self.structures)
+
+    def structure(self, value: int) -> Structure:
+        """The structure of ``value``."""
+        for s in self.structures:
+            if s.value == value:
+                return s
+        raise LabelError(f"the annotation holds no structure {value}")
+
+    def planes_of(self, value: int) -> tuple[AnnotatedPlane, ...]:
+        """The planes that annotate structure ``value`` (holding it or not)."""
+        return tuple(p for p in self.planes if p.annotates(value))
+
+    def orientations(self) -> list[tuple[NDArray[np.float64], list[int]]]:
+        """The planes grouped by orientation: ``[(unit normal, plane numbers), ...]``."""
+        groups: list[tuple[NDArray[np.float64], list[int]]] = []
+        for n, plane in enumerate(self.planes):
+            for normal, members in groups:
+                if float(np.linalg.norm(np.cross(normal, plane.pose.normal))) < ANGLE_TOLERANCE:
+                    members.append(n)
+                    break
+            else:
+                groups.append((plane.pose.normal, [n]))
+        return groups
+
+    def grid_axis(self) -> int | None:
+        """The reference grid axis every plane is perpendicular to, or None.
+
+        None when the planes have several orientations, or one that is not
+        perpendicular to a grid axis (oblique planes).
+        """
+        groups = self.orientations()
+        if len(groups) != 1:
+            return None
+        normal = groups[0][0]
+        for axis in range(3):
+            a, b = in_plane_axes(axis)
+            grid_normal = np.cross(self.affine[:3, a], self.affine[:3, b])
+            grid_normal /= np.linalg.norm(grid_normal)
+            if float(np.linalg.norm(np.cross(grid_normal, normal))) < ANGLE_TOLERANCE:
+                return axis
+        return None
+
+    def select(self, selectors: Sequence[int | str], *, source: Any) -> Annotation:
+        """The structures named by ``selectors`` (numbers or names), in the order given.
+
+        Raises
+        ------
+        LabelError
+            A selector names no structure (the message lists them).
+        """
+        names = {s.value: s.name for s in self.structures}
+        chosen: list[Structure] = []
+        for selector in selectors:
+            value = choose_structure(names, parse_selector(selector), kind="label", source=source)
+            found = self.structure(value)
+            if found not in chosen:
+                chosen.append(found)
+        keep = {s.value for s in chosen}
+        planes = []
+        for plane in self.planes:
+            annotated = keep if plane.structures is None else keep & plane.structures
+            if not annotated:
+                continue
+            masks = {v: m for v, m in plane.masks.items() if v in keep}
+            planes.append(AnnotatedPlane(plane.pose, masks, plane.structures))
+        return Annotation(
+            tuple(planes),
+            tuple(chosen),
+            self.affine,
+            self.grid_shape,
+            self.coordinates,
+            self.exclusive,
+            self.source,
+        )
+
+    # -- the parallel case ---------------------------------------------------------------
+    def plane_indices(self, axis: int) -> NDArray[np.float64]:
+        """Each plane's (possibly fractional) index along grid ``axis``, ndarray of shape (P,)."""
+        inverse = np.linalg.inv(self.affine)
+        origins = np.array([p.pose.affine[:3, 3] for p in self.planes]).reshape(-1, 3)
+        return (origins @ inverse[:3, :3].T + inverse[:3, 3])[:, axis]
+
+    def cross_sections(self, value: int | None = None) -> CrossSections:
+        """A structure's planes as cross-sections on the reference grid.
+
+        Parameters
+        ----------
+        value : int, optional
+            The structure (default: every structure together, their union).
+
+        Returns
+        -------
+        CrossSections
+            The planes that annotate the structure, empty ones included, in
+            increasing position along the grid axis they are perpendicular to.
+
+        Raises
+        ------
+        GeometryError
+            The planes are not all perpendicular to one grid axis on the
+            reference grid's pixels.
+        """
+        axis = self.grid_axis()
+        if axis is None:
+            raise GeometryError(
+                "the annotated planes are not all perpendicular to one axis of the grid"
+            )
+        planes = self.planes if value is None else self.planes_of(value)
+        indices = self.plane_indices(axis)
+        if value is not None:
+            indices = indices[[n for n, p in enumerate(self.planes) if p.annotates(value)]]
+        order = np.argsort(indices, kind="stable")
+        a, b = in_plane_axes(axis)
+        masks = np.zeros((len(planes), self.grid_shape[a], self.grid_shape[b]), dtype=bool)
+        for row, n in enumerate(order):
+            plane = planes[int(n)]
+            if plane.pose.shape != masks.shape[1:]:
+                raise GeometryError("a plane's pixels are not the reference grid's")
+            if value is None:
+                for mask in plane.masks.values():
+                    masks[row] |= mask
+            else:
+                masks[row] = plane.mask(value)
+        return CrossSections(masks, indices[order], axis, self.affine, self.grid_shape)
+
+    def describe(self) -> str:
+        """One line: how many planes, which orientations, their spacing."""
+        groups = self.orientations()
+        axis = self.grid_axis()
+        parts = []
+        for normal, members in groups:
+            offsets = np.sort([self.planes[n].pose.offset_mm for n in members])
+            gaps = np.diff(offsets)
+            spacing = f", spacing {np.median(gaps):.3g} mm" if gaps.size else ""
+            if axis is not None:
+                where = f"along {AXIS_NAMES[axis]}"
+            else:
+                where = "normal (" + ", ".join(f"{c:.2f}" for c in normal) + ")"
+            parts.append(f"{len(members)} planes {where}{spacing}")
+        return "; ".join(parts) if parts else "no plane"
+
+
+def plane_pose(affine: ArrayLike, shape: Sequence[int], axis: int, index: float) -> PlanePose:
+    """The pose of the plane at (fractional) ``index`` along grid ``axis``.
+
+    Its pixels are the grid's voxels along the two other axes, in increasing
+    axis order (the layout of :class:`~slicerecon.sections.CrossSections`);
+    the normal points along increasing ``axis``.
+    """
+    aff = np.asarray(affine, dtype=np.float64)
+    a, b = in_plane_axes(axis)
+    normal = np.cross(aff[:3, a], aff[:3, b])
+    normal /= np.linalg.norm(normal)
+    if np.dot(normal, aff[:3, axis]) < 0:
+        normal = -normal
+    ijk = np.zeros(3)
+    ijk[axis] = index
+    pose = np.eye(4)
+    pose[:3, 0] = aff[:3, a]
+    pose[:3, 1] = aff[:3, b]
+    pose[:3, 2] = normal
+    pose[:3, 3] = aff[:3, :3] @ ijk + aff[:3, 3]
+    return PlanePose(pose, (int(shape[a]), int(shape[b])))
+
+
+def annotation_from_sections(
+    structures: Sequence[Structure],
+    sections: Sequence[CrossSections | None],
+    *,
+    shared: bool,
+    coordinates: str = "RAS",
+    exclusive: bool = True,
+    source: str = "",
+) -> Annotation:
+    """An annotation made of each structure's cross-sections on one grid.
+
+    Parameters
+    ----------
+    structures : sequence of Structure
+    sections : sequence of CrossSections or None
+        Each structure's planes (None: it was annotated nowhere); all on the
+        same grid and axis.
+    shared : bool
+        True when every plane annotates every structure (a label map's
+        planes); False when each structure is drawn on its own planes (the
+        ROIs of an RTSTRUCT), so a plane annotates the structures whose
+        sections hold it.
+    coordinates, exclusive, source
+        As :class:`Annotation`.
+
+    Raises
+    ------
+    GeometryError
+        Sections on different grids or axes.
+    """
+    given = [s for s in sections if s is not None]
+    if not given:
+        raise InputError("no structure has an annotated plane")
+    first = given[0]
+    for other in given[1:]:
+        if (
+            other.axis != first.axis
+            or other.grid_shape != first.grid_shape
+            or not np.allclose(other.affine, first.affine)
+        ):
+            raise GeometryError("every structure's sections must lie on one grid and axis")
+    by_index: dict[float, tuple[dict[int, NDArray[np.bool_]], set[int]]] = {}
+    for structure, own in zip(structures, sections, strict=True):
+        if own is None:
+            continue
+        for plane, index in enumerate(own.indices):
+            key = round(float(index), 6)
+            masks, annotated = by_index.setdefault(key, ({}, set()))
+            masks[structure.value] = own.masks[plane]
+            annotated.add(structure.value)
+    planes = tuple(
+        AnnotatedPlane(
+            plane_pose(first.affine, first.grid_shape, first.axis, index),
+            masks,
+            None if shared else frozenset(annotated),
+        )
+        for index, (masks, annotated) in sorted(by_index.items())
+    )
+    return Annotation(
+        planes,
+        tuple(structures),
+        first.affine,
+        first.grid_shape,
+        coordinates,
+        exclusive,
+        source,
+    )

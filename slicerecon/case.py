@@ -1,0 +1,1025 @@
+"""One case: read an input into an annotation, reconstruct every structure, score it.
+
+This is the one case pipeline, for one structure and for many:
+
+1. **read** (:func:`load_case`): the input becomes a
+   :class:`~slicerecon.annotation.Annotation`. A dense label map (NIfTI, NRRD,
+   VTI, DICOM mask series, SEG; a mesh, voxelised) is cropped to all its
+   structures together and its planes are chosen **once** over their union
+   (``--slices`` / ``--every``, :func:`slicerecon.inputs.prepare_inputs`); it is
+   then each structure's ground truth. A sparse label map keeps the planes it
+   annotates. An RTSTRUCT gives each ROI on its own contour planes, a contour
+   file one structure.
+2. **reconstruct** (:func:`reconstruct_case`): each structure from its own
+   planes on its own crop, with :func:`slicerecon.reconstruct.reconstruct`
+   and one :class:`~slicerecon.options.ReconstructOptions`. The structures of
+   a label map (a partition) are then resolved jointly on their
+   signed-distance fields (:func:`slicerecon.surface.joint.resolve`): no
+   voxel belongs to two, touching structures share their interface. RTSTRUCT
+   ROIs may overlap or nest and are reconstructed independently: an ROI
+   inside another is never given away.
+3. **score** (:func:`score_case`): each structure against its own ground
+   truth, when there is one.
+4. **write** (:func:`slicerecon.case_outputs.write_case`), one on-disk schema
+   whatever the number of structures.
+
+:func:`run_case` does the four; :func:`reconstruct_structures` is the Python
+entry point for a label map given as a path, a
+:class:`~slicerecon.labels.LabelMap`, or an array with its affine.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from numpy.typing import ArrayLike, NDArray
+
+from .annotation import Annotation, annotation_from_sections
+from .errors import EmptyMaskError, InputError, OptionError
+from .inputs import axis_upsample, prepare_inputs
+from .io import DICOM_KINDS, InputKind, detect_kind, load_ground_truth, load_input
+from .io.labelmap import LABEL_MAP_KINDS, read_label_map
+from .io.limits import check_grid
+from .io.rtstruct import read_rtstruct_structures
+from .labels import LabelMap, Structure
+from .metrics import evaluate
+from .reconstruct import ReconstructConfig, reconstruct
+from .sampling import projections_from_sections, projections_from_volume
+from .sections import CrossSections, Projections, Volume
+from .surface.joint import resolve
+from .surface.smooth import taubin_smooth
+
+__all__ = [
+    "NOT_RECONSTRUCTED",
+    "NO_CONTOURS",
+    "NO_PLANE",
+    "CaseInput",
+    "CaseReconstruction",
+    "StructureResult",
+    "case_from_label_map",
+    "crop_to_structure",
+    "evaluate_structures",
+    "load_case",
+    "reconstruct_case",
+    "reconstruct_structures",
+    "run_case",
+    "score_case",
+]
+
+logger = logging.getLogger(__name__)
+
+RECONSTRUCTED = "reconstructed"
+"""Status of a structure that has a mesh."""
+NO_PLANE = "no kept plane crosses it"
+"""Status of a structure the chosen planes miss."""
+NOT_RECONSTRUCTED = "every voxel went to a neighbour"
+"""Status of a structure whose reconstruction lost every voxel to other structures."""
+NO_CONTOURS = "no closed planar contours"
+"""Status of an RTSTRUCT ROI that holds no contour."""
+CROP_PAD = 3
+"""Voxels kept around a structure's extent when it is reconstructed on its own crop."""
+
+Progress = Callable[[str], None]
+
+
+# ----------------------------------------------------------------------------- read
+@dataclass(frozen=True, eq=False)
+class CaseInput:
+    """What a case reconstructs from, and what it is scored against.
+
+    Attributes
+    ----------
+    annotation : Annotation
+        The annotated planes of every structure, on the shared grid (the
+        input's grid cropped around all the structures, or the contours' grid).
+    labels : LabelMap or None
+        A dense input on the shared grid: each structure's silhouettes come
+        from it, and it is each structure's ground truth. None for sparse inputs.
+    truth : LabelMap, Volume, trimesh.Trimesh or None
+        A separate ground truth (``--gt``): a label map holding the
+        structures' values, or one shape for a one-structure case.
+    input_path : Path
+        The input.
+    kind : InputKind
+        What the input is.
+    output_affine : ndarray of shape (4, 4)
+        Voxel index → world mm of the grid the label map is written on (the
+        input's own grid for label maps).
+    output_shape : tuple of 3 int
+        Shape of that grid.
+    crop_lo : ndarray of shape (3,), int
+        Where the shared grid starts on the output grid.
+    missing : tuple of Structure
+        Structures the input lists but nothing was drawn for (RTSTRUCT ROIs
+        without closed contours): reported, not reconstructed.
+    """
+
+    annotation: Annotation
+    labels: LabelMap | None
+    input_path: Path
+    kind: InputKind
+    output_affine: NDArray[np.float64]
+    output_shape: tuple[int, int, int]
+    crop_lo: NDArray[np.int64]
+    truth: Any = None
+    missing: tuple[Structure, ...] = ()
+
+    @property
+    def dense(self) -> bool:
+        """True when the input was a dense mask (sampled here, its own ground truth)."""
+        return self.labels is not None
+
+    @property
+    def has_truth(self) -> bool:
+        """True when the case can be scored (a dense input, or a separate ground truth)."""
+        return self.labels is not None or self.truth is not None
+
+    @property
+    def shared(self) -> CrossSections:
+        """Every structure's planes together, on the shared grid."""
+        return self.annotation.cross_sections()
+
+
+def _as_label_map(volume: Volume, structure: Structure | None = None) -> LabelMap:
+    value = 1 if structure is None else structure.value
+    labels = volume.mask.astype(np.uint8 if 0 <= value < 256 else np.int32) * value
+    return LabelMap(labels, volume.affine, (structure or Structure(value),))
+
+
+def load_case(
+    input_path: str | os.PathLike[str],
+    config: ReconstructConfig,
+    *,
+    ground_truth: str | os.PathLike[str] | None = None,
+    image_dir: str | os.PathLike[str] | None = None,
+) -> CaseInput:
+    """Read an input into the annotation a case reconstructs from.
+
+    Parameters
+    ----------
+    input_path : path-like
+        Any input :func:`slicerecon.io.detect_kind` knows.
+    config : ReconstructConfig
+        Plane choice (``slices``, ``every``, ``axis``), structures (``label``,
+        ``roi``, ``union``), the memory budget, ``allow_irregular``.
+    ground_truth : path-like, optional
+        A separate ground truth: a closed mesh or mask for a one-structure
+        case, or a label map holding the structures' values.
+    image_dir : path-like, optional
+        The image series of an RTSTRUCT.
+
+    Returns
+    -------
+    CaseInput
+
+    Raises
+    ------
+    InputError
+        What the readers raise; ``--union`` on an RTSTRUCT; plane options on
+        a sparse input.
+    """
+    kind = detect_kind(input_path)
+    if image_dir is not None and kind.kind != "rtstruct":
+        raise OptionError(
+            f"an image series applies to RTSTRUCT inputs only; {input_path} is a {kind.kind} input"
+        )
+    if kind.kind == "rtstruct":
+        case = _load_rtstruct(kind, config, image_dir)
+    elif kind.kind == "contours":
+        if config.union:
+            raise OptionError("--union applies to label maps; a contour file holds one structure")
+        data = load_input(
+            kind.path,
+            label=config.label,
+            roi=config.roi,
+            memory_budget_gb=config.max_memory_gb,
+        )
+        case = _load_sparse_sections(kind, config, [Structure(1)], [data], exclusive=True)
+    else:
+        case = _load_label_map(kind, config)
+    if ground_truth is not None:
+        case = _with_ground_truth(case, ground_truth, config)
+    logger.info("%s: %s", kind.path, case.annotation.source)
+    return case
+
+
+def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
+    """A label map file (or a mesh, voxelised), read whole."""
+    selectors = config.selectors
+    if kind.kind not in LABEL_MAP_KINDS:  # a mesh, voxelised
+        volume = load_input(kind.path, label=config.label, memory_budget_gb=config.max_memory_gb)
+        assert isinstance(volume, Volume)
+        return case_from_label_map(_as_label_map(volume), config, kind=kind)
+    label_map = read_label_map(
+        kind.path,
+        allow_irregular=config.allow_irregular,
+        memory_budget_gb=config.max_memory_gb,
+    )
+    assert label_map is not None
+    if kind.kind == "dicom-seg" and len(selectors) == 1 and not config.union:
+        # one segment, whole: SEG segments may overlap, and the label map of
+        # every segment gives overlapping voxels to one of them
+        (structure,) = label_map.select(selectors, source=kind.path).structures
+        volume = load_input(kind.path, label=structure.value, memory_budget_gb=config.max_memory_gb)
+        assert isinstance(volume, Volume)
+        label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
+        return case_from_label_map(label_map, replace(config, label=None, roi=None), kind=kind)
+    return case_from_label_map(label_map, config, kind=kind)
+
+
+def case_from_label_map(
+    label_map: LabelMap, config: ReconstructConfig, *, kind: InputKind | None = None
+) -> CaseInput:
+    """The case of a label map: planes chosen over all its structures when it is dense.
+
+    Parameters
+    ----------
+    label_map : LabelMap
+        Every structure on the input's grid.
+    config : ReconstructConfig
+        ``slices`` / ``every`` / ``axis`` choose the planes of a dense label
+        map; ``label`` / ``union`` choose the structures.
+    kind : InputKind, optional
+        The file it was read from (default: an array in memory).
+
+    Returns
+    -------
+    CaseInput
+        A dense label map is its own ground truth; a sparse one (annotated on
+        some planes, :func:`slicerecon.inputs.looks_sparse`) keeps its planes.
+    """
+    kind = kind if kind is not None else InputKind("array", Path("<array>"))
+    if config.union:
+        label_map = replace(_as_label_map(label_map.union()), coordinates=label_map.coordinates)
+    elif config.selectors:
+        label_map = label_map.select(config.selectors, source=kind.path)
+    union = label_map.union()
+    if union.is_empty:
+        raise EmptyMaskError(f"{kind.path} holds no foreground for the chosen structures")
+    sections, _, cropped = prepare_inputs(
+        union,
+        slices=config.slices,
+        every=config.every,
+        axis=config.axis,
+        projections="auto",
+        memory_budget_gb=config.max_memory_gb,
+    )
+    crop_lo = np.rint(
+        np.linalg.solve(label_map.affine[:3, :3], sections.affine[:3, 3] - label_map.affine[:3, 3])
+    ).astype(np.int64)
+    region = tuple(
+        slice(int(a), int(a) + n) for a, n in zip(crop_lo, sections.grid_shape, strict=True)
+    )
+    labels = label_map.labels[region]
+    planes = np.rint(sections.indices).astype(np.int64)
+    own = [
+        CrossSections(
+            np.moveaxis(labels == s.value, sections.axis, 0)[planes],
+            sections.indices,
+            sections.axis,
+            sections.affine,
+            sections.grid_shape,
+        )
+        for s in label_map.structures
+    ]
+    dense = cropped is not None
+    reading = "dense mask" if dense else "sparse label map"
+    annotation = annotation_from_sections(
+        label_map.structures,
+        own,
+        shared=True,
+        coordinates=label_map.coordinates,
+        exclusive=True,
+    )
+    annotation = replace(
+        annotation,
+        source=f"{reading}, {len(label_map.structures)} structure(s): {annotation.describe()}",
+    )
+    dense_labels = (
+        LabelMap(labels, sections.affine, label_map.structures, label_map.coordinates)
+        if dense
+        else None
+    )
+    return CaseInput(
+        annotation,
+        dense_labels,
+        kind.path,
+        kind,
+        label_map.affine,
+        label_map.shape,
+        crop_lo,
+    )
+
+
+def _load_rtstruct(
+    kind: InputKind, config: ReconstructConfig, image_dir: str | os.PathLike[str] | None
+) -> CaseInput:
+    """Every chosen ROI of an RTSTRUCT on its own contour planes of one shared grid."""
+    if config.union:
+        raise OptionError("--union applies to label maps; choose RTSTRUCT ROIs with --label")
+    structures, sections, _ = read_rtstruct_structures(
+        kind.path,
+        rois=config.selectors,
+        allow_irregular=config.allow_irregular,
+        image_dir=image_dir if image_dir is not None else kind.image_dir,
+        memory_budget_gb=config.max_memory_gb,
+    )
+    missing = tuple(s for s, own in zip(structures, sections, strict=True) if own is None)
+    for structure in missing:
+        logger.warning("ROI %s has no contours: nothing to reconstruct", structure.label)
+    drawn = [(s, own) for s, own in zip(structures, sections, strict=True) if own is not None]
+    case = _load_sparse_sections(
+        kind,
+        config,
+        [s for s, _ in drawn],
+        [own for _, own in drawn],
+        exclusive=False,
+        coordinates="LPS",
+    )
+    return replace(case, missing=missing)
+
+
+def _load_sparse_sections(
+    kind: InputKind,
+    config: ReconstructConfig,
+    structures: Sequence[Structure],
+    sections: Sequence[Volume | CrossSections],
+    *,
+    exclusive: bool,
+    coordinates: str | None = None,
+) -> CaseInput:
+    """Contours already on their planes: each structure's own planes, no ground truth."""
+    if config.slices is not None or config.every is not None:
+        raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
+    own = [s for s in sections if isinstance(s, CrossSections)]
+    if len(own) != len(sections):
+        raise InputError(f"{kind.path} holds a dense mask where contours were expected")
+    first = own[0]
+    shape = list(first.grid_shape)
+    shape[first.axis] *= axis_upsample(first)
+    check_grid(shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
+    frame = coordinates or ("LPS" if kind.kind in DICOM_KINDS else "RAS")
+    annotation = annotation_from_sections(
+        structures, own, shared=False, coordinates=frame, exclusive=exclusive
+    )
+    annotation = replace(
+        annotation,
+        source=f"contours, {len(structures)} structure(s): {annotation.describe()}",
+    )
+    return CaseInput(
+        annotation,
+        None,
+        kind.path,
+        kind,
+        annotation.affine,
+        annotation.grid_shape,
+        np.zeros(3, np.int64),
+    )
+
+
+def _with_ground_truth(
+    case: CaseInput, ground_truth: str | os.PathLike[str], config: ReconstructConfig
+) -> CaseInput:
+    """The case scored against a separate ground truth (``--gt``)."""
+    structures = case.annotation.structures
+    if len(structures) == 1:
+        truth = load_ground_truth(
+            ground_truth,
+            label=config.label,
+            allow_irregular=config.allow_irregular,
+            memory_budget_gb=config.max_memory_gb,
+        )
+        return replace(case, truth=truth)
+    if detect_kind(ground_truth).kind not in LABEL_MAP_KINDS:
+        raise OptionError(
+            f"the input holds {len(structures)} structures and {ground_truth} is one shape: "
+            "give a label map with their values as --gt, or choose one structure with --label"
+        )
+    truth_map = read_label_map(
+        ground_truth,
+        allow_irregular=config.allow_irregular,
+        memory_budget_gb=config.max_memory_gb,
+    )
+    assert truth_map is not None
+    return replace(case, truth=truth_map)
+
+
+# ------------------------------------------------------------------------ reconstruct
+@dataclass
+class StructureResult:
+    """One structure of a case.
+
+    Attributes
+    ----------
+    structure : Structure
+        Value, name and colour.
+    status : str
+        ``"reconstructed"``, or why it was not (:data:`NO_PLANE`,
+        :data:`NOT_RECONSTRUCTED`, :data:`NO_CONTOURS`).
+    mesh : trimesh.Trimesh or None
+        Its watertight surface, world mm.
+    planes : int
+        Annotated planes that hold it.
+    occupancy : Volume or None
+        Its voxels, when known without rasterizing: on the shared grid (its
+        share) for a partition of several structures, else on its own crop.
+    plan : Plan or None
+        The partition its reconstruction used.
+    metrics : dict or None
+        Its metrics against its ground truth (:func:`score_case`).
+    sections, projections : CrossSections, Projections or None
+        What it was reconstructed from (its own crop of the shared grid).
+    volume_mm3 : float
+        Volume of its voxels in the written label map's grid, mm³ (before any
+        overlap is resolved in that one file).
+    """
+
+    structure: Structure
+    status: str
+    mesh: trimesh.Trimesh | None = None
+    planes: int = 0
+    occupancy: Volume | None = None
+    plan: Any = None
+    metrics: dict[str, Any] | None = None
+    sections: CrossSections | None = None
+    projections: Projections | None = None
+    volume_mm3: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready record (``structures.json``)."""
+        return {
+            **self.structure.to_dict(),
+            "status": self.status,
+            "planes": self.planes,
+            "volume_mm3": round(self.volume_mm3, 3),
+            "parts": None if self.plan is None else len(self.plan.parts),
+        }
+
+
+@dataclass
+class CaseReconstruction:
+    """Every structure of a case, reconstructed.
+
+    Attributes
+    ----------
+    results : list of StructureResult
+        One per structure, in the annotation's order (then the ones with nothing drawn).
+    labels : ndarray of shape output_shape, integer
+        The reconstructed label map on the output grid (the input's grid for
+        label maps), with the structures' values. Where structures overlap (an
+        annotation that is not a partition) the smallest is written.
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm of :attr:`labels`.
+    sections : CrossSections
+        Every structure's planes together, on the shared grid.
+    truth : LabelMap or None
+        Each structure's ground truth on the shared grid (dense inputs).
+    crop_lo : ndarray of shape (3,)
+        Where the shared grid starts on the grid of :attr:`labels`.
+    coordinates : {"RAS", "LPS"}
+    exclusive : bool
+        Whether the structures were resolved as a partition.
+    overlap_voxels : int
+        Voxels claimed by several structures (0 for a partition).
+    timings : dict of str to float
+    """
+
+    results: list[StructureResult]
+    labels: NDArray[np.integer]
+    affine: NDArray[np.float64]
+    sections: CrossSections
+    truth: LabelMap | None
+    crop_lo: NDArray[np.int64]
+    coordinates: str = "RAS"
+    exclusive: bool = True
+    overlap_voxels: int = 0
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def reconstructed(self) -> list[StructureResult]:
+        """The structures that have a mesh."""
+        return [r for r in self.results if r.mesh is not None]
+
+    def truth_mask(self, value: int) -> Volume:
+        """A structure's own ground-truth mask on the shared grid (dense inputs only)."""
+        if self.truth is None:
+            raise OptionError("this case has no dense ground truth")
+        return self.truth.mask(value)
+
+
+def crop_to_structure(
+    own: CrossSections, mask: NDArray[np.bool_] | None
+) -> tuple[CrossSections, Projections, NDArray[np.int64]]:
+    """A structure's sections on the crop of the shared grid around it, its silhouettes,
+    and where the crop starts on the shared grid.
+
+    Parameters
+    ----------
+    own : CrossSections
+        The structure's planes on the shared grid.
+    mask : ndarray of shape own.grid_shape, bool, or None
+        Its dense mask (a dense input: the crop is its bounding box and its
+        silhouettes come from it), or None (the crop is the extent of its
+        planes; silhouettes derived from them).
+
+    Returns
+    -------
+    sections : CrossSections
+        On the crop, :data:`CROP_PAD` voxels around the structure.
+    projections : Projections
+    lo : ndarray of shape (3,), int
+    """
+    axis = own.axis
+    a, b = own.plane_axes
+    grid = np.asarray(own.grid_shape)
+    if mask is not None:
+        lo, hi = Volume(mask, own.affine).bounding_box_vox()
+    else:
+        rows = np.flatnonzero(own.masks.any(axis=(0, 2)))
+        cols = np.flatnonzero(own.masks.any(axis=(0, 1)))
+        drawn = own.indices[own.masks.any(axis=(1, 2))]
+        lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
+        lo[a], hi[a] = rows[0], rows[-1] + 1
+        lo[b], hi[b] = cols[0], cols[-1] + 1
+        lo[axis] = int(np.floor(drawn.min() + 0.5))
+        hi[axis] = int(np.ceil(drawn.max() + 0.5))
+    lo = np.maximum(lo - CROP_PAD, 0)
+    hi = np.minimum(hi + CROP_PAD, grid)
+    keep = np.flatnonzero((own.indices >= lo[axis] - 0.5) & (own.indices <= hi[axis] - 0.5))
+    affine = own.affine.copy()
+    affine[:3, 3] = own.affine[:3, :3] @ lo.astype(np.float64) + own.affine[:3, 3]
+    sub = CrossSections(
+        own.masks[keep][:, lo[a] : hi[a], lo[b] : hi[b]],
+        own.indices[keep] - lo[axis],
+        axis,
+        affine,
+        tuple(int(v) for v in hi - lo),
+    )
+    if mask is not None:
+        crop = mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]]
+        projections = projections_from_volume(Volume(crop, affine))
+    else:
+        projections = projections_from_sections(sub)
+    return sub, projections, lo
+
+
+def _projections(
+    config: ReconstructConfig, sub: CrossSections, derived: Projections, *, dense: bool, many: bool
+) -> Projections:
+    """A structure's silhouettes as ``--projections`` asks (``derived``: from its dense
+    mask when the input is dense, else from its sections)."""
+    source = config.projections
+    if source == "auto":
+        source = "gt" if dense else "sections"
+    if source == "gt":
+        if not dense:
+            raise OptionError(
+                "--projections gt needs a dense mask as input; use --projections sections"
+            )
+        return derived
+    if source == "sections":
+        return derived if not dense else projections_from_sections(sub)
+    if many:
+        raise OptionError(
+            "silhouette files (--projections FILE) describe one structure; choose one with --label"
+        )
+    from .io.projections import read_projection_files
+
+    return read_projection_files(config.projection_files, sub)
+
+
+def reconstruct_case(
+    case: CaseInput, config: ReconstructConfig, *, progress: Progress | None = None
+) -> CaseReconstruction:
+    """Reconstruct every structure of a case.
+
+    Each structure is reconstructed from its own planes on its own crop of the
+    shared grid (:func:`crop_to_structure`), as a run on that structure alone
+    would, so ``N`` structures cost about the sum of ``N`` single runs. The
+    structures of a partition are then resolved jointly on their
+    signed-distance fields; the others keep their own surfaces.
+
+    Parameters
+    ----------
+    case : CaseInput
+    config : ReconstructConfig
+        Its :attr:`~slicerecon.reconstruct.ReconstructConfig.options` apply to
+        every structure; ``projections`` says where silhouettes come from.
+    progress : callable, optional
+        Called with a short stage text (``"reconstruct 2/4: 2_Liver"``).
+
+    Returns
+    -------
+    CaseReconstruction
+
+    Raises
+    ------
+    OptionError
+        A partition of several structures with a method that has no field to
+        resolve them on; silhouette files with several structures.
+    """
+    annotation = case.annotation
+    options = config.options
+    shared = case.shared
+    drawn = annotation.structures
+    joint = annotation.exclusive and len(drawn) > 1
+    if joint and not options.method_entry.implicit:
+        raise OptionError(
+            f"several structures of a label map are resolved on their signed distances: "
+            f"use --method sdf (got {options.method!r}), or choose one structure with "
+            "--label, or --union"
+        )
+    per_structure = options.with_changes(smooth=False) if joint else options
+    upsample = axis_upsample(shared)
+    timings: dict[str, float] = {}
+    results: list[StructureResult] = []
+    fields: list[Any] = []
+    for n, structure in enumerate(drawn, start=1):
+        if progress is not None:
+            progress(f"reconstruct {n}/{len(drawn)}: {structure.label}")
+        own = annotation.cross_sections(structure.value)
+        crossed = int(np.count_nonzero(own.masks.any(axis=(1, 2))))
+        if not crossed:
+            logger.warning(
+                "structure %s lies between the kept planes: not reconstructed", structure.label
+            )
+            results.append(StructureResult(structure, NO_PLANE))
+            fields.append(None)
+            continue
+        mask = None if case.labels is None else case.labels.labels == structure.value
+        start = time.perf_counter()
+        sub, derived, offset = crop_to_structure(own, mask)
+        projections = _projections(config, sub, derived, dense=case.dense, many=len(drawn) > 1)
+        result = reconstruct(sub, projections, per_structure, keep_field=joint, upsample=upsample)
+        for stage, seconds in result.timings.items():
+            timings[stage] = timings.get(stage, 0.0) + seconds
+        timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
+        item = StructureResult(
+            structure,
+            RECONSTRUCTED,
+            mesh=result.mesh,
+            planes=crossed,
+            occupancy=result.occupancy,
+            plan=result.plan,
+            sections=sub,
+            projections=projections,
+        )
+        results.append(item)
+        if joint:
+            field = result.field
+            fields.append(
+                field._replace(lo=tuple(int(a + b) for a, b in zip(field.lo, offset, strict=True)))
+            )
+    if joint:
+        start = time.perf_counter()
+        _resolve(results, fields, shared, smooth=options.smooth)
+        timings["resolve"] = time.perf_counter() - start
+    results += [StructureResult(s, NO_CONTOURS) for s in case.missing]
+    labels, overlap = _label_map(case, results, shared)
+    logger.info(
+        "%d structure(s): %d reconstructed",
+        len(results),
+        sum(r.mesh is not None for r in results),
+    )
+    return CaseReconstruction(
+        results,
+        labels,
+        case.output_affine,
+        shared,
+        case.labels,
+        case.crop_lo,
+        annotation.coordinates,
+        annotation.exclusive,
+        overlap,
+        timings,
+    )
+
+
+def _resolve(
+    results: list[StructureResult], fields: list[Any], shared: CrossSections, *, smooth: bool
+) -> None:
+    """Resolve a partition's structures on their fields: meshes and shares in place."""
+    joint = resolve(fields, shared.grid_shape)
+    for i, item in enumerate(results):
+        if fields[i] is None:
+            continue
+        inside = joint.labels == i
+        mesh = joint.meshes[i]
+        if mesh is None or not inside.any():
+            item.status, item.mesh, item.occupancy = NOT_RECONSTRUCTED, None, None
+            logger.warning(
+                "structure %s: %s (its neighbours are closer everywhere)",
+                item.structure.label,
+                NOT_RECONSTRUCTED,
+            )
+            continue
+        item.mesh = taubin_smooth(mesh) if smooth else mesh
+        item.occupancy = Volume(inside, shared.affine)
+
+
+def _label_map(
+    case: CaseInput, results: list[StructureResult], shared: CrossSections
+) -> tuple[NDArray[np.integer], int]:
+    """The structures as one label map on the output grid, and the voxels claimed twice.
+
+    A partition's shares never overlap. Overlapping structures (ROIs) are
+    painted largest first, so the smallest is on top; the count says how many
+    voxels some structure lost in this one file. Each structure's
+    ``volume_mm3`` is set from its own voxels.
+    """
+    values = [r.structure.value for r in results] or [0]
+    fits = 0 <= min(values) and max(values) < 256
+    labels = np.zeros(case.output_shape, dtype=np.uint8 if fits else np.int32)
+    voxel = float(abs(np.linalg.det(case.output_affine[:3, :3])))
+    claimed = np.zeros(case.output_shape, dtype=bool)
+    overlap = 0
+    painted = [r for r in results if r.mesh is not None]
+    painted.sort(key=lambda r: -_size(r))
+    for item in painted:
+        inside = _voxels(item, case.output_affine, case.output_shape)
+        overlap += int(np.count_nonzero(inside & claimed))
+        claimed |= inside
+        labels[inside] = item.structure.value
+        item.volume_mm3 = float(np.count_nonzero(inside)) * voxel
+    return labels, overlap
+
+
+def _voxels(
+    item: StructureResult, affine: NDArray[np.float64], shape: tuple[int, int, int]
+) -> NDArray[np.bool_]:
+    """A structure's voxels on a grid: its occupancy moved by whole voxels when it lies on
+    the grid's lattice, else its mesh rasterized there."""
+    from .metrics.inputs import place
+    from .rasterize import mesh_to_mask
+
+    occupancy = item.occupancy
+    if occupancy is not None and np.allclose(occupancy.affine[:3, :3], affine[:3, :3]):
+        offset = np.linalg.solve(affine[:3, :3], occupancy.affine[:3, 3] - affine[:3, 3])
+        lo = np.rint(offset).astype(np.int64)
+        if np.allclose(offset, lo, atol=1e-6):
+            return place(occupancy.mask, -lo, shape)
+    return mesh_to_mask(item.mesh, affine, shape)
+
+
+def _size(item: StructureResult) -> float:
+    if item.occupancy is not None:
+        return float(np.count_nonzero(item.occupancy.mask)) * item.occupancy.voxel_volume
+    return float(abs(item.mesh.volume)) if item.mesh is not None else 0.0
+
+
+# ----------------------------------------------------------------------------- score
+def _mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The mean of each numeric metric over the structures (a structure's own for one)."""
+    if len(per_structure) == 1:
+        return dict(next(iter(per_structure.values())))
+    keys = [
+        k
+        for k, v in next(iter(per_structure.values())).items()
+        if isinstance(v, int | float) and not isinstance(v, bool)
+    ]
+    return {k: float(np.mean([m[k] for m in per_structure.values()])) for k in keys}
+
+
+def score_case(
+    case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
+) -> dict[str, Any] | None:
+    """Score every reconstructed structure against its own ground truth.
+
+    Returns
+    -------
+    dict or None
+        None without a ground truth. Otherwise ``{"structures": {label:
+        metrics}, "mean": {...}}`` (:func:`slicerecon.metrics.evaluate`);
+        each structure's metrics are also kept on its :class:`StructureResult`.
+    """
+    truths: LabelMap | None = case.truth if isinstance(case.truth, LabelMap) else case.labels
+    scored: dict[str, dict[str, Any]] = {}
+    for item in result.reconstructed:
+        truth: Any = case.truth
+        if truths is not None:
+            if not any(s.value == item.structure.value for s in truths.structures):
+                logger.warning(
+                    "the ground truth holds no structure %s: not scored", item.structure.label
+                )
+                continue
+            truth = truths.mask(item.structure.value)
+        if truth is None:
+            continue
+        item.metrics = evaluate(
+            item.mesh,
+            truth,
+            n_points=config.n_points,
+            seed=config.seed,
+            pred_occupancy=item.occupancy,
+        ).to_dict()
+        scored[item.structure.label] = item.metrics
+    if not scored:
+        return None
+    return {"structures": scored, "mean": _mean_metrics(scored)}
+
+
+# ------------------------------------------------------------------------------- run
+def run_case(
+    input_path: str | os.PathLike[str],
+    outdir: str | os.PathLike[str],
+    config: ReconstructConfig,
+    *,
+    ground_truth: str | os.PathLike[str] | None = None,
+    image_dir: str | os.PathLike[str] | None = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Reconstruct one case and write its outputs: the one pipeline of ``slicerecon run``.
+
+    Writes into ``outdir`` (:func:`slicerecon.case_outputs.write_case`, every
+    file atomically): ``mesh.<format>`` for one structure or
+    ``meshes/<value>_<name>.<format>`` for several, ``labels.nii.gz`` and
+    ``labels.seg.nrrd`` on the input's grid (and ``seg.dcm`` / ``rtstruct.dcm``
+    for DICOM inputs with their series), ``structures.json``, ``plan.json``,
+    ``metrics.json`` (when a ground truth is known) and ``preview.png``.
+
+    Returns
+    -------
+    dict
+        The case summary: output paths, mean metrics (or None), structures,
+        timings, part and plane counts, whether every written mesh is watertight.
+    """
+    from .case_outputs import check_outdir, write_case
+
+    def say(stage: str) -> None:
+        if progress is not None:
+            progress(stage)
+
+    out = check_outdir(outdir)
+    timings: dict[str, float] = {}
+    say("read")
+    start = time.perf_counter()
+    case = load_case(input_path, config, ground_truth=ground_truth, image_dir=image_dir)
+    timings["read"] = time.perf_counter() - start
+    say("reconstruct")
+    result = reconstruct_case(case, config, progress=say)
+    timings.update(result.timings)
+    metrics = None
+    if case.has_truth:
+        say("evaluate")
+        start = time.perf_counter()
+        metrics = score_case(case, result, config)
+        timings["metrics"] = time.perf_counter() - start
+    say("write")
+    return write_case(
+        out,
+        case,
+        result,
+        metrics,
+        config,
+        ground_truth=ground_truth,
+        image_dir=image_dir,
+        timings=timings,
+    )
+
+
+def reconstruct_structures(
+    source: str | os.PathLike[str] | LabelMap | tuple[ArrayLike, ArrayLike],
+    config: ReconstructConfig | None = None,
+    **changes: Any,
+) -> CaseReconstruction:
+    """Reconstruct every structure of a label map: the Python entry point.
+
+    Parameters
+    ----------
+    source : path-like, LabelMap or (array, affine)
+        A label map file (any format :func:`slicerecon.io.labelmap.read_label_map`
+        reads), a :class:`~slicerecon.labels.LabelMap`, or an integer array of
+        shape (I, J, K) with its 4×4 voxel → world mm affine (RAS). 0 is
+        background; every other value is one structure.
+    config : ReconstructConfig, optional
+        Plane choice, structures and reconstruction options (default: the defaults).
+    **changes
+        Fields of :class:`~slicerecon.reconstruct.ReconstructConfig` to change
+        (``slices=12``, ``method="loft"``, ``label="2,5"`` ...).
+
+    Returns
+    -------
+    CaseReconstruction
+        Each structure's mesh (world mm), occupancy and status, the label map
+        on the input's grid, and each structure's ground truth when the input
+        was dense (:meth:`CaseReconstruction.truth_mask`).
+
+    Raises
+    ------
+    InputError
+        An unreadable file, an array that is not a 3-D integer label map.
+    OptionError
+        A bad option.
+    """
+    config = replace(config or ReconstructConfig(), **changes)
+    if isinstance(source, str | os.PathLike):
+        case = load_case(source, config)
+    else:
+        label_map = source if isinstance(source, LabelMap) else LabelMap.from_array(*source)
+        case = case_from_label_map(label_map, config)
+    return reconstruct_case(case, config)
+
+
+def evaluate_structures(
+    prediction: str | os.PathLike[str],
+    ground_truth: str | os.PathLike[str],
+    *,
+    n_points: int = 50_000,
+    seed: int = 0,
+    memory_budget_gb: float | None = None,
+) -> dict[str, Any] | None:
+    """Score every structure of a label-map ground truth against its own prediction.
+
+    Parameters
+    ----------
+    prediction : path-like
+        A label map with the ground truth's label values (NIfTI, NRRD, VTI,
+        DICOM; e.g. a run's ``labels.nii.gz``), or a run's output directory
+        holding ``meshes/``, or that ``meshes/`` directory itself
+        (``<value>_<name>.<fmt>`` files: each mesh is scored as the exact
+        surface of structure ``<value>``).
+    ground_truth : path-like
+        A dense label map.
+    n_points, seed
+        As for :func:`slicerecon.metrics.evaluate`.
+    memory_budget_gb : float, optional
+        As for :func:`slicerecon.io.load_input`.
+
+    Returns
+    -------
+    dict or None
+        None when the ground truth holds fewer than two structures (score it
+        as one shape). Otherwise ``{"structures": {"<value>_<name>": metrics},
+        "mean": {...}, "missing": [...]}`` as in a run's ``metrics.json``:
+        ``missing`` lists the ground-truth structures the prediction does not
+        hold (left out of the mean).
+
+    Raises
+    ------
+    InputError
+        A prediction that is a single mesh (it cannot say which structure it
+        is: give ``--label``), or a directory without meshes.
+    """
+    from .io.limits import DEFAULT_MEMORY_BUDGET_GB
+
+    budget = DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb
+    if detect_kind(ground_truth).kind not in LABEL_MAP_KINDS:
+        return None
+    truth = read_label_map(ground_truth, memory_budget_gb=budget)
+    if truth is None or len(truth.structures) < 2:
+        return None
+    pred_path = Path(prediction)
+    meshes: dict[int, Path] = {}
+    pred_map: LabelMap | None = None
+    if pred_path.is_dir():
+        folder = pred_path / "meshes" if (pred_path / "meshes").is_dir() else pred_path
+        for file in sorted(folder.iterdir()):
+            value = _mesh_value(file)
+            if value is not None and file.suffix.lower() in (".stl", ".ply", ".obj", ".off"):
+                meshes[value] = file
+        if not meshes:
+            raise InputError(
+                f"{pred_path} holds no <value>_<name> meshes (a run's meshes/ directory) to "
+                "score each structure of the ground truth"
+            )
+    elif detect_kind(pred_path).kind == "mesh":
+        raise InputError(
+            f"the ground truth {ground_truth} holds {len(truth.structures)} structures and "
+            f"{pred_path.name} is one mesh: give --label to score it against one, or pass a "
+            "label map or a meshes/ directory"
+        )
+    else:
+        pred_map = read_label_map(pred_path, memory_budget_gb=budget)
+    scored: dict[str, dict[str, Any]] = {}
+    missing: list[str] = []
+    for structure in truth.structures:
+        target = truth.mask(structure.value)
+        pred: Any = None
+        if pred_map is not None:
+            if any(s.value == structure.value for s in pred_map.structures):
+                pred = pred_map.mask(structure.value)
+        elif structure.value in meshes:
+            pred = load_ground_truth(meshes[structure.value])
+        if pred is None:
+            missing.append(structure.label)
+            continue
+        scored[structure.label] = evaluate(pred, target, n_points=n_points, seed=seed).to_dict()
+    if not scored:
+        raise InputError(
+            f"{pred_path} holds none of the {len(truth.structures)} structures of {ground_truth}"
+        )
+    return {"structures": scored, "mean": _mean_metrics(scored), "missing": missing}
+
+
+def _mesh_value(path: Path) -> int | None:
+    """The label value a ``meshes/`` file is named for (``<value>_<name>.<fmt>``)."""
+    head = path.name.split(".")[0].split("_")[0]
+    return int(head) if head.isdigit() else None

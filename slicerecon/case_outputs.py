@@ -1,0 +1,293 @@
+"""What a case leaves on disk: one schema whatever the number of structures.
+
+:func:`write_case` writes a reconstructed case into its folder (every file
+atomically; the layout is :mod:`slicerecon.results`'s):
+
+``mesh.<format>`` or ``meshes/<value>_<name>.<format>``
+    One watertight mesh per reconstructed structure, world mm: ``mesh.<format>``
+    when the case has one structure, ``meshes/`` when it has several.
+``labels.nii.gz``, ``labels.seg.nrrd`` (and ``seg.dcm``, ``rtstruct.dcm``)
+    The label map on the input's grid (:func:`slicerecon.io.outputs.write_label_outputs`).
+``structures.json``
+    Every structure: value, name, colour, status, planes, volume (mm³), parts,
+    and its mesh's path relative to the case folder; how the input was read.
+``plan.json``
+    Each structure's plan (cuboid parts and cuts), all parts together under
+    ``parts``, the planes, the configuration, the timings.
+``metrics.json`` (when a ground truth is known)
+    The case's metrics at the top level (the mean over the structures: the
+    structure's own for one), each structure's under ``structures``, and the
+    mean again under ``mean``.
+``preview.png``
+    What the reconstruction was made from and what it made.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import trimesh
+
+from .errors import OptionError
+from .io.atomic import write_json
+from .io.mesh import write_mesh
+from .io.outputs import dicom_image_series, write_label_outputs
+from .rasterize import is_closed
+from .reconstruct import ReconstructConfig
+from .results import METRICS_FILE, PLAN_FILE, PREVIEW_FILE, STRUCTURES_FILE, mesh_file
+from .sampling import projections_from_sections, projections_from_volume
+from .sections import Volume
+
+if TYPE_CHECKING:
+    from .case import CaseInput, CaseReconstruction
+
+__all__ = ["check_outdir", "write_case"]
+
+logger = logging.getLogger(__name__)
+
+
+def check_outdir(outdir: str | os.PathLike[str]) -> Path:
+    """Make sure a case's output folder can be written, before any work; create nothing.
+
+    Parameters
+    ----------
+    outdir : path-like
+        The folder (it and its missing parents are created when the case is written).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    OptionError
+        The path, or one of its parents, is a file; or the folder (or its
+        nearest existing parent, where it would be created) cannot be written.
+    """
+    out = Path(outdir)
+    if out.exists() and not out.is_dir():
+        raise OptionError(f"the output folder {out} is a file; give -o a folder")
+    existing = out
+    while not existing.exists():
+        if existing.parent == existing:
+            break
+        existing = existing.parent
+    if existing.exists() and not existing.is_dir():
+        raise OptionError(f"cannot create the output folder {out}: {existing} is a file")
+    try:  # a real write: permission bits alone do not tell (root, read-only mounts)
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".slicerecon-write-check-"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise OptionError(f"cannot write the output folder {out} ({existing}: {reason})") from None
+    return out
+
+
+def _plan_record(case: CaseInput, result: CaseReconstruction) -> dict[str, Any]:
+    """``plan.json`` without the configuration and timings."""
+    items = [r for r in result.results if r.structure in case.annotation.structures]
+    one = items[0] if len(items) == 1 and items[0].plan is not None else None
+    sections = one.sections if one is not None and one.sections is not None else result.sections
+    parts: list[dict[str, Any]] = []
+    structures = []
+    for item in result.results:
+        plan = None
+        if item.plan is not None and item.sections is not None:
+            plan = item.plan.to_dict(affine=item.sections.affine)
+            parts += [{**p, "structure": item.structure.value} for p in plan["parts"]]
+        structures.append({**item.structure.to_dict(), "plan": plan})
+    record: dict[str, Any] = {
+        "planner": one.plan.planner if one is not None else case_planner(result),
+        "grid_shape": list(one.plan.grid_shape if one is not None else sections.grid_shape),
+        "parts": parts,
+        "structures": structures,
+        "sections": {
+            "axis": "xyz"[sections.axis],
+            "n_planes": sections.n_planes,
+            "plane_indices": sections.indices.tolist(),
+            "positions_mm": sections.positions.tolist(),
+        },
+        "annotation": case.annotation.source,
+    }
+    if one is not None and one.projections is not None:
+        record["projections"] = one.projections.source
+    return record
+
+
+def case_planner(result: CaseReconstruction) -> str:
+    """The planner that made the case's plans (the first structure's)."""
+    return next((r.plan.planner for r in result.results if r.plan is not None), "none")
+
+
+def write_case(
+    outdir: Path,
+    case: CaseInput,
+    result: CaseReconstruction,
+    metrics: dict[str, Any] | None,
+    config: ReconstructConfig,
+    *,
+    ground_truth: str | os.PathLike[str] | None = None,
+    image_dir: str | os.PathLike[str] | None = None,
+    timings: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """Write a reconstructed case into ``outdir``, one schema for any number of structures.
+
+    Parameters
+    ----------
+    outdir : Path
+        The case folder (:func:`check_outdir` made sure it is writable).
+    case : CaseInput
+    result : CaseReconstruction
+    metrics : dict or None
+        :func:`slicerecon.case.score_case`'s record.
+    config : ReconstructConfig
+    ground_truth, image_dir : path-like, optional
+        As given to :func:`slicerecon.case.run_case` (recorded; ``image_dir``
+        is the DICOM series DICOM outputs refer to).
+    timings : dict of str to float, optional
+        Seconds per stage so far; ``write`` is added.
+
+    Returns
+    -------
+    dict
+        The case summary (what ``slicerecon run`` prints).
+    """
+    import time
+
+    times = dict(timings or {})
+    start = time.perf_counter()
+    several = len(case.annotation.structures) > 1
+    records = []
+    written: list[trimesh.Trimesh] = []
+    for item in result.results:
+        record = item.to_dict()
+        if item.mesh is not None:
+            name = mesh_file(item.structure.label, config.mesh_format, several=several)
+            write_mesh(item.mesh, outdir / name)
+            record["mesh"] = name
+            written.append(item.mesh)
+        if item.metrics is not None:
+            record["metrics"] = item.metrics
+        records.append(record)
+    if result.overlap_voxels:
+        logger.warning(
+            "%s: structures overlap on %d voxels; labels.nii.gz and labels.seg.nrrd hold "
+            "one structure per voxel (the smallest on top); the meshes keep each whole",
+            case.input_path,
+            result.overlap_voxels,
+        )
+    kind = case.kind
+    outputs = write_label_outputs(
+        outdir,
+        result.labels,
+        result.affine,
+        [item.structure for item in result.results],
+        coordinates=result.coordinates,
+        series=dicom_image_series(
+            kind.kind, kind.path, image_dir if image_dir is not None else kind.image_dir
+        ),
+        rtstruct=kind.path if kind.kind == "rtstruct" else None,
+        allow_irregular=config.allow_irregular,
+    )
+    write_json(
+        outdir / STRUCTURES_FILE,
+        {
+            "structures": records,
+            "annotation": case.annotation.source,
+            "overlap": {
+                "exclusive": result.exclusive,
+                "voxels": result.overlap_voxels,
+                "rule": "a partition: no voxel in two structures"
+                if result.exclusive
+                else "structures may overlap; the label maps hold the smallest on top",
+            },
+            "outputs": outputs.to_dict(),
+        },
+    )
+    mean = None if metrics is None else metrics["mean"]
+    if metrics is not None:
+        write_json(outdir / METRICS_FILE, {**metrics["mean"], **metrics})
+    _write_preview(outdir / PREVIEW_FILE, case, result, config)
+    times["write"] = time.perf_counter() - start
+    plan = _plan_record(case, result)
+    plan["input"] = str(case.input_path)
+    plan["ground_truth"] = None if ground_truth is None else str(ground_truth)
+    plan["config"] = config.to_dict()
+    plan["timings_s"] = {k: round(v, 4) for k, v in times.items()}
+    write_json(outdir / PLAN_FILE, plan)
+    mesh_path = (
+        outdir / mesh_file(result.results[0].structure.label, config.mesh_format, several=False)
+        if not several
+        else outdir / "meshes"
+    )
+    return {
+        "input": str(case.input_path),
+        "mesh": str(mesh_path),
+        "parts": len(plan["parts"]),
+        "planes": plan["sections"]["n_planes"],
+        "watertight": bool(written) and all(is_closed(m) for m in written),
+        "metrics": mean,
+        "structures": records,
+        "annotation": case.annotation.source,
+        "timings_s": plan["timings_s"],
+    }
+
+
+def _write_preview(
+    path: Path, case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
+) -> None:
+    """The preview: one structure's own view, or every structure together."""
+    from .preview import write_preview
+
+    items = result.reconstructed
+    if len(case.annotation.structures) == 1 and items and items[0].sections is not None:
+        item = items[0]
+        truth: Any = case.truth
+        if truth is None and case.labels is not None:
+            truth = _crop(case.labels.mask(item.structure.value), item.sections.affine, item)
+        write_preview(
+            path,
+            mesh=item.mesh,
+            boxes=item.plan.boxes,
+            planner=item.plan.planner,
+            sections=item.sections,
+            projections=item.projections,
+            occupancy=item.occupancy,
+            truth=truth,
+        )
+        return
+    meshes = [r.mesh for r in items]
+    if not meshes:
+        return
+    sections = result.sections
+    region = tuple(
+        slice(int(a), int(a) + n) for a, n in zip(result.crop_lo, sections.grid_shape, strict=True)
+    )
+    union = Volume(result.labels[region] != 0, sections.affine)
+    truth_union = None if case.labels is None else case.labels.union()
+    write_preview(
+        path,
+        mesh=trimesh.util.concatenate(meshes),
+        boxes=[],
+        planner=f"{config.planner}, {len(meshes)} structures",
+        sections=sections,
+        projections=projections_from_sections(sections)
+        if truth_union is None
+        else projections_from_volume(truth_union),
+        occupancy=union,
+        truth=truth_union,
+    )
+
+
+def _crop(truth: Volume, affine: np.ndarray, item: Any) -> Volume:
+    """A structure's ground truth on its own crop (the grid its preview is drawn on)."""
+    offset = np.rint(
+        np.linalg.solve(truth.affine[:3, :3], affine[:3, 3] - truth.affine[:3, 3])
+    ).astype(np.int64)
+    shape = item.sections.grid_shape
+    return truth.subgrid(offset, offset + np.asarray(shape))
