@@ -9,9 +9,10 @@ inputs in this one process (:func:`slicerecon.reconstruct.reconstruct`, library
 defaults: carving by the hull on for loft and sdf), then is evaluated against
 the dense mask (:func:`slicerecon.metrics.evaluate`)::
 
-    python benchmarks/compare_methods.py --out docs/results_methods.md
+    python benchmarks/compare_methods.py --out docs/data/compare_methods.csv
 
-writes a markdown table and a CSV next to it (same name, ``.csv``). Each
+writes every number to the CSV ``--out`` and prints the markdown tables (per
+case, and the summary that ``docs/results.md`` shows) to stdout. Each
 method is warmed up once on a tiny ball before timing, so ITK's ~10 s
 first-call cost and pymeshlab's plugin loading are not charged to a case.
 Nothing is tuned per shape.
@@ -167,7 +168,12 @@ def main(argv: list[str] | None = None) -> int:
         help="real shapes downsampled to at most this many voxels a side",
     )
     parser.add_argument("--n-points", type=int, default=20_000, help="surface samples per mesh")
-    parser.add_argument("--out", type=Path, default=Path("docs/results_methods.md"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/data/compare_methods.csv"),
+        help="CSV of every number (the markdown tables go to stdout)",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
 
@@ -279,7 +285,7 @@ def _write(
         "",
         f"Command: `{command}`",
         "",
-        f"Written by `benchmarks/compare_methods.py`; raw numbers in `{csv_path.name}`. "
+        f"Written by `benchmarks/compare_methods.py`; raw numbers in `{csv_path.as_posix()}`. "
         f"Sections along {args.axis}, {_PROJECTION_TEXT[args.projections]}, "
         f"{args.n_points} surface samples per mesh, seed 0. Every method runs in one process "
         "on the same sections; each was warmed up once before timing. Seconds are wall "
@@ -335,8 +341,7 @@ def _write(
             )
     lines += ["", "## Summary", ""]
     lines += _summary(rows, labels)
-    with atomic_path(out) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def _summary(rows: list[dict[str, Any]], labels: list[str]) -> list[str]:
