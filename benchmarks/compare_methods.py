@@ -7,13 +7,21 @@ setting, the dense mask is sampled once (:func:`slicerecon.reconstruct.prepare_i
 projections from the mask) and every method reconstructs from exactly these
 inputs in this one process (:func:`slicerecon.reconstruct.reconstruct`, library
 defaults: carving by the hull on for loft and sdf), then is evaluated against
-the dense mask (:func:`slicerecon.metrics.evaluate`)::
+the dense mask (:func:`slicerecon.metrics.evaluate`). It writes every number to
+the CSV ``--out`` and prints the markdown tables (per case, and the summary
+that ``docs/results.md`` shows) to stdout. The tables of ``docs/results.md``::
 
-    python benchmarks/compare_methods.py --out docs/data/compare_methods.csv
+    S=sphere,torus,y_branch,chair,two_spheres,kidney,lung,vessel_tree,brain,genus2,table,\\
+    mni152_brain,mni152_wm,frog_liver,frog_kidney,frog_brain,pymeshlab_bunny
+    python benchmarks/compare_methods.py --shapes $S --out docs/data/compare_methods.csv
+    python benchmarks/compare_methods.py --projections sections --shapes $S --methods \\
+        "sdf + heuristic (default),sdf + heuristic (carve only),hybrid + heuristic,\\
+    loft + heuristic,loft + none,sdf plain,sdf-hull" --out docs/data/compare_methods_sections.csv
+    python benchmarks/compare_methods.py --projections sections --shapes $S --methods \\
+        "sdf + heuristic (default),sdf + lookahead" \\
+        --out docs/data/compare_methods_sections_lookahead.csv
 
-writes every number to the CSV ``--out`` and prints the markdown tables (per
-case, and the summary that ``docs/results.md`` shows) to stdout. Each
-method is warmed up once on a tiny ball before timing, so ITK's ~10 s
+Each method is warmed up once on a tiny ball before timing, so ITK's ~10 s
 first-call cost and pymeshlab's plugin loading are not charged to a case.
 Nothing is tuned per shape.
 """
