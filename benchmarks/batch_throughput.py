@@ -11,9 +11,11 @@ families, about 20-40 voxels a side) and reconstructs it with
 "wall s" is the whole ``run_batch`` call (discovery, hashing, cluster start
 and stop, every case, ``summary.csv``; no HTML report). Cluster start and stop
 alone is measured separately, so throughput with and without it can be told
-apart. Numbers depend on the machine and on its load; the table says both::
+apart. Numbers depend on the machine and on its load; the table says both.
+Prints a markdown table (``--out FILE`` also writes it; ``docs/results.md``
+shows it)::
 
-    python benchmarks/batch_throughput.py --out docs/results_batch.md
+    python benchmarks/batch_throughput.py --cases 12 --workers 0,1,2 --slices 8
 """
 
 from __future__ import annotations

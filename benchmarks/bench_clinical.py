@@ -26,9 +26,12 @@ For each case and each plane count (12, 24), in one fresh process per case:
 * **peak memory**: the peak resident set of a fresh ``slicerecon run`` process.
 
 Absolute seconds vary with the machine and its load; the ratios are what to
-compare::
+compare. The script prints a markdown table (``--out FILE`` also writes it);
+``docs/results.md`` shows the tables of::
 
-    python benchmarks/bench_clinical.py --out docs/results_clinical.md
+    python benchmarks/bench_clinical.py
+    python benchmarks/bench_clinical.py --planner lookahead --planes 12,24 \\
+        --cases 'liver 510x428x120,brain 512x512x300,sphere 256x256x256'
 """
 
 from __future__ import annotations

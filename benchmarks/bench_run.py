@@ -12,9 +12,10 @@ this one process:
 * repeats both under ``tracemalloc`` for the peak Python/numpy memory.
 
 Times are the best of ``--repeat`` runs. Ratios (run / marching cubes) are what
-to compare across machines; absolute seconds depend on the machine::
+to compare across machines; absolute seconds depend on the machine. Prints a
+markdown table (``--out FILE`` also writes it; ``docs/results.md`` shows it)::
 
-    python benchmarks/bench_run.py --out docs/results_speed.md
+    python benchmarks/bench_run.py
 """
 
 from __future__ import annotations

@@ -7,12 +7,21 @@ setting, the dense mask is sampled once (:func:`slicerecon.reconstruct.prepare_i
 projections from the mask) and every method reconstructs from exactly these
 inputs in this one process (:func:`slicerecon.reconstruct.reconstruct`, library
 defaults: carving by the hull on for loft and sdf), then is evaluated against
-the dense mask (:func:`slicerecon.metrics.evaluate`)::
+the dense mask (:func:`slicerecon.metrics.evaluate`). It writes every number to
+the CSV ``--out`` and prints the markdown tables (per case, and the summary
+that ``docs/results.md`` shows) to stdout. The tables of ``docs/results.md``::
 
-    python benchmarks/compare_methods.py --out docs/results_methods.md
+    S=sphere,torus,y_branch,chair,two_spheres,kidney,lung,vessel_tree,brain,genus2,table,\\
+    mni152_brain,mni152_wm,frog_liver,frog_kidney,frog_brain,pymeshlab_bunny
+    python benchmarks/compare_methods.py --shapes $S --out docs/data/compare_methods.csv
+    python benchmarks/compare_methods.py --projections sections --shapes $S --methods \\
+        "sdf + heuristic (default),sdf + heuristic (carve only),hybrid + heuristic,\\
+    loft + heuristic,loft + none,sdf plain,sdf-hull" --out docs/data/compare_methods_sections.csv
+    python benchmarks/compare_methods.py --projections sections --shapes $S --methods \\
+        "sdf + heuristic (default),sdf + lookahead" \\
+        --out docs/data/compare_methods_sections_lookahead.csv
 
-writes a markdown table and a CSV next to it (same name, ``.csv``). Each
-method is warmed up once on a tiny ball before timing, so ITK's ~10 s
+Each method is warmed up once on a tiny ball before timing, so ITK's ~10 s
 first-call cost and pymeshlab's plugin loading are not charged to a case.
 Nothing is tuned per shape.
 """
@@ -167,7 +176,12 @@ def main(argv: list[str] | None = None) -> int:
         help="real shapes downsampled to at most this many voxels a side",
     )
     parser.add_argument("--n-points", type=int, default=20_000, help="surface samples per mesh")
-    parser.add_argument("--out", type=Path, default=Path("docs/results_methods.md"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/data/compare_methods.csv"),
+        help="CSV of every number (the markdown tables go to stdout)",
+    )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
 
@@ -279,7 +293,7 @@ def _write(
         "",
         f"Command: `{command}`",
         "",
-        f"Written by `benchmarks/compare_methods.py`; raw numbers in `{csv_path.name}`. "
+        f"Written by `benchmarks/compare_methods.py`; raw numbers in `{csv_path.as_posix()}`. "
         f"Sections along {args.axis}, {_PROJECTION_TEXT[args.projections]}, "
         f"{args.n_points} surface samples per mesh, seed 0. Every method runs in one process "
         "on the same sections; each was warmed up once before timing. Seconds are wall "
@@ -335,8 +349,7 @@ def _write(
             )
     lines += ["", "## Summary", ""]
     lines += _summary(rows, labels)
-    with atomic_path(out) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def _summary(rows: list[dict[str, Any]], labels: list[str]) -> list[str]:

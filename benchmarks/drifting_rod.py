@@ -6,9 +6,10 @@ do not overlap: a pixel-wise blend of signed distances closes each disc off
 half-way, and so does ITK's morphological contour interpolation. Each method
 reconstructs from the same planes, with silhouettes from the dense mask
 (``gt``) or derived from the sections (``sections``, what contour users have);
-the table gives volume IoU against the rod and the number of connected pieces::
+the table gives volume IoU against the rod and the number of connected pieces.
+It is printed (``--out FILE`` also writes it; ``docs/results.md`` shows it)::
 
-    python benchmarks/drifting_rod.py --out docs/results_rod.md
+    python benchmarks/drifting_rod.py
 """
 
 from __future__ import annotations

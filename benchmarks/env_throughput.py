@@ -7,9 +7,10 @@ available, batched on the GPU, for each reward surface asked for
 (``--surfaces exact,surrogate``). Corner detection stays on the CPU (numpy
 Harris corners of the episodes whose remaining region changed), as do the
 rules' decisions (:mod:`slicerecon.partition.cuts`, :mod:`~slicerecon.partition.state`)
-and the ``exact`` reward surface. Writes a markdown table.
+and the ``exact`` reward surface. Prints a markdown table (and writes it to
+``--out`` when given).
 
-    python benchmarks/env_throughput.py --out docs/results_policy_env.md
+    python benchmarks/env_throughput.py --grid 32 --resolution 64 --seconds 20 --threads 2
 """
 
 from __future__ import annotations
@@ -70,7 +71,7 @@ def measure(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("docs/results_policy_env.md"))
+    parser.add_argument("--out", type=Path, default=None, help="also write the markdown here")
     parser.add_argument("--grid", type=int, default=32)
     parser.add_argument("--resolution", type=int, default=64)
     parser.add_argument("--seconds", type=float, default=10.0, help="per measurement")
@@ -141,9 +142,11 @@ def main() -> None:
         "other jobs shared the CPU, so these rates are lower bounds.",
         "",
     ]
-    with atomic_path(args.out) as tmp:
-        tmp.write_text("\n".join(lines))
-    print(f"wrote {args.out}")
+    print("\n".join(lines))
+    if args.out is not None:
+        with atomic_path(args.out) as tmp:
+            tmp.write_text("\n".join(lines))
+        print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

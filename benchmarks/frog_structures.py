@@ -13,9 +13,10 @@ hundred stray voxels with labels 16-29, which are left out here. The script
   default pipeline on the same planes (each on its own crop, as ``slicerecon
   run --label N`` would);
 
-and prints a markdown table::
+and prints a markdown table (``--out FILE`` also writes it; ``docs/results.md``
+shows it)::
 
-    python benchmarks/frog_structures.py --planes 24 --out docs/results_frog.md
+    python benchmarks/frog_structures.py --planes 24
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ fi
 export PYTHONPATH=$PWD${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1
 slicerecon() { python3 -c 'import sys; from slicerecon.cli import main; sys.exit(main())' "$@"; }
 python3 benchmarks/env_throughput.py --surfaces surrogate --batches 256,1024 --seconds 5 \
-  --out "$OUT/results_policy_env_gpu.md"
+  --out "$OUT/env_throughput_gpu.md"
 resume=()
 if [ "${RESUME:-0}" = 1 ]; then resume=(--resume); fi
 status=0

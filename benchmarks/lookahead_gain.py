@@ -23,7 +23,11 @@ values, each with its default margin): on held-out section planes
 silhouettes (:func:`~slicerecon.partition.lookahead.silhouette_value`); their
 episodes are read off the same IoU with the shape.
 
-    python benchmarks/lookahead_gain.py [--episodes 240] [--config il_rl_choice] [--out FILE]
+It prints a markdown report (``--out FILE`` also writes it; ``docs/results.md``
+shows it)::
+
+    python benchmarks/lookahead_gain.py --episodes 240 --config il_rl_choice --candidates 4 \\
+        --margin 0.002 --seed 7
 """
 
 from __future__ import annotations

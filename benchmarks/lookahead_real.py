@@ -15,9 +15,12 @@ surface by four planners:
   inference.
 
 Meshes are scored by ``benchmarks/independent_eval.py`` (volume IoU), paired
-against the heuristic per case. Choose on ``--half dev`` only::
+against the heuristic per case, and printed as markdown (``--out FILE`` also
+writes it; ``docs/results.md`` shows both halves). Choose on ``--half dev``
+only::
 
-    python benchmarks/lookahead_real.py --half dev --out docs/results_lookahead_real.md
+    python benchmarks/lookahead_real.py --half dev --planes 12
+    python benchmarks/lookahead_real.py --half val --planes 12
 """
 
 from __future__ import annotations

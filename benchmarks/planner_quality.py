@@ -3,9 +3,10 @@
 For each shape, section axis and plane count, the script samples the dense
 mask, reconstructs with both planners (same sections, same projections, same
 surface method) and evaluates against the dense mask.  It prints a markdown
-table, the per-setting winner, and the win count::
+table, the per-setting winner, and the win count (``--out FILE`` also writes
+it; ``docs/results.md`` shows it)::
 
-    python benchmarks/planner_quality.py --out docs/results_planner.md
+    python benchmarks/planner_quality.py
 
 Nothing here is tuned per shape: every setting uses the library defaults.
 """

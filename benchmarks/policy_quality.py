@@ -7,11 +7,13 @@ with its ground-truth projections, reconstructed with ``reconstruct()`` and
 each planner (``none``, ``heuristic`` and the three shipped actors ``ddpg``,
 ``il``, ``il_rl`` through ``planner="policy"`` + ``weights=``) and scored with
 ``evaluate()`` (volume IoU, Chamfer-L1 in mm). A second sweep varies the
-number of contours on a subset of families. Writes ``docs/results_policy.md``
-and two figures: IoU against the number of contours, and the training curves
-(held-out surrogate IoU against update, from the shipped training logs).
+number of contours on a subset of families. Writes every case to the JSON
+``--out``, two figures into ``--figures`` (IoU against the number of contours,
+and the training curves: held-out surrogate IoU against update, from the
+training logs) and prints the markdown tables that ``docs/results.md`` shows.
 
-    python benchmarks/policy_quality.py --out docs/results_policy.md
+    python benchmarks/policy_quality.py --seeds 3 --voxels 44 --slices 12 --contours 6,12,20 \\
+        --out docs/data/policy_quality.json
 """
 
 from __future__ import annotations
@@ -193,7 +195,12 @@ def figure_training(logs: dict[str, Path], heuristic: float | None, path: Path) 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("docs/results_policy.md"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/data/policy_quality.json"),
+        help="JSON of every case (the markdown tables go to stdout)",
+    )
     parser.add_argument("--figures", type=Path, default=Path("docs/figures"))
     parser.add_argument("--seeds", type=int, default=1, help="held-out seeds per family")
     parser.add_argument("--voxels", type=int, default=44, help="longest side of a shape")
@@ -364,8 +371,6 @@ def main() -> None:
             ]
             + [""]
         )
-    with atomic_path(args.out) as tmp:
-        tmp.write_text("\n".join(lines))
     print("\n".join(lines))
 
 

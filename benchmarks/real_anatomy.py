@@ -9,10 +9,11 @@ the dense mask), reconstructed by each variant
 ``benchmarks/independent_eval.py``, which does not use
 :mod:`slicerecon.metrics`::
 
-    python benchmarks/real_anatomy.py --half both --planes 12 --axes z \\
-        --out docs/results_real.md
+    python benchmarks/real_anatomy.py --half both --planes 6,12,24 --axes x,y,z --jobs 2 \\
+        --out docs/data/real_anatomy.csv
 
-writes a markdown report and a CSV next to it (same name, ``.csv``). The
+writes every number to the CSV ``--out`` and prints a markdown report (summary,
+strata, largest losses, per case) to stdout. The
 numbers are deterministic: every random sample is seeded from the case,
 setting and variant, and nothing depends on ``--jobs`` or on the order in
 which cases finish. Wall times go to stderr (and to the CSV with
@@ -460,7 +461,7 @@ def write_report(
     timings: bool,
     library: str = "",
 ) -> None:
-    """Write the markdown report ``out`` and the CSV next to it."""
+    """Write the CSV ``out`` (suffix ``.csv``) and print the markdown report."""
     csv_path = out.with_suffix(".csv")
     fields = list(FIELDS) + (["seconds"] if timings else [])
     buffer = io.StringIO()
@@ -485,7 +486,7 @@ def write_report(
         "",
         *([f"Library: {library}.", ""] if library else []),
         "Written by `benchmarks/real_anatomy.py`; raw numbers in "
-        f"`{csv_path.name}`. Cases, halves and grid normalisation: "
+        f"`{csv_path.as_posix()}`. Cases, halves and grid normalisation: "
         "`benchmarks/real_split.toml` and `docs/realshapes.md`. Each case is sampled at N "
         "evenly spaced planes along the axis (`prepare_inputs`, projections from the dense "
         "mask) and reconstructed by every variant from exactly these inputs. Scores come "
@@ -510,7 +511,7 @@ def write_report(
     lines += _worst_lines(rows, variants)
     lines += ["", "## Per case"]
     lines += _case_tables(rows, variants)
-    _write_atomic(out, "\n".join(lines).rstrip() + "\n")
+    print("\n".join(lines).rstrip())
 
 
 def library_state() -> str:
@@ -589,7 +590,12 @@ def main(argv: list[str] | None = None) -> int:
         help="comma-separated actor files (.safetensors): each adds a variant "
         "policy-<file stem>, the default surface planned by that actor",
     )
-    parser.add_argument("--out", type=Path, default=Path("docs/results_real.md"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/data/real_anatomy.csv"),
+        help="CSV of every number (the markdown report goes to stdout)",
+    )
     args = parser.parse_args(argv)
     for item in (w.strip() for w in args.policy_weights.split(",") if w.strip()):
         path = Path(item)
@@ -692,8 +698,7 @@ def main(argv: list[str] | None = None) -> int:
         secs = [r["seconds"] for r in rows if r["variant"] == v and "seconds" in r]
         log.info("%-15s reconstruct() total %.0f s over %d runs", v, sum(secs), len(secs))
     log.info(
-        "wrote %s and %s in %.0f s (%d cases, %d jobs)",
-        args.out,
+        "wrote %s in %.0f s (%d cases, %d jobs)",
         args.out.with_suffix(".csv"),
         total,
         len(names),

@@ -217,7 +217,7 @@ LOOKAHEAD_VALUES = ("planes", "silhouettes")
 
 LOOKAHEAD_MARGINS: dict[str, float] = {"planes": 0.002, "silhouettes": 0.005}
 """Default ``margin`` of :func:`plan_lookahead` per value, chosen on the development
-shapes (``docs/results_lookahead.md``)."""
+shapes (``docs/results.md``, "The lookahead planner")."""
 
 
 def _state_boxes(state: PartitionState) -> list[Box]:

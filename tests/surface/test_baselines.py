@@ -245,7 +245,7 @@ def test_baselines_on_full_size_shapes(method: str, shape: str) -> None:
         assert evaluate(mesh, truth, n_points=20_000).volume_iou > 0.75
     # The chair's thin legs and sharp seat are a known weakness of the whole-shape
     # baselines (volume IoU 0.64 poisson, 0.68 itk-mci at 12 planes, see
-    # docs/results_methods.md): only closedness is asserted for it.
+    # docs/data/compare_methods.csv): only closedness is asserted for it.
 
 
 @pytest.mark.slow
