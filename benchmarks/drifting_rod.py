@@ -31,7 +31,7 @@ RADIUS_MM = 5.0
 PLANE_GAP = 4
 SHIFTS_MM = (4.0, 8.0, 12.0)
 METHODS: dict[str, dict[str, object]] = {
-    "plain SDF": PLAIN_SDF,
+    "plain SDF": PLAIN_SDF.to_dict(),
     "ITK-MCI": {"method": "itk-mci", "planner": "none"},
     "loft + heuristic": {"method": "loft"},
     "default, no join": {"join_drift": False},

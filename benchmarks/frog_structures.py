@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         reconstruct(sub, projections)
         single_seconds += time.perf_counter() - t0
-        plain = reconstruct(sub, projections, **PLAIN_SDF)
+        plain = reconstruct(sub, projections, PLAIN_SDF)
         crop = Volume(truth.mask, sections.affine)
         plain_score = evaluate(plain.mesh, crop, n_points=20_000)
         rows.append((value, item.status, score.volume_iou, plain_score.volume_iou, score.hd95_mm))

@@ -56,7 +56,7 @@ SPLIT_FILE = Path(__file__).resolve().with_name("real_split.toml")
 """The committed development / validation split (``benchmarks/draw_real_split.py``)."""
 
 VARIANTS: dict[str, dict[str, Any]] = {
-    "sdf-plain": PLAIN_SDF,
+    "sdf-plain": PLAIN_SDF.to_dict(),
     "default": {},
     "loft-heuristic": {"method": "loft", "planner": "heuristic"},
     "itk-mci": {"method": "itk-mci", "planner": "none"},

@@ -394,6 +394,7 @@ def _with_ground_truth(
         truth = load_ground_truth(
             ground_truth,
             label=config.label,
+            union=config.union,
             allow_irregular=config.allow_irregular,
             memory_budget_gb=config.max_memory_gb,
         )

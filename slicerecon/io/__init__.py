@@ -142,8 +142,14 @@ def load_input(
     mesh_resolution: int = 128,
     pixel_spacing: float | None = None,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+    union: bool = False,
 ) -> Volume | CrossSections:
-    """Read any supported input.
+    """Read any supported input as one structure.
+
+    A label map of several structures is never merged silently: give
+    ``label`` to take one, ``union=True`` to take every non-zero voxel as one
+    structure, or read them all with :func:`slicerecon.io.labelmap.read_label_map`
+    (and reconstruct them with :func:`slicerecon.case.reconstruct_structures`).
 
     This is the reading boundary (:func:`slicerecon.io.limits.reading`):
     whatever a parser raises becomes a :class:`~slicerecon.errors.FormatError`
@@ -161,8 +167,8 @@ def load_input(
         The structure to keep, by number or name
         (:func:`slicerecon.selection.choose_structure`): a label value (NIfTI,
         NRRD, VTI, DICOM series), a segment name (``.seg.nrrd``), a SegmentNumber
-        or SegmentLabel (SEG), a ROINumber or ROIName (RTSTRUCT). Default: every
-        non-zero voxel of a label map, the only segment or ROI.
+        or SegmentLabel (SEG), a ROINumber or ROIName (RTSTRUCT). Default: the
+        only structure (label, segment or ROI) of the input.
     roi : int or str, optional
         Another name for ``label`` (``--roi`` of the command line).
     image_dir : path-like, optional
@@ -177,6 +183,8 @@ def load_input(
     memory_budget_gb : float
         Refuse inputs whose grid would not fit this budget, GiB
         (:func:`slicerecon.io.limits.check_grid`).
+    union : bool
+        Take every non-zero voxel of a label map as one structure.
 
     Returns
     -------
@@ -188,13 +196,16 @@ def load_input(
     InputError
         Missing input or one whose kind cannot be told; its subclasses for
         what the readers find (FormatError, LabelError, GeometryError,
-        EmptyMaskError, MemoryBudgetError).
+        EmptyMaskError, MemoryBudgetError). A :class:`LabelError` for a label
+        map of several structures without ``label`` or ``union``.
     OptionError
-        ``label`` and ``roi`` disagree; ``image_dir`` for an input that is not
-        an RTSTRUCT.
+        ``label`` and ``roi`` disagree; ``label`` with ``union``;
+        ``image_dir`` for an input that is not an RTSTRUCT.
     """
     check_budget(memory_budget_gb)
     selector = _selector(label, roi)
+    if union and selector is not None:
+        raise OptionError("give a label or union, not both")
     with reading(path):
         kind = detect_kind(path)
         if image_dir is not None and kind.kind != "rtstruct":
@@ -202,6 +213,8 @@ def load_input(
                 f"an image series applies to RTSTRUCT inputs only; {path} is a {kind.kind} input"
             )
         logger.info("reading %s as %s", kind.path, kind.kind)
+        if selector is None and kind.kind in _WHOLE_LABEL_MAPS:
+            return _one_structure(kind, union, allow_irregular, memory_budget_gb)
         return _read(
             kind,
             selector,
@@ -219,6 +232,7 @@ def load_ground_truth(
     label: int | str | None = None,
     allow_irregular: bool = False,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+    union: bool = False,
 ) -> Volume | Any:
     """Read a ground truth (or a prediction) to score against: the one loader for both.
 
@@ -232,7 +246,7 @@ def load_ground_truth(
     ----------
     path : path-like
         A mesh (``.stl`` / ``.ply`` / ``.obj`` / ``.off``) or a dense mask.
-    label, allow_irregular, memory_budget_gb
+    label, allow_irregular, memory_budget_gb, union
         As for :func:`load_input`.
 
     Returns
@@ -251,7 +265,11 @@ def load_ground_truth(
             _single_structure(Path(path), parse_selector(label))
             return read_mesh(path)
     data = load_input(
-        path, label=label, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb
+        path,
+        label=label,
+        allow_irregular=allow_irregular,
+        memory_budget_gb=memory_budget_gb,
+        union=union,
     )
     if not isinstance(data, Volume):
         raise InputError(
@@ -322,6 +340,33 @@ def _read(
     _single_structure(kind.path, selector)
     check_grid((mesh_resolution,) * 3, what=str(kind.path), memory_budget_gb=memory_budget_gb)
     return read_mesh_volume(kind.path, resolution=mesh_resolution)
+
+
+_WHOLE_LABEL_MAPS = ("nifti", "nrrd", "vti", "dicom-series")
+"""Label-map kinds whose every structure :func:`load_input` reads before it takes one."""
+
+
+def _one_structure(
+    kind: InputKind, union: bool, allow_irregular: bool, memory_budget_gb: float
+) -> Volume:
+    """The one structure of a label map, or all of them merged when ``union``."""
+    from .labelmap import read_label_map
+
+    label_map = read_label_map(
+        kind.path, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb
+    )
+    assert label_map is not None
+    if len(label_map.structures) > 1 and not union:
+        listed = ", ".join(s.label for s in label_map.structures[:12])
+        more = (
+            f" and {len(label_map.structures) - 12} more" if len(label_map.structures) > 12 else ""
+        )
+        raise LabelError(
+            f"{kind.path} holds {len(label_map.structures)} structures ({listed}{more}): "
+            "choose one with --label (label=), merge them with --union (union=True), or "
+            "reconstruct them all (slicerecon run, or slicerecon.case.reconstruct_structures)"
+        )
+    return label_map.union()
 
 
 def _single_structure(path: Path, selector: int | str | None) -> None:

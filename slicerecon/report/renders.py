@@ -150,6 +150,7 @@ def _truth_surface(path: Path, config: Any) -> trimesh.Trimesh | None:
         label=config.get("label"),
         roi=config.get("roi"),
         allow_irregular=bool(config.get("allow_irregular", False)),
+        union=config.get("label") is None and config.get("roi") is None,
     )
     if not isinstance(data, Volume):
         return None

@@ -285,7 +285,7 @@ def test_values_no_segment_claims_are_ignored_with_a_warning(tmp_path: Path, cap
 
 def test_load_input_picks_a_segment_by_name_or_value_or_takes_the_union(tmp_path: Path) -> None:
     path = _segmentation(tmp_path)
-    union = load_input(path)
+    union = load_input(path, union=True)
     assert union.mask.sum() == np.count_nonzero(read_nrrd_label_map(path).labels)
     tumour = load_input(path, label="Tumour")
     assert tumour.mask.sum() == 4 * 3 * 3

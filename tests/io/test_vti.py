@@ -244,7 +244,7 @@ def test_load_input_reads_a_vti_label_map(tmp_path: Path) -> None:
     labels[7:10, 5:9, 3:7] = 5
     path = write_vti(tmp_path / "organs.vti", labels)
     assert detect_kind(path).kind == "vti"
-    assert load_input(path).mask.sum() == np.count_nonzero(labels)
+    assert load_input(path, union=True).mask.sum() == np.count_nonzero(labels)
     assert load_input(path, label=5).mask.sum() == np.count_nonzero(labels == 5)
     with pytest.raises(LabelError, match="label 4"):
         load_input(path, label=4)
