@@ -23,7 +23,8 @@ values, each with its default margin): on held-out section planes
 silhouettes (:func:`~slicerecon.partition.lookahead.silhouette_value`); their
 episodes are read off the same IoU with the shape.
 
-    python benchmarks/lookahead_gain.py [--episodes 240] [--config il_rl_choice] [--out FILE]
+    python benchmarks/lookahead_gain.py [--episodes 240] [--out FILE]
+        [--config benchmarks/configs/il_rl_choice.toml]
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ from slicerecon.policy.train import training_pool
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default="il_rl_choice")
+    parser.add_argument("--config", default="benchmarks/configs/il_rl_choice.toml")
     parser.add_argument("--episodes", type=int, default=240)
     parser.add_argument("--candidates", type=int, default=4)
     parser.add_argument("--margin", type=float, default=0.002)

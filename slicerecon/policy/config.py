@@ -36,17 +36,11 @@ __all__ = [
 EVAL_SEED_OFFSET = 10_000
 """Evaluation shapes use seeds from here on; training seeds stay below it."""
 
-CONFIG_NAMES = (
-    "ddpg",
-    "il",
-    "il_rl",
-    "ddpg_gain",
-    "il_gain",
-    "il_rl_gain",
-    "il_rl_choice",
-    "il_rl_gpu",
-)
-"""The shipped configs in ``slicerecon/policy/configs/``."""
+CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain")
+"""The shipped configs in ``slicerecon/policy/configs/``: the paper's three
+(``ddpg``, ``il``, ``il_rl``) and the best current one (``ddpg_gain``,
+``docs/policy.md``). Other experiments' configs are in ``benchmarks/configs/``
+and load by path."""
 
 NOISES = ("gaussian", "ou")
 
@@ -65,7 +59,8 @@ class TrainConfig:
     """Real shapes (:mod:`slicerecon.realshapes` names) added to the training pool
     (:func:`~slicerecon.partition.episodes.real_occupancy`); only ever the
     development half of ``benchmarks/real_split.toml`` (a test checks the
-    shipped configs). Missing source packages are skipped with a warning."""
+    shipped and the benchmark configs). Missing source packages are skipped
+    with a warning."""
     real_variants: int = 1
     """Copies of each real shape in the pool: as it is, then stretched per axis."""
     max_stretch: float = 1.5

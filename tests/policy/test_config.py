@@ -8,7 +8,9 @@ import pytest
 
 from slicerecon.cli import main
 from slicerecon.errors import FormatError
-from slicerecon.policy.config import load_config
+from slicerecon.policy.config import CONFIG_NAMES, config_path, load_config
+
+BENCHMARK_CONFIGS = Path(__file__).resolve().parents[2] / "benchmarks" / "configs"
 
 
 def test_extends_takes_the_parents_settings_under_the_files_own(tmp_path: Path) -> None:
@@ -57,3 +59,16 @@ def test_a_missing_parent_stops_the_train_command_with_one_line(
     assert len(errors) == 1 and "Traceback" not in err, err
     assert "extends = 'il_rl_tuned'" in errors[0] and "ddpg, il, il_rl" in errors[0]
     assert not (tmp_path / "run").exists()
+
+
+def test_the_package_ships_the_papers_configs_and_the_best_current_one() -> None:
+    """configs/ holds exactly CONFIG_NAMES; each names itself; the experiments' configs in
+    benchmarks/configs/ load by path and are named after their files."""
+    assert CONFIG_NAMES == ("ddpg", "il", "il_rl", "ddpg_gain")
+    assert sorted(p.stem for p in config_path("il").parent.glob("*")) == sorted(CONFIG_NAMES)
+    for name in CONFIG_NAMES:
+        assert load_config(name).name == name
+    files = sorted(BENCHMARK_CONFIGS.glob("*.toml"))
+    assert [f.stem for f in files] == ["il_gain", "il_rl_choice", "il_rl_gain", "il_rl_gpu"]
+    for path in files:
+        assert load_config(path).name == path.stem
