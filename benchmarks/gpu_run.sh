@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The GPU parts of the learned planner in one run on the device machine
 # (docs/policy.md, "Training shapes from a file"): the environment's throughput
-# on the GPU, then the full-scale il_rl_gpu training, both into $OUT.
+# on the GPU, then the full-scale il_rl_gpu training (benchmarks/configs/il_rl_gpu.toml),
+# both into $OUT.
 #
 # Here, once, in the repository root (the device image lacks trimesh and
 # manifold3d, and the real shapes' packages):
@@ -9,7 +10,7 @@
 #   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
 #     --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 \
 #     --platform manylinux_2_17_x86_64 -d .whl trimesh==5.2.0 manifold3d==3.5.4
-#   slicerecon train --config il_rl_gpu --write-pool .whl/pool_il_rl_gpu.npz
+#   slicerecon train --config benchmarks/configs/il_rl_gpu.toml --write-pool .whl/pool_il_rl_gpu.npz
 # There (carry .whl; TRAIN_SECONDS bounds the training, which checkpoints and
 # resumes with RESUME=1):
 #   bash benchmarks/gpu_run.sh
@@ -30,7 +31,7 @@ python3 benchmarks/env_throughput.py --surfaces surrogate --batches 256,1024 --s
 resume=()
 if [ "${RESUME:-0}" = 1 ]; then resume=(--resume); fi
 status=0
-timeout "$TRAIN_SECONDS" bash -c "$(declare -f slicerecon); slicerecon train --config il_rl_gpu \
+timeout "$TRAIN_SECONDS" bash -c "$(declare -f slicerecon); slicerecon train --config benchmarks/configs/il_rl_gpu.toml \
   --device $DEVICE --pool .whl/pool_il_rl_gpu.npz --out $OUT/il_rl_gpu ${resume[*]:-}" \
   || status=$?
 echo "training exit status $status (124: stopped at TRAIN_SECONDS, resume with RESUME=1)"

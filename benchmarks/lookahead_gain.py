@@ -26,8 +26,8 @@ episodes are read off the same IoU with the shape.
 It prints a markdown report (``--out FILE`` also writes it; ``docs/results.md``
 shows it)::
 
-    python benchmarks/lookahead_gain.py --episodes 240 --config il_rl_choice --candidates 4 \\
-        --margin 0.002 --seed 7
+    python benchmarks/lookahead_gain.py --episodes 240 \\
+        --config benchmarks/configs/il_rl_choice.toml --candidates 4 --margin 0.002 --seed 7
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ from slicerecon.policy.train import training_pool
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default="il_rl_choice")
+    parser.add_argument("--config", default="benchmarks/configs/il_rl_choice.toml")
     parser.add_argument("--episodes", type=int, default=240)
     parser.add_argument("--candidates", type=int, default=4)
     parser.add_argument("--margin", type=float, default=0.002)

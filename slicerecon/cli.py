@@ -529,8 +529,8 @@ def train(
         typer.Option(
             "--config",
             help=(
-                "TOML file, or a shipped config: ddpg, il, il_rl, ddpg_gain, il_gain, "
-                "il_rl_gain, il_rl_choice, il_rl_gpu."
+                "TOML file (e.g. benchmarks/configs/il_rl_gain.toml), or a shipped config: "
+                "ddpg, il, il_rl, ddpg_gain."
             ),
         ),
     ] = "il_rl",

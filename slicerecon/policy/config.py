@@ -2,7 +2,10 @@
 
 A config is a TOML file whose top-level keys are :class:`TrainConfig` fields
 (:func:`load_config`); the shipped ones live in ``slicerecon/policy/configs/``
-(:data:`CONFIG_NAMES`, :func:`config_path`). :func:`slicerecon.policy.train.train`
+(:data:`CONFIG_NAMES`, :func:`config_path`). A file may start from another
+config with ``extends = "NAME"`` (a shipped config) or ``extends = "FILE.toml"``
+(relative to the file) and list only what differs, so that a block of settings
+several configs share is written once. :func:`slicerecon.policy.train.train`
 runs one.
 """
 
@@ -33,17 +36,11 @@ __all__ = [
 EVAL_SEED_OFFSET = 10_000
 """Evaluation shapes use seeds from here on; training seeds stay below it."""
 
-CONFIG_NAMES = (
-    "ddpg",
-    "il",
-    "il_rl",
-    "ddpg_gain",
-    "il_gain",
-    "il_rl_gain",
-    "il_rl_choice",
-    "il_rl_gpu",
-)
-"""The shipped configs in ``slicerecon/policy/configs/``."""
+CONFIG_NAMES = ("ddpg", "il", "il_rl", "ddpg_gain")
+"""The shipped configs in ``slicerecon/policy/configs/``: the paper's three
+(``ddpg``, ``il``, ``il_rl``) and the best current one (``ddpg_gain``,
+``docs/policy.md``). Other experiments' configs are in ``benchmarks/configs/``
+and load by path."""
 
 NOISES = ("gaussian", "ou")
 
@@ -62,7 +59,8 @@ class TrainConfig:
     """Real shapes (:mod:`slicerecon.realshapes` names) added to the training pool
     (:func:`~slicerecon.partition.episodes.real_occupancy`); only ever the
     development half of ``benchmarks/real_split.toml`` (a test checks the
-    shipped configs). Missing source packages are skipped with a warning."""
+    shipped and the benchmark configs). Missing source packages are skipped
+    with a warning."""
     real_variants: int = 1
     """Copies of each real shape in the pool: as it is, then stretched per axis."""
     max_stretch: float = 1.5
@@ -300,7 +298,9 @@ def load_config(source: str | os.PathLike[str], **overrides: Any) -> TrainConfig
     ----------
     source : str or path-like
         A name in :data:`CONFIG_NAMES` or a path to a ``.toml`` file whose top-level
-        keys are :class:`TrainConfig` fields.
+        keys are :class:`TrainConfig` fields, and optionally ``extends``: a name in
+        :data:`CONFIG_NAMES` or a path relative to the file, the config whose
+        settings the file's own keys replace (it may extend another in turn).
     **overrides
         Fields to replace (``None`` values are ignored).
 
@@ -309,7 +309,8 @@ def load_config(source: str | os.PathLike[str], **overrides: Any) -> TrainConfig
     InputError
         If the file is missing.
     FormatError
-        If it is not TOML or holds an unknown key.
+        If it, or a config it extends, is not TOML or holds an unknown key, or if
+        ``extends`` names neither a shipped config nor a file, or makes a cycle.
     """
     text_source = str(source)
     path = config_path(text_source) if text_source in CONFIG_NAMES else Path(text_source)
@@ -317,16 +318,7 @@ def load_config(source: str | os.PathLike[str], **overrides: Any) -> TrainConfig
         raise InputError(
             f"config file not found: {path} (give a .toml file or one of {', '.join(CONFIG_NAMES)})"
         )
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise FormatError(f"{path} is not valid TOML: {exc}") from exc
-    known = {f.name for f in dataclasses.fields(TrainConfig)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise FormatError(
-            f"{path}: unknown setting(s) {', '.join(unknown)}; see TrainConfig for the fields"
-        )
+    data = _settings(path, ())
     data.update({k: v for k, v in overrides.items() if v is not None})
     for key in ("shapes", "real_shapes"):
         if key in data:
@@ -335,3 +327,36 @@ def load_config(source: str | os.PathLike[str], **overrides: Any) -> TrainConfig
         return TrainConfig(**data)
     except TypeError as exc:
         raise FormatError(f"{path}: {exc}") from exc
+
+
+def _settings(path: Path, chain: tuple[Path, ...]) -> dict[str, Any]:
+    """The settings of one config file over those of the config it ``extends``.
+
+    ``chain`` holds the files that extend this one (to refuse a cycle).
+    """
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise FormatError(f"{path} is not valid TOML: {exc}") from exc
+    parent = data.pop("extends", None)
+    known = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise FormatError(
+            f"{path}: unknown setting(s) {', '.join(unknown)}; see TrainConfig for the fields"
+        )
+    if parent is None:
+        return data
+    if not isinstance(parent, str):
+        raise FormatError(f"{path}: extends must be a config name or a .toml path (got {parent!r})")
+    parent_path = config_path(parent) if parent in CONFIG_NAMES else path.parent / parent
+    if not parent_path.is_file():
+        raise FormatError(
+            f"{path}: extends = {parent!r} is neither a shipped config "
+            f"({', '.join(CONFIG_NAMES)}) nor a file ({parent_path})"
+        )
+    chain = (*chain, path.resolve())
+    if parent_path.resolve() in chain:
+        files = " -> ".join(p.name for p in (*chain, parent_path))
+        raise FormatError(f"{path}: extends makes a cycle ({files})")
+    return {**_settings(parent_path, chain), **data}

@@ -14,7 +14,7 @@ from slicerecon.errors import FormatError, OptionError
 from slicerecon.policy.buffers import ReplayBuffer
 from slicerecon.policy.checkpoint import load_checkpoint
 from slicerecon.policy.env import CutEnv, ShapePool
-from slicerecon.policy.train import TrainConfig, config_path, load_config, train
+from slicerecon.policy.train import CONFIG_NAMES, TrainConfig, config_path, load_config, train
 from slicerecon.policy.weights import load_actor
 
 TINY = dict(
@@ -240,18 +240,25 @@ def test_checkpoint_of_other_networks_is_refused_clearly(tmp_path: Path) -> None
 
 
 def test_gain_configs_train_only_on_development_real_shapes() -> None:
-    """The real shapes a shipped config trains on are all in the development half."""
+    """The real shapes a shipped or benchmark config trains on are all in the development
+    half, and the *_gain configs share one gain setting (ddpg_gain's)."""
     import tomllib
 
-    split = Path(__file__).resolve().parents[2] / "benchmarks" / "real_split.toml"
-    cases = tomllib.loads(split.read_text())["cases"]
+    benchmarks = Path(__file__).resolve().parents[2] / "benchmarks"
+    cases = tomllib.loads((benchmarks / "real_split.toml").read_text())["cases"]
     dev = {name for name, case in cases.items() if case["half"] == "dev"}
-    for name in ("ddpg_gain", "il_gain", "il_rl_gain", "il_rl_choice", "il_rl_gpu"):
-        cfg = load_config(name)
-        assert cfg.name == name and cfg.reward == "gain"
-        assert cfg.real_shapes and set(cfg.real_shapes) <= dev, set(cfg.real_shapes) - dev
-        assert (cfg.planes_min, cfg.planes_max) == (6, 24)
-    assert load_config("il_rl_gain").expert_stops
+    files = sorted((benchmarks / "configs").glob("*.toml"))
+    configs = [load_config(name) for name in CONFIG_NAMES] + [load_config(f) for f in files]
+    assert {"il_gain", "il_rl_gain", "il_rl_choice", "il_rl_gpu"} <= {c.name for c in configs}
+    setting = ("reward", "real_shapes", "real_variants", "max_stretch", "planes_min", "planes_max")
+    gain = load_config("ddpg_gain")
+    assert gain.reward == "gain" and len(gain.real_shapes) == 19
+    assert set(gain.real_shapes) <= dev, set(gain.real_shapes) - dev
+    for cfg in configs:
+        assert set(cfg.real_shapes) <= dev, (cfg.name, set(cfg.real_shapes) - dev)
+        if cfg.name.endswith(("_gain", "_choice", "_gpu")):
+            assert [getattr(cfg, k) for k in setting] == [getattr(gain, k) for k in setting]
+            assert cfg.keep_best and cfg.expert_stops == (cfg.demo_episodes > 0), cfg.name
     with pytest.raises(OptionError):
         TrainConfig(reward="area")
 
