@@ -2,7 +2,7 @@
 
 This is the one case pipeline, for one structure and for many:
 
-1. **read** (:func:`load_case`): the input becomes a
+1. **read** (:func:`slicerecon.case_inputs.load_case`): the input becomes a
    :class:`~slicerecon.annotation.Annotation`. A dense label map (NIfTI, NRRD,
    VTI, DICOM mask series, SEG; a mesh, voxelised) is cropped to all its
    structures together and its planes are chosen **once** over their union
@@ -33,22 +33,18 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from .annotation import Annotation, annotation_from_sections
-from .errors import EmptyMaskError, InputError, OptionError
-from .inputs import axis_upsample, prepare_inputs
-from .io import DICOM_KINDS, InputKind, detect_kind, load_ground_truth, load_input
-from .io.labelmap import LABEL_MAP_KINDS, read_label_map
-from .io.limits import check_grid
-from .io.rtstruct import read_rtstruct_structures
+from .case_inputs import CaseInput, case_from_label_map, load_case
+from .errors import OptionError
+from .evaluation import mean_metrics
+from .inputs import axis_upsample
 from .labels import LabelMap, Structure
 from .metrics import evaluate
 from .reconstruct import ReconstructConfig, reconstruct
@@ -66,7 +62,6 @@ __all__ = [
     "StructureResult",
     "case_from_label_map",
     "crop_to_structure",
-    "evaluate_structures",
     "load_case",
     "reconstruct_case",
     "reconstruct_structures",
@@ -88,329 +83,6 @@ CROP_PAD = 3
 """Voxels kept around a structure's extent when it is reconstructed on its own crop."""
 
 Progress = Callable[[str], None]
-
-
-# ----------------------------------------------------------------------------- read
-@dataclass(frozen=True, eq=False)
-class CaseInput:
-    """What a case reconstructs from, and what it is scored against.
-
-    Attributes
-    ----------
-    annotation : Annotation
-        The annotated planes of every structure, on the shared grid (the
-        input's grid cropped around all the structures, or the contours' grid).
-    labels : LabelMap or None
-        A dense input on the shared grid: each structure's silhouettes come
-        from it, and it is each structure's ground truth. None for sparse inputs.
-    truth : LabelMap, Volume, trimesh.Trimesh or None
-        A separate ground truth (``--gt``): a label map holding the
-        structures' values, or one shape for a one-structure case.
-    input_path : Path
-        The input.
-    kind : InputKind
-        What the input is.
-    output_affine : ndarray of shape (4, 4)
-        Voxel index → world mm of the grid the label map is written on (the
-        input's own grid for label maps).
-    output_shape : tuple of 3 int
-        Shape of that grid.
-    crop_lo : ndarray of shape (3,), int
-        Where the shared grid starts on the output grid.
-    missing : tuple of Structure
-        Structures the input lists but nothing was drawn for (RTSTRUCT ROIs
-        without closed contours): reported, not reconstructed.
-    """
-
-    annotation: Annotation
-    labels: LabelMap | None
-    input_path: Path
-    kind: InputKind
-    output_affine: NDArray[np.float64]
-    output_shape: tuple[int, int, int]
-    crop_lo: NDArray[np.int64]
-    truth: Any = None
-    missing: tuple[Structure, ...] = ()
-
-    @property
-    def dense(self) -> bool:
-        """True when the input was a dense mask (sampled here, its own ground truth)."""
-        return self.labels is not None
-
-    @property
-    def has_truth(self) -> bool:
-        """True when the case can be scored (a dense input, or a separate ground truth)."""
-        return self.labels is not None or self.truth is not None
-
-    @property
-    def shared(self) -> CrossSections:
-        """Every structure's planes together, on the shared grid."""
-        return self.annotation.cross_sections()
-
-
-def _as_label_map(volume: Volume, structure: Structure | None = None) -> LabelMap:
-    value = 1 if structure is None else structure.value
-    labels = volume.mask.astype(np.uint8 if 0 <= value < 256 else np.int32) * value
-    return LabelMap(labels, volume.affine, (structure or Structure(value),))
-
-
-def load_case(
-    input_path: str | os.PathLike[str],
-    config: ReconstructConfig,
-    *,
-    ground_truth: str | os.PathLike[str] | None = None,
-    image_dir: str | os.PathLike[str] | None = None,
-) -> CaseInput:
-    """Read an input into the annotation a case reconstructs from.
-
-    Parameters
-    ----------
-    input_path : path-like
-        Any input :func:`slicerecon.io.detect_kind` knows.
-    config : ReconstructConfig
-        Plane choice (``slices``, ``every``, ``axis``), structures (``label``,
-        ``roi``, ``union``), the memory budget, ``allow_irregular``.
-    ground_truth : path-like, optional
-        A separate ground truth: a closed mesh or mask for a one-structure
-        case, or a label map holding the structures' values.
-    image_dir : path-like, optional
-        The image series of an RTSTRUCT.
-
-    Returns
-    -------
-    CaseInput
-
-    Raises
-    ------
-    InputError
-        What the readers raise; ``--union`` on an RTSTRUCT; plane options on
-        a sparse input.
-    """
-    kind = detect_kind(input_path)
-    if image_dir is not None and kind.kind != "rtstruct":
-        raise OptionError(
-            f"an image series applies to RTSTRUCT inputs only; {input_path} is a {kind.kind} input"
-        )
-    if kind.kind == "rtstruct":
-        case = _load_rtstruct(kind, config, image_dir)
-    elif kind.kind == "contours":
-        if config.union:
-            raise OptionError("--union applies to label maps; a contour file holds one structure")
-        data = load_input(
-            kind.path,
-            label=config.label,
-            roi=config.roi,
-            memory_budget_gb=config.max_memory_gb,
-        )
-        case = _load_sparse_sections(kind, config, [Structure(1)], [data], exclusive=True)
-    else:
-        case = _load_label_map(kind, config)
-    if ground_truth is not None:
-        case = _with_ground_truth(case, ground_truth, config)
-    logger.info("%s: %s", kind.path, case.annotation.source)
-    return case
-
-
-def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
-    """A label map file (or a mesh, voxelised), read whole."""
-    selectors = config.selectors
-    if kind.kind not in LABEL_MAP_KINDS:  # a mesh, voxelised
-        volume = load_input(kind.path, label=config.label, memory_budget_gb=config.max_memory_gb)
-        assert isinstance(volume, Volume)
-        return case_from_label_map(_as_label_map(volume), config, kind=kind)
-    label_map = read_label_map(
-        kind.path,
-        allow_irregular=config.allow_irregular,
-        memory_budget_gb=config.max_memory_gb,
-    )
-    assert label_map is not None
-    if kind.kind == "dicom-seg" and len(selectors) == 1 and not config.union:
-        # one segment, whole: SEG segments may overlap, and the label map of
-        # every segment gives overlapping voxels to one of them
-        (structure,) = label_map.select(selectors, source=kind.path).structures
-        volume = load_input(kind.path, label=structure.value, memory_budget_gb=config.max_memory_gb)
-        assert isinstance(volume, Volume)
-        label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
-        return case_from_label_map(label_map, replace(config, label=None, roi=None), kind=kind)
-    return case_from_label_map(label_map, config, kind=kind)
-
-
-def case_from_label_map(
-    label_map: LabelMap, config: ReconstructConfig, *, kind: InputKind | None = None
-) -> CaseInput:
-    """The case of a label map: planes chosen over all its structures when it is dense.
-
-    Parameters
-    ----------
-    label_map : LabelMap
-        Every structure on the input's grid.
-    config : ReconstructConfig
-        ``slices`` / ``every`` / ``axis`` choose the planes of a dense label
-        map; ``label`` / ``union`` choose the structures.
-    kind : InputKind, optional
-        The file it was read from (default: an array in memory).
-
-    Returns
-    -------
-    CaseInput
-        A dense label map is its own ground truth; a sparse one (annotated on
-        some planes, :func:`slicerecon.inputs.looks_sparse`) keeps its planes.
-    """
-    kind = kind if kind is not None else InputKind("array", Path("<array>"))
-    if config.union:
-        label_map = replace(_as_label_map(label_map.union()), coordinates=label_map.coordinates)
-    elif config.selectors:
-        label_map = label_map.select(config.selectors, source=kind.path)
-    union = label_map.union()
-    if union.is_empty:
-        raise EmptyMaskError(f"{kind.path} holds no foreground for the chosen structures")
-    sections, _, cropped = prepare_inputs(
-        union,
-        slices=config.slices,
-        every=config.every,
-        axis=config.axis,
-        projections="auto",
-        memory_budget_gb=config.max_memory_gb,
-    )
-    crop_lo = np.rint(
-        np.linalg.solve(label_map.affine[:3, :3], sections.affine[:3, 3] - label_map.affine[:3, 3])
-    ).astype(np.int64)
-    region = tuple(
-        slice(int(a), int(a) + n) for a, n in zip(crop_lo, sections.grid_shape, strict=True)
-    )
-    labels = label_map.labels[region]
-    planes = np.rint(sections.indices).astype(np.int64)
-    own = [
-        CrossSections(
-            np.moveaxis(labels == s.value, sections.axis, 0)[planes],
-            sections.indices,
-            sections.axis,
-            sections.affine,
-            sections.grid_shape,
-        )
-        for s in label_map.structures
-    ]
-    dense = cropped is not None
-    reading = "dense mask" if dense else "sparse label map"
-    annotation = annotation_from_sections(
-        label_map.structures,
-        own,
-        shared=True,
-        coordinates=label_map.coordinates,
-        exclusive=True,
-    )
-    annotation = replace(
-        annotation,
-        source=f"{reading}, {len(label_map.structures)} structure(s): {annotation.describe()}",
-    )
-    dense_labels = (
-        LabelMap(labels, sections.affine, label_map.structures, label_map.coordinates)
-        if dense
-        else None
-    )
-    return CaseInput(
-        annotation,
-        dense_labels,
-        kind.path,
-        kind,
-        label_map.affine,
-        label_map.shape,
-        crop_lo,
-    )
-
-
-def _load_rtstruct(
-    kind: InputKind, config: ReconstructConfig, image_dir: str | os.PathLike[str] | None
-) -> CaseInput:
-    """Every chosen ROI of an RTSTRUCT on its own contour planes of one shared grid."""
-    if config.union:
-        raise OptionError("--union applies to label maps; choose RTSTRUCT ROIs with --label")
-    structures, sections, _ = read_rtstruct_structures(
-        kind.path,
-        rois=config.selectors,
-        allow_irregular=config.allow_irregular,
-        image_dir=image_dir if image_dir is not None else kind.image_dir,
-        memory_budget_gb=config.max_memory_gb,
-    )
-    missing = tuple(s for s, own in zip(structures, sections, strict=True) if own is None)
-    for structure in missing:
-        logger.warning("ROI %s has no contours: nothing to reconstruct", structure.label)
-    drawn = [(s, own) for s, own in zip(structures, sections, strict=True) if own is not None]
-    case = _load_sparse_sections(
-        kind,
-        config,
-        [s for s, _ in drawn],
-        [own for _, own in drawn],
-        exclusive=False,
-        coordinates="LPS",
-    )
-    return replace(case, missing=missing)
-
-
-def _load_sparse_sections(
-    kind: InputKind,
-    config: ReconstructConfig,
-    structures: Sequence[Structure],
-    sections: Sequence[Volume | CrossSections],
-    *,
-    exclusive: bool,
-    coordinates: str | None = None,
-) -> CaseInput:
-    """Contours already on their planes: each structure's own planes, no ground truth."""
-    if config.slices is not None or config.every is not None:
-        raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
-    own = [s for s in sections if isinstance(s, CrossSections)]
-    if len(own) != len(sections):
-        raise InputError(f"{kind.path} holds a dense mask where contours were expected")
-    first = own[0]
-    shape = list(first.grid_shape)
-    shape[first.axis] *= axis_upsample(first)
-    check_grid(shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
-    frame = coordinates or ("LPS" if kind.kind in DICOM_KINDS else "RAS")
-    annotation = annotation_from_sections(
-        structures, own, shared=False, coordinates=frame, exclusive=exclusive
-    )
-    annotation = replace(
-        annotation,
-        source=f"contours, {len(structures)} structure(s): {annotation.describe()}",
-    )
-    return CaseInput(
-        annotation,
-        None,
-        kind.path,
-        kind,
-        annotation.affine,
-        annotation.grid_shape,
-        np.zeros(3, np.int64),
-    )
-
-
-def _with_ground_truth(
-    case: CaseInput, ground_truth: str | os.PathLike[str], config: ReconstructConfig
-) -> CaseInput:
-    """The case scored against a separate ground truth (``--gt``)."""
-    structures = case.annotation.structures
-    if len(structures) == 1:
-        truth = load_ground_truth(
-            ground_truth,
-            label=config.label,
-            union=config.union,
-            allow_irregular=config.allow_irregular,
-            memory_budget_gb=config.max_memory_gb,
-        )
-        return replace(case, truth=truth)
-    if detect_kind(ground_truth).kind not in LABEL_MAP_KINDS:
-        raise OptionError(
-            f"the input holds {len(structures)} structures and {ground_truth} is one shape: "
-            "give a label map with their values as --gt, or choose one structure with --label"
-        )
-    truth_map = read_label_map(
-        ground_truth,
-        allow_irregular=config.allow_irregular,
-        memory_budget_gb=config.max_memory_gb,
-    )
-    assert truth_map is not None
-    return replace(case, truth=truth_map)
 
 
 # ------------------------------------------------------------------------ reconstruct
@@ -777,18 +449,6 @@ def _size(item: StructureResult) -> float:
 
 
 # ----------------------------------------------------------------------------- score
-def _mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """The mean of each numeric metric over the structures (a structure's own for one)."""
-    if len(per_structure) == 1:
-        return dict(next(iter(per_structure.values())))
-    keys = [
-        k
-        for k, v in next(iter(per_structure.values())).items()
-        if isinstance(v, int | float) and not isinstance(v, bool)
-    ]
-    return {k: float(np.mean([m[k] for m in per_structure.values()])) for k in keys}
-
-
 def score_case(
     case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
 ) -> dict[str, Any] | None:
@@ -824,7 +484,7 @@ def score_case(
         scored[item.structure.label] = item.metrics
     if not scored:
         return None
-    return {"structures": scored, "mean": _mean_metrics(scored)}
+    return {"structures": scored, "mean": mean_metrics(scored)}
 
 
 # ------------------------------------------------------------------------------- run
@@ -927,100 +587,3 @@ def reconstruct_structures(
         label_map = source if isinstance(source, LabelMap) else LabelMap.from_array(*source)
         case = case_from_label_map(label_map, config)
     return reconstruct_case(case, config)
-
-
-def evaluate_structures(
-    prediction: str | os.PathLike[str],
-    ground_truth: str | os.PathLike[str],
-    *,
-    n_points: int = 50_000,
-    seed: int = 0,
-    memory_budget_gb: float | None = None,
-) -> dict[str, Any] | None:
-    """Score every structure of a label-map ground truth against its own prediction.
-
-    Parameters
-    ----------
-    prediction : path-like
-        A label map with the ground truth's label values (NIfTI, NRRD, VTI,
-        DICOM; e.g. a run's ``labels.nii.gz``), or a run's output directory
-        holding ``meshes/``, or that ``meshes/`` directory itself
-        (``<value>_<name>.<fmt>`` files: each mesh is scored as the exact
-        surface of structure ``<value>``).
-    ground_truth : path-like
-        A dense label map.
-    n_points, seed
-        As for :func:`slicerecon.metrics.evaluate`.
-    memory_budget_gb : float, optional
-        As for :func:`slicerecon.io.load_input`.
-
-    Returns
-    -------
-    dict or None
-        None when the ground truth holds fewer than two structures (score it
-        as one shape). Otherwise ``{"structures": {"<value>_<name>": metrics},
-        "mean": {...}, "missing": [...]}`` as in a run's ``metrics.json``:
-        ``missing`` lists the ground-truth structures the prediction does not
-        hold (left out of the mean).
-
-    Raises
-    ------
-    InputError
-        A prediction that is a single mesh (it cannot say which structure it
-        is: give ``--label``), or a directory without meshes.
-    """
-    from .io.limits import DEFAULT_MEMORY_BUDGET_GB
-
-    budget = DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb
-    if detect_kind(ground_truth).kind not in LABEL_MAP_KINDS:
-        return None
-    truth = read_label_map(ground_truth, memory_budget_gb=budget)
-    if truth is None or len(truth.structures) < 2:
-        return None
-    pred_path = Path(prediction)
-    meshes: dict[int, Path] = {}
-    pred_map: LabelMap | None = None
-    if pred_path.is_dir():
-        folder = pred_path / "meshes" if (pred_path / "meshes").is_dir() else pred_path
-        for file in sorted(folder.iterdir()):
-            value = _mesh_value(file)
-            if value is not None and file.suffix.lower() in (".stl", ".ply", ".obj", ".off"):
-                meshes[value] = file
-        if not meshes:
-            raise InputError(
-                f"{pred_path} holds no <value>_<name> meshes (a run's meshes/ directory) to "
-                "score each structure of the ground truth"
-            )
-    elif detect_kind(pred_path).kind == "mesh":
-        raise InputError(
-            f"the ground truth {ground_truth} holds {len(truth.structures)} structures and "
-            f"{pred_path.name} is one mesh: give --label to score it against one, or pass a "
-            "label map or a meshes/ directory"
-        )
-    else:
-        pred_map = read_label_map(pred_path, memory_budget_gb=budget)
-    scored: dict[str, dict[str, Any]] = {}
-    missing: list[str] = []
-    for structure in truth.structures:
-        target = truth.mask(structure.value)
-        pred: Any = None
-        if pred_map is not None:
-            if any(s.value == structure.value for s in pred_map.structures):
-                pred = pred_map.mask(structure.value)
-        elif structure.value in meshes:
-            pred = load_ground_truth(meshes[structure.value])
-        if pred is None:
-            missing.append(structure.label)
-            continue
-        scored[structure.label] = evaluate(pred, target, n_points=n_points, seed=seed).to_dict()
-    if not scored:
-        raise InputError(
-            f"{pred_path} holds none of the {len(truth.structures)} structures of {ground_truth}"
-        )
-    return {"structures": scored, "mean": _mean_metrics(scored), "missing": missing}
-
-
-def _mesh_value(path: Path) -> int | None:
-    """The label value a ``meshes/`` file is named for (``<value>_<name>.<fmt>``)."""
-    head = path.name.split(".")[0].split("_")[0]
-    return int(head) if head.isdigit() else None

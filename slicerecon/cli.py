@@ -411,7 +411,7 @@ def evaluate(
     from .metrics import evaluate as evaluate_metrics
 
     if label is None:
-        from .case import evaluate_structures
+        from .evaluation import evaluate_structures
 
         per_structure = evaluate_structures(
             prediction, ground_truth, n_points=n_points, seed=seed, memory_budget_gb=max_memory

@@ -1,0 +1,142 @@
+"""Scoring structures: each structure against its own ground truth.
+
+:func:`mean_metrics` is how a case of several structures is summarised (the
+mean of each metric; a structure's own for one); :func:`evaluate_structures`
+scores the structures of a prediction on disk (a label map, or a run's
+``meshes/``) against a label-map ground truth (``slicerecon evaluate``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+from .io import detect_kind, load_ground_truth
+from .io.labelmap import LABEL_MAP_KINDS, read_label_map
+from .labels import LabelMap
+from .metrics import evaluate
+
+__all__ = ["evaluate_structures", "mean_metrics"]
+
+
+def mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """The mean of each numeric metric over the structures (a structure's own for one).
+
+    Parameters
+    ----------
+    per_structure : dict of str to dict
+        Each structure's metrics (:meth:`slicerecon.metrics.Metrics.to_dict`).
+
+    Returns
+    -------
+    dict
+    """
+    if len(per_structure) == 1:
+        return dict(next(iter(per_structure.values())))
+    keys = [
+        k
+        for k, v in next(iter(per_structure.values())).items()
+        if isinstance(v, int | float) and not isinstance(v, bool)
+    ]
+    return {k: float(np.mean([m[k] for m in per_structure.values()])) for k in keys}
+
+
+def evaluate_structures(
+    prediction: str | os.PathLike[str],
+    ground_truth: str | os.PathLike[str],
+    *,
+    n_points: int = 50_000,
+    seed: int = 0,
+    memory_budget_gb: float | None = None,
+) -> dict[str, Any] | None:
+    """Score every structure of a label-map ground truth against its own prediction.
+
+    Parameters
+    ----------
+    prediction : path-like
+        A label map with the ground truth's label values (NIfTI, NRRD, VTI,
+        DICOM; e.g. a run's ``labels.nii.gz``), or a run's output directory
+        holding ``meshes/``, or that ``meshes/`` directory itself
+        (``<value>_<name>.<fmt>`` files: each mesh is scored as the exact
+        surface of structure ``<value>``).
+    ground_truth : path-like
+        A dense label map.
+    n_points, seed
+        As for :func:`slicerecon.metrics.evaluate`.
+    memory_budget_gb : float, optional
+        As for :func:`slicerecon.io.load_input`.
+
+    Returns
+    -------
+    dict or None
+        None when the ground truth holds fewer than two structures (score it
+        as one shape). Otherwise ``{"structures": {"<value>_<name>": metrics},
+        "mean": {...}, "missing": [...]}`` as in a run's ``metrics.json``:
+        ``missing`` lists the ground-truth structures the prediction does not
+        hold (left out of the mean).
+
+    Raises
+    ------
+    InputError
+        A prediction that is a single mesh (it cannot say which structure it
+        is: give ``--label``), or a directory without meshes.
+    """
+    from .io.limits import DEFAULT_MEMORY_BUDGET_GB
+
+    budget = DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb
+    if detect_kind(ground_truth).kind not in LABEL_MAP_KINDS:
+        return None
+    truth = read_label_map(ground_truth, memory_budget_gb=budget)
+    if truth is None or len(truth.structures) < 2:
+        return None
+    pred_path = Path(prediction)
+    meshes: dict[int, Path] = {}
+    pred_map: LabelMap | None = None
+    if pred_path.is_dir():
+        folder = pred_path / "meshes" if (pred_path / "meshes").is_dir() else pred_path
+        for file in sorted(folder.iterdir()):
+            value = _mesh_value(file)
+            if value is not None and file.suffix.lower() in (".stl", ".ply", ".obj", ".off"):
+                meshes[value] = file
+        if not meshes:
+            raise InputError(
+                f"{pred_path} holds no <value>_<name> meshes (a run's meshes/ directory) to "
+                "score each structure of the ground truth"
+            )
+    elif detect_kind(pred_path).kind == "mesh":
+        raise InputError(
+            f"the ground truth {ground_truth} holds {len(truth.structures)} structures and "
+            f"{pred_path.name} is one mesh: give --label to score it against one, or pass a "
+            "label map or a meshes/ directory"
+        )
+    else:
+        pred_map = read_label_map(pred_path, memory_budget_gb=budget)
+    scored: dict[str, dict[str, Any]] = {}
+    missing: list[str] = []
+    for structure in truth.structures:
+        target = truth.mask(structure.value)
+        pred: Any = None
+        if pred_map is not None:
+            if any(s.value == structure.value for s in pred_map.structures):
+                pred = pred_map.mask(structure.value)
+        elif structure.value in meshes:
+            pred = load_ground_truth(meshes[structure.value])
+        if pred is None:
+            missing.append(structure.label)
+            continue
+        scored[structure.label] = evaluate(pred, target, n_points=n_points, seed=seed).to_dict()
+    if not scored:
+        raise InputError(
+            f"{pred_path} holds none of the {len(truth.structures)} structures of {ground_truth}"
+        )
+    return {"structures": scored, "mean": mean_metrics(scored), "missing": missing}
+
+
+def _mesh_value(path: Path) -> int | None:
+    """The label value a ``meshes/`` file is named for (``<value>_<name>.<fmt>``)."""
+    head = path.name.split(".")[0].split("_")[0]
+    return int(head) if head.isdigit() else None
