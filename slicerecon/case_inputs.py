@@ -165,21 +165,31 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         volume = load_input(kind.path, label=config.label, memory_budget_gb=config.max_memory_gb)
         assert isinstance(volume, Volume)
         return case_from_label_map(_as_label_map(volume), config, kind=kind)
+    if kind.kind == "dicom-seg" and len(selectors) == 1 and not config.union:
+        # one segment, whole: SEG segments may overlap, and the label map of
+        # every segment gives overlapping voxels to one of them
+        structure = _seg_segment(kind, selectors[0])
+        volume = load_input(kind.path, label=structure.value, memory_budget_gb=config.max_memory_gb)
+        assert isinstance(volume, Volume)
+        label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
+        return case_from_label_map(label_map, replace(config, label=None, roi=None), kind=kind)
     label_map = read_label_map(
         kind.path,
         allow_irregular=config.allow_irregular,
         memory_budget_gb=config.max_memory_gb,
     )
     assert label_map is not None
-    if kind.kind == "dicom-seg" and len(selectors) == 1 and not config.union:
-        # one segment, whole: SEG segments may overlap, and the label map of
-        # every segment gives overlapping voxels to one of them
-        (structure,) = label_map.select(selectors, source=kind.path).structures
-        volume = load_input(kind.path, label=structure.value, memory_budget_gb=config.max_memory_gb)
-        assert isinstance(volume, Volume)
-        label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
-        return case_from_label_map(label_map, replace(config, label=None, roi=None), kind=kind)
     return case_from_label_map(label_map, config, kind=kind)
+
+
+def _seg_segment(kind: InputKind, selector: int | str) -> Structure:
+    """The SEG segment a selector names (headers only), or LabelError listing them."""
+    from .io.dicom import dicom_info
+    from .selection import choose_structure
+
+    names = {int(s["number"]): str(s["label"]) for s in dicom_info(kind.path)["segments"]}
+    value = choose_structure(names, selector, kind="label", source=kind.path)
+    return Structure(value, names[value])
 
 
 def case_from_label_map(

@@ -77,7 +77,7 @@ def _pchip_slopes(z: torch.Tensor, y: torch.Tensor, count: torch.Tensor) -> torc
     """Fritsch–Carlson slopes of the monotone cubics through ``y`` at ``z`` (float64).
 
     ``z`` (n, P), ``y`` (n, P, I, J); row ``b`` uses its first ``count[b] >= 3``
-    knots (the rule of :func:`slicerecon.surface.sdf._pchip_slopes`, scipy's
+    knots (the rule of :func:`slicerecon.surface.across_planes.pchip_slopes`, scipy's
     ``PchipInterpolator``). Slopes past ``count`` are meaningless.
     """
     n, p = z.shape
