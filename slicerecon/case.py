@@ -42,11 +42,15 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from .case_inputs import CaseInput, case_from_label_map, load_case
+from .case_outputs import check_outdir, write_case
 from .errors import OptionError
 from .evaluation import mean_metrics
 from .inputs import axis_upsample
+from .io.projections import read_projection_files
 from .labels import LabelMap, Structure
 from .metrics import evaluate
+from .metrics.inputs import place
+from .rasterize import mesh_to_mask
 from .reconstruct import ReconstructConfig, reconstruct
 from .sampling import projections_from_sections, projections_from_volume
 from .sections import CrossSections, Projections, Volume
@@ -264,7 +268,6 @@ def _projections(
         raise OptionError(
             "silhouette files (--projections FILE) describe one structure; choose one with --label"
         )
-    from .io.projections import read_projection_files
 
     return read_projection_files(config.projection_files, sub)
 
@@ -430,8 +433,6 @@ def _voxels(
 ) -> NDArray[np.bool_]:
     """A structure's voxels on a grid: its occupancy moved by whole voxels when it lies on
     the grid's lattice, else its mesh rasterized there."""
-    from .metrics.inputs import place
-    from .rasterize import mesh_to_mask
 
     occupancy = item.occupancy
     if occupancy is not None and np.allclose(occupancy.affine[:3, :3], affine[:3, :3]):
@@ -512,7 +513,6 @@ def run_case(
         The case summary: output paths, mean metrics (or None), structures,
         timings, part and plane counts, whether every written mesh is watertight.
     """
-    from .case_outputs import check_outdir, write_case
 
     def say(stage: str) -> None:
         if progress is not None:

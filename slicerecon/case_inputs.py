@@ -26,12 +26,14 @@ from .annotation import Annotation, annotation_from_sections
 from .errors import EmptyMaskError, InputError, OptionError
 from .inputs import axis_upsample, prepare_inputs
 from .io import DICOM_KINDS, InputKind, detect_kind, load_ground_truth, load_input
+from .io.dicom import dicom_info
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import check_grid
 from .io.rtstruct import read_rtstruct_structures
 from .labels import LabelMap, Structure
 from .reconstruct import ReconstructConfig
 from .sections import CrossSections, Volume
+from .selection import choose_structure
 
 __all__ = ["CaseInput", "case_from_label_map", "load_case"]
 
@@ -184,8 +186,6 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
 
 def _seg_segment(kind: InputKind, selector: int | str) -> Structure:
     """The SEG segment a selector names (headers only), or LabelError listing them."""
-    from .io.dicom import dicom_info
-    from .selection import choose_structure
 
     names = {int(s["number"]): str(s["label"]) for s in dicom_info(kind.path)["segments"]}
     value = choose_structure(names, selector, kind="label", source=kind.path)

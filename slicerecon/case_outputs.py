@@ -37,6 +37,7 @@ from .errors import OptionError
 from .io.atomic import write_json
 from .io.mesh import write_mesh
 from .io.outputs import dicom_image_series, write_label_outputs
+from .preview import write_preview
 from .rasterize import is_closed
 from .reconstruct import ReconstructConfig
 from .results import METRICS_FILE, PLAN_FILE, PREVIEW_FILE, STRUCTURES_FILE, mesh_file
@@ -242,7 +243,6 @@ def _write_preview(
     path: Path, case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
 ) -> None:
     """The preview: one structure's own view, or every structure together."""
-    from .preview import write_preview
 
     items = result.reconstructed
     if len(case.annotation.structures) == 1 and items and items[0].sections is not None:

@@ -33,8 +33,18 @@ from typing import Any
 
 import numpy as np
 
+from . import __version__
 from .errors import FormatError, InputError, OptionError
 from .io.atomic import atomic_path
+from .shapes import (
+    FAMILIES,
+    SHAPES,
+    analytic_volume,
+    family_of,
+    make_shape,
+    shape_names,
+    shape_params,
+)
 
 __all__ = [
     "MANIFEST",
@@ -104,7 +114,6 @@ def resolve_shapes(shapes: str | Sequence[str] | None) -> list[str]:
         If a name is unknown or nothing is selected.
     """
     from .realshapes import REAL_SHAPES, available_real_shapes
-    from .shapes import FAMILIES, SHAPES, shape_names
 
     if shapes is None:
         return shape_names()
@@ -265,10 +274,8 @@ def make_dataset(
     DependencyError
         If a requested real shape's package is missing.
     """
-    from . import __version__
     from .io.nifti import write_nifti
     from .realshapes import REAL_SHAPES, real_shape
-    from .shapes import SHAPES, analytic_volume, family_of, make_shape, shape_params
 
     folder = Path(outdir)
     names = resolve_shapes(shapes)

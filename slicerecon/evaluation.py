@@ -17,6 +17,7 @@ import numpy as np
 from .errors import InputError
 from .io import detect_kind, load_ground_truth
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
+from .io.limits import DEFAULT_MEMORY_BUDGET_GB
 from .labels import LabelMap
 from .metrics import evaluate
 
@@ -85,7 +86,6 @@ def evaluate_structures(
         A prediction that is a single mesh (it cannot say which structure it
         is: give ``--label``), or a directory without meshes.
     """
-    from .io.limits import DEFAULT_MEMORY_BUDGET_GB
 
     budget = DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb
     if detect_kind(ground_truth).kind not in LABEL_MAP_KINDS:

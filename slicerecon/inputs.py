@@ -19,6 +19,8 @@ import numpy as np
 
 from .errors import OptionError
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
+from .io.projections import read_projection_files
+from .sampling import projections_from_sections, projections_from_volume, sample_sections
 from .sections import AXIS_NAMES, CrossSections, Projections, Volume, axis_index
 
 __all__ = [
@@ -39,7 +41,6 @@ DEFAULT_SLICES = 16
 
 
 def _sparse_volume_to_sections(volume: Volume, axis: int) -> CrossSections:
-    from .sampling import sample_sections
 
     planes = volume.occupied_planes(axis)
     full = sample_sections(volume, every=1, axis=axis)
@@ -96,7 +97,6 @@ def prepare_inputs(
     projections : Projections
     ground_truth : Volume or None
     """
-    from .sampling import projections_from_sections, projections_from_volume, sample_sections
 
     if isinstance(projections, str):
         files = (
@@ -143,8 +143,6 @@ def prepare_inputs(
     samples[sections.axis] *= axis_upsample(sections)  # the sdf surface's field samples
     check_grid(samples, what="the reconstruction grid", memory_budget_gb=memory_budget_gb)
     if files:
-        from .io.projections import read_projection_files
-
         return sections, read_projection_files(files, sections), truth
     source = projections
     if source == "auto":

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from .io.atomic import atomic_path
 from .sampling import pool_any
 from .sections import AXIS_NAMES, Box, CrossSections, Projections, Volume, in_plane_axes
 
@@ -134,7 +135,6 @@ def write_preview(
     """
     from PIL import Image, ImageDraw
 
-    from .io.atomic import atomic_path
     from .rasterize import mesh_to_mask
 
     grid = sections.grid_shape

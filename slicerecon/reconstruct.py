@@ -34,10 +34,13 @@ from .inputs import (
 )
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget
 from .options import INTERPOLATIONS, OPTION_NAMES, PLAIN_SDF, ReconstructOptions
-from .partition.planner import planner_names
+from .partition.lookahead import PlanningSurface
+from .partition.planner import Plan, PlanPart, plan_partition, planner_names
+from .sampling import pool_any, pool_sections, visual_hull
 from .sections import Box, CrossSections, Projections, Volume, axis_index
 from .selection import parse_selector
 from .surface.methods import method_names
+from .surface.smooth import taubin_smooth
 
 if TYPE_CHECKING:
     from .partition.lookahead import PlanningSurface
@@ -232,7 +235,6 @@ def planning_occupancy(sections: CrossSections, projections: Projections) -> np.
     -------
     ndarray of shape ``sections.grid_shape``, bool
     """
-    from .sampling import visual_hull
 
     return _exact_on_planes(visual_hull(projections, sections.grid_shape), sections)
 
@@ -248,8 +250,6 @@ def _planning_surface(
     along the hull and carved by it; on a pooled grid the sections and the
     hull are pooled the same way (:func:`~slicerecon.sampling.pool_sections`).
     """
-    from .partition.lookahead import PlanningSurface
-    from .sampling import pool_any, pool_sections
     from .surface.part import part_voxels
 
     part_options = options.with_changes(method="sdf")
@@ -327,8 +327,6 @@ def reconstruct(
     EmptyMaskError
         No section holds foreground.
     """
-    from .partition.planner import plan_partition
-    from .sampling import visual_hull
     from .surface.part import reconstruct_surface
 
     options = (options or ReconstructOptions()).with_changes(**changes)
@@ -380,9 +378,7 @@ def _reconstruct_whole_shape(
     sections: CrossSections, projections: Projections, options: ReconstructOptions
 ) -> Reconstruction:
     """A whole-shape baseline on all the sections, recorded as a one-part plan."""
-    from .partition.planner import Plan, PlanPart
     from .surface.baselines import reconstruct_baseline, sections_box
-    from .surface.smooth import taubin_smooth
 
     timings: dict[str, float] = {}
     with _timed(timings, "plan"):

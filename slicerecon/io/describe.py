@@ -20,7 +20,13 @@ from scipy import ndimage
 
 from ..errors import EmptyMaskError
 from ..sections import AXIS_NAMES, CrossSections, Volume
+from . import detect_kind, load_input
+from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, reading
+from .nrrd import nrrd_info, read_nrrd_label_map
+from .polygons import polygon_normal
+from .rtstruct import roi_contours
+from .vti import read_vti
 
 __all__ = ["describe_input", "describe_label_map", "describe_sections", "describe_volume"]
 
@@ -170,8 +176,6 @@ def _polygon_record(
 
 
 def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
-    from .polygons import polygon_normal
-    from .rtstruct import roi_contours
 
     details: dict[str, Any] = {}
     rois = []
@@ -186,8 +190,6 @@ def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
         rois.append(record)
     details["rois"] = rois
     if image_dir is not None:
-        from .dicom import dicom_info
-
         details["image_series"] = {
             "path": str(image_dir),
             **dicom_info(image_dir, allow_irregular=True),
@@ -232,7 +234,6 @@ def describe_input(
         What :func:`~slicerecon.io.load_input` raises for unreadable files;
         never for a file that holds several structures or empty ones.
     """
-    from . import detect_kind, load_input
 
     check_budget(memory_budget_gb)
     with reading(path):
@@ -249,8 +250,6 @@ def describe_input(
             details["structures"] = describe_label_map(values, affine)
             details["labels"] = {str(s["value"]): s["voxels"] for s in details["structures"]}
         elif kind.kind == "nrrd":
-            from .nrrd import nrrd_info, read_nrrd_label_map
-
             header = nrrd_info(kind.path)
             label_map = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
             details["coordinates"] = label_map.coordinates
@@ -266,14 +265,10 @@ def describe_input(
             if header.is_segmentation:
                 details["segments"] = [s.to_dict() for s in header.segments]
         elif kind.kind == "vti":
-            from .vti import read_vti
-
             image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
             details.update(_grid(image.affine, image.values.shape))
             details["structures"] = describe_label_map(np.asarray(image.values), image.affine)
         elif kind.kind == "dicom-series":
-            from .dicom import dicom_info, read_dicom_series_values
-
             # described on the grid --allow-irregular would give: info never refuses
             details["dicom"] = dicom_info(kind.path, allow_irregular=True)
             values, affine = read_dicom_series_values(
@@ -282,8 +277,6 @@ def describe_input(
             details.update(_grid(affine, values.shape))
             details["structures"] = describe_label_map(values, affine)
         elif kind.kind == "dicom-seg":
-            from .dicom import dicom_info, read_dicom_seg
-
             details["dicom"] = dicom_info(kind.path)
             segments = []
             for segment in details["dicom"]["segments"]:

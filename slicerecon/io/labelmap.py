@@ -24,7 +24,12 @@ from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, LabelError
 from ..labels import LPS_TO_RAS, LabelMap, as_labels
+from . import detect_kind
+from .atomic import atomic_path
+from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
+from .nrrd import read_nrrd_label_map
+from .vti import read_vti
 
 __all__ = [
     "LABEL_MAP_KINDS",
@@ -71,7 +76,6 @@ def read_label_map(
 def _read_label_map(
     path: str | os.PathLike[str], allow_irregular: bool, memory_budget_gb: float
 ) -> LabelMap | None:
-    from . import detect_kind
 
     kind = detect_kind(path)
     if kind.kind not in LABEL_MAP_KINDS:
@@ -82,17 +86,11 @@ def _read_label_map(
         values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
         result = LabelMap.from_array(values, affine)
     elif kind.kind == "nrrd":
-        from .nrrd import read_nrrd_label_map
-
         result = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
     elif kind.kind == "vti":
-        from .vti import read_vti
-
         image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
         result = LabelMap.from_array(np.asarray(image.values), image.affine)
     elif kind.kind == "dicom-series":
-        from .dicom import read_dicom_series_values
-
         values, affine = read_dicom_series_values(
             kind.path, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb
         )
@@ -112,7 +110,6 @@ def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
     Overlapping segments (a SEG may let a voxel belong to several) are made
     disjoint: a voxel goes to the later segment, with a warning.
     """
-    from .dicom import dicom_info, read_dicom_seg
 
     info = dicom_info(path)
     labels: NDArray[np.integer] | None = None
@@ -166,8 +163,6 @@ def write_label_map(
     Path
     """
     import nibabel as nib
-
-    from .atomic import atomic_path
 
     values = as_labels(np.asarray(labels))
     if values.dtype.itemsize > 2 or values.dtype.kind == "i" and values.min() >= 0:

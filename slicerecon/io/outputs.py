@@ -37,6 +37,10 @@ from numpy.typing import NDArray
 
 from ..errors import SlicereconError
 from ..labels import LPS_TO_RAS, Structure
+from .dicom.seg_writer import write_seg
+from .labelmap import write_label_map
+from .nrrd_writer import write_seg_nrrd
+from .rtstruct_writer import write_rtstruct
 
 __all__ = ["LabelOutputs", "dicom_image_series", "write_label_outputs"]
 
@@ -138,8 +142,6 @@ def write_label_outputs(
         When ``labels.nii.gz`` or ``labels.seg.nrrd`` cannot be written; DICOM
         outputs that cannot be made are skipped with a warning instead.
     """
-    from .labelmap import write_label_map
-    from .nrrd_writer import write_seg_nrrd
 
     out = Path(outdir)
     result = LabelOutputs()
@@ -160,7 +162,6 @@ def write_label_outputs(
     if not chosen:
         result.skipped["seg"] = "no structure holds a voxel"
         return result
-    from .dicom.seg_writer import write_seg
 
     try:
         result.written["seg"] = write_seg(
@@ -170,8 +171,6 @@ def write_label_outputs(
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
     if rtstruct is not None:
-        from .rtstruct_writer import write_rtstruct
-
         try:
             result.written["rtstruct"] = write_rtstruct(
                 labels,

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, FormatError, GeometryError, InputError
+from ..sampling import projections_from_sections
 from ..sections import AXIS_NAMES, CrossSections, Projection, Projections, in_plane_axes
 
 __all__ = ["PARALLEL_TOLERANCE_DEG", "read_projection_files"]
@@ -99,7 +100,6 @@ def read_projection_files(
     EmptyMaskError
         A silhouette without foreground.
     """
-    from ..sampling import projections_from_sections
 
     files = [Path(p) for p in paths]
     if not 1 <= len(files) <= 3:

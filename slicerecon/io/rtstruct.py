@@ -36,6 +36,7 @@ from ..errors import (
 from ..labels import Structure
 from ..sections import CrossSections
 from ..selection import choose_structure, parse_selector
+from .dicom.series import dicom_series_geometry
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 from .polygons import sections_from_polygons
@@ -279,8 +280,6 @@ def read_rtstruct(
     polygons, names, image_uids = _roi_polygons(ds, number, name, p)
     reference = None
     if image_dir is not None:
-        from .dicom.series import dicom_series_geometry
-
         affine, shape, series_uids = dicom_series_geometry(
             image_dir, allow_irregular=allow_irregular
         )
@@ -410,8 +409,6 @@ def _read_structures(
         raise EmptyMaskError(f"{p}: no chosen ROI has a closed planar contour")
     reference = None
     if image_dir is not None:
-        from .dicom.series import dicom_series_geometry
-
         affine, shape, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
         reference = (affine, shape)
         pixel_spacing = None

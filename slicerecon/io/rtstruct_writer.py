@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import __version__
 from ..errors import EmptyMaskError, FormatError, InputError
 from ..labels import Structure
 from ..sections import CrossSections
@@ -287,8 +288,6 @@ def write_rtstruct(
     """
     from pydicom.dataset import Dataset, FileMetaDataset
     from pydicom.uid import UID, ImplicitVRLittleEndian, generate_uid
-
-    from .. import __version__
 
     values, aff, chosen = check_label_map(labels, affine, structures)
     series = load_source_series(source_images, allow_irregular=allow_irregular)

@@ -22,9 +22,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import EmptyMaskError, InputError, OptionError
+from ..errors import DependencyError, EmptyMaskError, FormatError, InputError, OptionError
+from ..io.atomic import atomic_path
 from ..sampling import projections_from_volume, sample_sections, visual_hull
 from ..sections import Box, CrossSections, Volume
+from ..shapes import make_shape
 
 __all__ = [
     "SECTION_AXIS",
@@ -103,7 +105,6 @@ def shape_occupancy(name: str, *, seed: int, grid: int, margin: int = 1) -> NDAr
     -------
     ndarray of shape (grid, grid, grid), bool
     """
-    from ..shapes import make_shape
 
     inner = int(grid) - 2 * int(margin)
     if inner < 4:
@@ -246,7 +247,6 @@ class ShapePool:
         name ``"real:<name>"`` and seed ``k`` for variant ``k``). A real shape
         whose package is missing is skipped with a warning.
         """
-        from ..errors import DependencyError
 
         if not seeds or not (names or real):
             raise OptionError("a shape pool needs at least one family and one seed")
@@ -305,7 +305,6 @@ class ShapePool:
         Path
             ``path``.
         """
-        from ..io.atomic import atomic_path
 
         out = Path(path)
         with atomic_path(out) as tmp, open(tmp, "wb") as fh:
@@ -329,7 +328,6 @@ class ShapePool:
         FormatError
             If it is not such a pool (missing or inconsistent arrays).
         """
-        from ..errors import FormatError
 
         src = Path(path)
         if not src.is_file():

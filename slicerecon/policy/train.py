@@ -42,7 +42,9 @@ import numpy as np
 import torch
 
 from ..errors import FormatError, OptionError
+from ..io.atomic import atomic_path
 from ..partition.episodes import ShapePool
+from ..shapes import shape_names
 from .buffers import ReplayBuffer
 from .checkpoint import load_checkpoint, save_checkpoint
 from .config import CONFIG_NAMES, EVAL_SEED_OFFSET, TrainConfig, config_path, load_config
@@ -114,7 +116,6 @@ class TrainResult:
 
 # -- pieces of the loop -----------------------------------------------------------------
 def _shape_names(config: TrainConfig) -> list[str]:
-    from ..shapes import shape_names
 
     names = list(config.shapes) if config.shapes else shape_names()
     unknown = sorted(set(names) - set(shape_names()))
@@ -279,7 +280,6 @@ def _resume_state(path: Path, config: TrainConfig) -> dict[str, Any]:
 
 
 def _write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    from ..io.atomic import atomic_path
 
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=LOG_FIELDS)

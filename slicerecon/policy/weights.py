@@ -19,6 +19,7 @@ from typing import Any
 import torch
 
 from ..errors import DependencyError, FormatError, InputError, OptionError
+from ..io.atomic import atomic_path
 from .networks import Actor, NetConfig
 
 __all__ = ["SHIPPED", "shipped_weights", "save_actor", "load_actor"]
@@ -71,7 +72,6 @@ def save_actor(
     -------
     Path
     """
-    from ..io.atomic import atomic_path
 
     st = _safetensors()
     meta = {"net": json.dumps(actor.config.to_dict()), "format": "slicerecon-actor-1"}

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DependencyError, EmptyMaskError, OptionError
+from ..io.vti import read_vti
 from ..sections import Volume
 from . import installed
 from .installed import REAL_EXTRA
@@ -102,7 +103,6 @@ def frog_tissue(
     EmptyMaskError
         If the organ's label is absent from the file.
     """
-    from ..io.vti import read_vti
 
     if tissue not in FROG_TISSUES:
         raise OptionError(

@@ -17,6 +17,7 @@ from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
+from .. import __version__
 from ..results import CaseResult
 from .figures import CAPTIONS
 from .renders import RENDER_FACES
@@ -181,7 +182,6 @@ def render_page(
     str
         The HTML document.
     """
-    from .. import __version__
 
     names = summary["metrics"]
     methods = sorted({c.method for c in cases}, key=sort_key)

@@ -15,7 +15,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..io import detect_kind, load_input
 from ..results import CaseResult
+from ..sections import Volume
 from .figures import png_bytes, pyplot
 
 if TYPE_CHECKING:
@@ -138,9 +140,7 @@ class TruthCache:
 
 
 def _truth_surface(path: Path, config: Any) -> trimesh.Trimesh | None:
-    from ..io import detect_kind, load_input
     from ..io.mesh import read_mesh
-    from ..sections import Volume
     from ..surface.marching import volume_to_mesh
 
     if detect_kind(path).kind == "mesh":

@@ -10,6 +10,7 @@ import tempfile
 from pathlib import Path
 
 from ..errors import InputError, OptionError
+from ..io.atomic import atomic_path
 from ..results import REPORT_ASSETS, CaseResult, ResultsLayout, collect_results
 from .figures import box_plot, planes_plot
 from .page import Render, render_page
@@ -49,7 +50,6 @@ def _write_assets(layout: ResultsLayout, files: dict[str, bytes]) -> None:
 
 
 def _write_text(path: Path, text: str) -> None:
-    from ..io.atomic import atomic_path
 
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")

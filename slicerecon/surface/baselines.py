@@ -72,6 +72,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from ..errors import DependencyError, EmptyMaskError, GeometryError, InputError, OptionError
+from ..sampling import visual_hull
 from ..sections import Box, CrossSections, Projections, Volume
 from .marching import field_to_mesh, volume_to_mesh
 from .merge import from_manifold, solid_from_arrays
@@ -546,7 +547,6 @@ def sdf_hull(
     EmptyMaskError
         If the interpolation and the hull do not overlap.
     """
-    from ..sampling import visual_hull
 
     _check_sections(sections, "sdf-hull")
     proj = _check_projections(projections, sections)

@@ -22,6 +22,7 @@ import trimesh
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import EmptyMaskError, InputError, OptionError
+from ..rasterize import edge_face_counts, is_closed
 from ..sections import Volume, check_affine
 
 __all__ = ["field_to_mesh", "march_field", "signed_volume", "volume_to_mesh"]
@@ -83,7 +84,6 @@ def volume_to_mesh(
     if not 0.0 < level < 1.0:
         raise OptionError(f"level must lie strictly between 0 and 1 on a binary mask (got {level})")
     step = _check_step(step_size)
-    from ..rasterize import is_closed
 
     # Marching cubes only needs the foreground and one background layer around it.
     cropped = volume.crop(pad=1)
@@ -179,8 +179,6 @@ def _repair_ambiguous_blocks(
     matter at 2 mm).
     """
     from skimage.measure import marching_cubes
-
-    from ..rasterize import edge_face_counts
 
     fixed = mask.copy()
     for round_ in range(max_rounds):
@@ -329,7 +327,6 @@ def march_field(
     mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
     if not repair:
         return mesh
-    from ..rasterize import edge_face_counts
 
     edges, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
     if np.all(counts == 2):

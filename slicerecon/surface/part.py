@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, InputError, OptionError
 from ..options import ReconstructOptions
+from ..rasterize import mesh_to_mask
 from ..sections import Box, CrossSections, Volume
 from .loft import correspondence_is_simple, loft_solid
 from .merge import check_closed, from_manifold, to_manifold, union_solids
@@ -245,7 +246,6 @@ def part_voxels(
             join_drift=options.join_drift,
         )
         return field < 0
-    from ..rasterize import mesh_to_mask
 
     mesh = reconstruct_part(sections, box, options, extend_to_box=extend_to_box, hull=hull)
     if mesh is None:

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ... import __version__
 from ...errors import DependencyError, EmptyMaskError
 from ...labels import Structure
 from ..atomic import atomic_path
@@ -58,8 +59,6 @@ def _segment_descriptions(structures: Sequence[Structure]) -> list[Any]:
     from highdicom.color import CIELabColor
     from highdicom.seg import SegmentDescription
     from pydicom.sr.codedict import codes
-
-    from ... import __version__
 
     algorithm = AlgorithmIdentificationSequence(
         name=SEG_ALGORITHM_NAME,
@@ -142,8 +141,6 @@ def write_seg(
         from pydicom.uid import generate_uid
     except ImportError as exc:  # pragma: no cover - highdicom is a dependency
         raise DependencyError("writing a DICOM SEG needs highdicom: pip install highdicom") from exc
-
-    from ... import __version__
 
     series = load_source_series(source_images, allow_irregular=allow_irregular)
     on_grid = labels_on_series(values, aff, series)
