@@ -1,0 +1,144 @@
+"""One case pipeline for one structure and many: the same functions, one on-disk schema."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import nibabel as nib
+import numpy as np
+import pytest
+import trimesh
+
+import slicerecon.case as case_module
+import slicerecon.case_outputs as outputs_module
+from slicerecon.case import reconstruct_structures, run_case
+from slicerecon.cli import main
+from slicerecon.errors import LabelError, OptionError
+from slicerecon.io import load_input
+from slicerecon.labels import LabelMap
+from slicerecon.reconstruct import ReconstructConfig
+
+SPACING = (1.0, 1.0, 2.0)
+
+
+def _grid(shape: tuple[int, int, int] = (40, 36, 24)) -> tuple[np.ndarray, ...]:
+    return tuple(
+        a * s
+        for a, s in zip(
+            np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), SPACING, strict=True
+        )
+    )
+
+
+def _labels(n: int) -> np.ndarray:
+    """``n`` (1 or 4) balls and bars; the first two touch."""
+    x, y, z = _grid()
+    labels = np.zeros(x.shape, np.uint8)
+    ball = (x - 20) ** 2 + (y - 18) ** 2 + (z - 24) ** 2 < 12**2
+    labels[ball & (x < 20)] = 1
+    if n > 1:
+        labels[ball & (x >= 20)] = 2
+        labels[(x - 32) ** 2 + (y - 28) ** 2 + (z - 12) ** 2 < 4**2] = 3
+        labels[(np.abs(x - 6) < 3) & (np.abs(y - 30) < 3) & (z > 6) & (z < 40)] = 4
+    return labels
+
+
+def _write(labels: np.ndarray, path: Path) -> Path:
+    nib.save(nib.Nifti1Image(labels, np.diag([*SPACING, 1.0])), path)
+    return path
+
+
+@pytest.mark.parametrize("n", [1, 4])
+def test_one_and_four_structures_go_through_the_same_functions(
+    n: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = _write(_labels(n), tmp_path / f"labels{n}.nii.gz")
+    calls: list[str] = []
+
+    def spy(module: object, name: str) -> None:
+        real = getattr(module, name)
+
+        def wrapped(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            calls.append(name)
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(module, name, wrapped)
+
+    for name in ("load_case", "reconstruct_case", "score_case", "reconstruct"):
+        spy(case_module, name)
+    spy(outputs_module, "write_label_outputs")
+    out = tmp_path / "out"
+    summary = run_case(path, out, ReconstructConfig(slices=8, n_points=2000))
+    assert calls[:2] == ["load_case", "reconstruct_case"]
+    assert calls.count("reconstruct") == n  # one reconstruction per structure
+    assert calls[-2:] == ["score_case", "write_label_outputs"]
+
+    # one schema: the records say where each mesh is, whatever the count
+    records = json.loads((out / "structures.json").read_text())["structures"]
+    assert [r["value"] for r in records] == list(range(1, n + 1))
+    meshes = [out / r["mesh"] for r in records]
+    assert meshes == (
+        [out / "mesh.stl"] if n == 1 else [out / "meshes" / f"{v}.stl" for v in (1, 2, 3, 4)]
+    )
+    assert all(trimesh.load(m).is_watertight for m in meshes)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics["structures"]) == {str(v) for v in range(1, n + 1)}
+    assert metrics["volume_iou"] == pytest.approx(
+        np.mean([m["volume_iou"] for m in metrics["structures"].values()])
+    )
+    plan = json.loads((out / "plan.json").read_text())
+    assert len(plan["structures"]) == n
+    assert len(plan["parts"]) == sum(len(s["plan"]["parts"]) for s in plan["structures"])
+    assert summary["parts"] == len(plan["parts"]) and summary["watertight"]
+
+
+def test_the_python_entry_point_takes_a_path_or_an_array_with_its_affine(tmp_path: Path) -> None:
+    labels = _labels(4)
+    path = _write(labels, tmp_path / "four.nii.gz")
+    from_file = reconstruct_structures(path, slices=8)
+    from_array = reconstruct_structures((labels, np.diag([*SPACING, 1.0])), slices=8)
+    np.testing.assert_array_equal(from_file.labels, from_array.labels)
+    assert [r.structure.value for r in from_array.results] == [1, 2, 3, 4]
+    assert all(r.mesh is not None and r.mesh.is_watertight for r in from_array.results)
+    # a partition: no voxel in two structures, the input's values on the input's grid
+    assert from_array.labels.shape == labels.shape
+    assert set(np.unique(from_array.labels)) == {0, 1, 2, 3, 4}
+    with pytest.raises(LabelError, match="integer"):
+        LabelMap.from_array(labels + 0.5, np.eye(4))
+
+
+def test_load_input_never_merges_structures_silently(tmp_path: Path) -> None:
+    path = _write(_labels(4), tmp_path / "four.nii.gz")
+    with pytest.raises(LabelError, match="4 structures"):
+        load_input(path)
+    assert load_input(path, union=True).mask.sum() == np.count_nonzero(_labels(4))
+    assert load_input(path, label=3).mask.sum() == np.count_nonzero(_labels(4) == 3)
+
+
+def test_every_option_reaches_every_structure_or_is_refused(tmp_path: Path) -> None:
+    path = _write(_labels(4), tmp_path / "four.nii.gz")
+    smooth = reconstruct_structures(path, slices=8, smooth=True)
+    plain = reconstruct_structures(path, slices=8)
+    for a, b in zip(smooth.results, plain.results, strict=True):
+        assert a.mesh.is_watertight  # each smoothed, still closed
+        assert not np.allclose(a.mesh.vertices, b.mesh.vertices)
+    with pytest.raises(OptionError, match="--method sdf"):
+        reconstruct_structures(path, slices=8, method="loft")
+    silhouette = tmp_path / "s.nii.gz"
+    silhouette.write_bytes(b"")
+    with pytest.raises(OptionError, match="one structure"):
+        reconstruct_structures(path, slices=8, projections=str(silhouette))
+
+
+def test_an_unwritable_output_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _write(_labels(1), tmp_path / "one.nii.gz")
+    target = tmp_path / "a_file"
+    target.write_text("x")
+    assert main(["run", str(path), "-o", str(target)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "is a file" in err[0]
+    assert main(["run", str(path), "-o", str(target / "below")]) == 2
+    assert "is a file" in capsys.readouterr().err
