@@ -43,6 +43,7 @@ __all__ = [
     "Annotation",
     "PlanePose",
     "annotation_from_sections",
+    "plane_pose",
 ]
 
 ANGLE_TOLERANCE = 1e-3
@@ -286,13 +287,42 @@ class Annotation:
         origins = np.array([p.pose.affine[:3, 3] for p in self.planes]).reshape(-1, 3)
         return (origins @ inverse[:3, :3].T + inverse[:3, 3])[:, axis]
 
-    def cross_sections(self, value: int | None = None) -> CrossSections:
+    def main_axis(self) -> int:
+        """The grid axis most planes are perpendicular to.
+
+        Raises
+        ------
+        GeometryError
+            No plane is perpendicular to a grid axis.
+        """
+        counts = [0, 0, 0]
+        for plane in self.planes:
+            axis = self._axis_of(plane.pose)
+            if axis is not None:
+                counts[axis] += 1
+        if not any(counts):
+            raise GeometryError("no annotated plane is perpendicular to an axis of the grid")
+        return int(np.argmax(counts))
+
+    def _axis_of(self, pose: PlanePose) -> int | None:
+        for axis in range(3):
+            a, b = in_plane_axes(axis)
+            grid_normal = np.cross(self.affine[:3, a], self.affine[:3, b])
+            grid_normal /= np.linalg.norm(grid_normal)
+            if float(np.linalg.norm(np.cross(grid_normal, pose.normal))) < ANGLE_TOLERANCE:
+                return axis
+        return None
+
+    def cross_sections(self, value: int | None = None, *, axis: int | None = None) -> CrossSections:
         """A structure's planes as cross-sections on the reference grid.
 
         Parameters
         ----------
         value : int, optional
             The structure (default: every structure together, their union).
+        axis : int, optional
+            Only the planes perpendicular to this grid axis (default: every
+            plane, which must then all be perpendicular to one axis).
 
         Returns
         -------
@@ -306,15 +336,19 @@ class Annotation:
             The planes are not all perpendicular to one grid axis on the
             reference grid's pixels.
         """
-        axis = self.grid_axis()
         if axis is None:
-            raise GeometryError(
-                "the annotated planes are not all perpendicular to one axis of the grid"
-            )
-        planes = self.planes if value is None else self.planes_of(value)
-        indices = self.plane_indices(axis)
-        if value is not None:
-            indices = indices[[n for n, p in enumerate(self.planes) if p.annotates(value)]]
+            axis = self.grid_axis()
+            if axis is None:
+                raise GeometryError(
+                    "the annotated planes are not all perpendicular to one axis of the grid"
+                )
+        chosen = [
+            n
+            for n, p in enumerate(self.planes)
+            if (value is None or p.annotates(value)) and self._axis_of(p.pose) == axis
+        ]
+        planes = tuple(self.planes[n] for n in chosen)
+        indices = self.plane_indices(axis)[chosen]
         order = np.argsort(indices, kind="stable")
         a, b = in_plane_axes(axis)
         masks = np.zeros((len(planes), self.grid_shape[a], self.grid_shape[b]), dtype=bool)

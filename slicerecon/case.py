@@ -41,6 +41,7 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
+from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
 from .errors import OptionError
@@ -50,12 +51,14 @@ from .io.projections import read_projection_files
 from .labels import LabelMap, Structure
 from .metrics import evaluate
 from .metrics.inputs import place
+from .options import ReconstructOptions
 from .rasterize import mesh_to_mask
 from .reconstruct import ReconstructConfig, reconstruct
 from .sampling import projections_from_sections, projections_from_volume
 from .sections import CrossSections, Projections, Volume
 from .surface.joint import resolve
 from .surface.smooth import taubin_smooth
+from .surface.views import views_surface
 
 __all__ = [
     "NOT_RECONSTRUCTED",
@@ -113,7 +116,8 @@ class StructureResult:
     metrics : dict or None
         Its metrics against its ground truth (:func:`score_case`).
     sections, projections : CrossSections, Projections or None
-        What it was reconstructed from (its own crop of the shared grid).
+        What it was reconstructed from (its own crop of the shared grid; None
+        for planes along several axes).
     volume_mm3 : float
         Volume of its voxels in the written label map's grid, mm³ (before any
         overlap is resolved in that one file).
@@ -129,6 +133,7 @@ class StructureResult:
     sections: CrossSections | None = None
     projections: Projections | None = None
     volume_mm3: float = 0.0
+    field: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready record (``structures.json``)."""
@@ -156,7 +161,8 @@ class CaseReconstruction:
     affine : ndarray of shape (4, 4)
         Voxel index → world mm of :attr:`labels`.
     sections : CrossSections
-        Every structure's planes together, on the shared grid.
+        Every structure's planes together, on the shared grid (along the axis
+        most planes are perpendicular to, when they lie along several).
     truth : LabelMap or None
         Each structure's ground truth on the shared grid (dense inputs).
     crop_lo : ndarray of shape (3,)
@@ -304,7 +310,8 @@ def reconstruct_case(
     """
     annotation = case.annotation
     options = config.options
-    shared = case.shared
+    one_axis = annotation.grid_axis() is not None
+    shared = annotation.cross_sections(axis=None if one_axis else annotation.main_axis())
     drawn = annotation.structures
     joint = annotation.exclusive and len(drawn) > 1
     if joint and not options.method_entry.implicit:
@@ -313,16 +320,22 @@ def reconstruct_case(
             f"use --method sdf (got {options.method!r}), or choose one structure with "
             "--label, or --union"
         )
+    if not one_axis and not options.method_entry.implicit:
+        raise OptionError(
+            f"planes along several axes are reconstructed on their signed distances: use "
+            f"--method sdf (got {options.method!r}), or --annotation to read one axis"
+        )
     per_structure = options.with_changes(smooth=False) if joint else options
-    upsample = axis_upsample(shared)
+    upsample = axis_upsample(shared) if one_axis else 1
     timings: dict[str, float] = {}
     results: list[StructureResult] = []
     fields: list[Any] = []
     for n, structure in enumerate(drawn, start=1):
         if progress is not None:
             progress(f"reconstruct {n}/{len(drawn)}: {structure.label}")
-        own = annotation.cross_sections(structure.value)
-        crossed = int(np.count_nonzero(own.masks.any(axis=(1, 2))))
+        crossed = sum(
+            1 for p in annotation.planes_of(structure.value) if structure.value in p.masks
+        )
         if not crossed:
             logger.warning(
                 "structure %s lies between the kept planes: not reconstructed", structure.label
@@ -330,8 +343,14 @@ def reconstruct_case(
             results.append(StructureResult(structure, NO_PLANE))
             fields.append(None)
             continue
-        mask = None if case.labels is None else case.labels.labels == structure.value
         start = time.perf_counter()
+        if not one_axis:
+            results.append(_from_views(case, structure, per_structure, crossed))
+            fields.append(results[-1].field)
+            timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
+            continue
+        own = annotation.cross_sections(structure.value)
+        mask = None if case.labels is None else case.labels.labels == structure.value
         sub, derived, offset = crop_to_structure(own, mask)
         projections = _projections(config, sub, derived, dense=case.dense, many=len(drawn) > 1)
         result = reconstruct(sub, projections, per_structure, keep_field=joint, upsample=upsample)
@@ -356,10 +375,10 @@ def reconstruct_case(
             )
     if joint:
         start = time.perf_counter()
-        _resolve(results, fields, shared, smooth=options.smooth)
+        _resolve(results, fields, annotation, smooth=options.smooth)
         timings["resolve"] = time.perf_counter() - start
     results += [StructureResult(s, NO_CONTOURS) for s in case.missing]
-    labels, overlap = _label_map(case, results, shared)
+    labels, overlap = _label_map(case, results)
     logger.info(
         "%d structure(s): %d reconstructed",
         len(results),
@@ -379,11 +398,27 @@ def reconstruct_case(
     )
 
 
+def _from_views(
+    case: CaseInput, structure: Structure, options: ReconstructOptions, crossed: int
+) -> StructureResult:
+    """A structure drawn in several views (:mod:`slicerecon.surface.views`): no partition."""
+    made = views_surface(case.annotation, structure.value, interpolation=options.interpolation)
+    mesh = taubin_smooth(made.mesh) if options.smooth else made.mesh
+    return StructureResult(
+        structure,
+        RECONSTRUCTED,
+        mesh=mesh,
+        planes=crossed,
+        occupancy=None if options.smooth else made.occupancy,
+        field=made.field,
+    )
+
+
 def _resolve(
-    results: list[StructureResult], fields: list[Any], shared: CrossSections, *, smooth: bool
+    results: list[StructureResult], fields: list[Any], annotation: Annotation, *, smooth: bool
 ) -> None:
     """Resolve a partition's structures on their fields: meshes and shares in place."""
-    joint = resolve(fields, shared.grid_shape)
+    joint = resolve(fields, annotation.grid_shape)
     for i, item in enumerate(results):
         if fields[i] is None:
             continue
@@ -398,12 +433,10 @@ def _resolve(
             )
             continue
         item.mesh = taubin_smooth(mesh) if smooth else mesh
-        item.occupancy = Volume(inside, shared.affine)
+        item.occupancy = Volume(inside, annotation.affine)
 
 
-def _label_map(
-    case: CaseInput, results: list[StructureResult], shared: CrossSections
-) -> tuple[NDArray[np.integer], int]:
+def _label_map(case: CaseInput, results: list[StructureResult]) -> tuple[NDArray[np.integer], int]:
     """The structures as one label map on the output grid, and the voxels claimed twice.
 
     A partition's shares never overlap. Overlapping structures (ROIs) are

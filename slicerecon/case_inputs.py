@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .annotation import Annotation, annotation_from_sections
+from .annotation import AnnotatedPlane, Annotation, annotation_from_sections, plane_pose
 from .errors import EmptyMaskError, InputError, OptionError
 from .inputs import axis_upsample, prepare_inputs
 from .io import DICOM_KINDS, InputKind, detect_kind, load_ground_truth, load_input
@@ -31,6 +31,7 @@ from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import check_grid
 from .io.rtstruct import read_rtstruct_structures
 from .labels import LabelMap, Structure
+from .plane_detection import detect_planes, parse_annotation
 from .reconstruct import ReconstructConfig
 from .sections import CrossSections, Volume
 from .selection import choose_structure
@@ -211,7 +212,9 @@ def case_from_label_map(
     -------
     CaseInput
         A dense label map is its own ground truth; a sparse one (annotated on
-        some planes, :func:`slicerecon.inputs.looks_sparse`) keeps its planes.
+        some planes of one or several axes, by the rule of
+        :func:`slicerecon.plane_detection.detect_planes` or as ``annotation``
+        states) keeps its planes.
     """
     kind = kind if kind is not None else InputKind("array", Path("<array>"))
     if config.union:
@@ -221,47 +224,63 @@ def case_from_label_map(
     union = label_map.union()
     if union.is_empty:
         raise EmptyMaskError(f"{kind.path} holds no foreground for the chosen structures")
-    sections, _, cropped = prepare_inputs(
-        union,
-        slices=config.slices,
-        every=config.every,
-        axis=config.axis,
-        projections="auto",
-        memory_budget_gb=config.max_memory_gb,
-    )
-    crop_lo = np.rint(
-        np.linalg.solve(label_map.affine[:3, :3], sections.affine[:3, 3] - label_map.affine[:3, 3])
-    ).astype(np.int64)
-    region = tuple(
-        slice(int(a), int(a) + n) for a, n in zip(crop_lo, sections.grid_shape, strict=True)
-    )
-    labels = label_map.labels[region]
-    planes = np.rint(sections.indices).astype(np.int64)
-    own = [
-        CrossSections(
-            np.moveaxis(labels == s.value, sections.axis, 0)[planes],
-            sections.indices,
-            sections.axis,
-            sections.affine,
-            sections.grid_shape,
+    crop = union.crop(pad=3)
+    check_grid(crop.shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
+    reading = detect_planes(crop.mask, parse_annotation(config.annotation))
+    stated = "dense" if reading.dense else reading.axes
+    if reading.dense or len(reading.axes) == 1:
+        sections, _, cropped = prepare_inputs(
+            union,
+            slices=config.slices,
+            every=config.every,
+            axis=config.axis,
+            projections="auto",
+            memory_budget_gb=config.max_memory_gb,
+            annotation=stated if reading.dense else tuple(reading.axes),
         )
-        for s in label_map.structures
-    ]
+        grid_affine, grid_shape = sections.affine, sections.grid_shape
+    else:
+        if config.slices is not None or config.every is not None:
+            raise OptionError(
+                "--slices/--every apply to dense masks; this input is already sparse "
+                f"({reading.describe(crop.spacing)})"
+            )
+        sections, cropped = None, None
+        grid_affine, grid_shape = crop.affine, crop.shape
+    crop_lo = np.rint(
+        np.linalg.solve(label_map.affine[:3, :3], grid_affine[:3, 3] - label_map.affine[:3, 3])
+    ).astype(np.int64)
+    region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, grid_shape, strict=True))
+    labels = label_map.labels[region]
+    if sections is not None:
+        planes = np.rint(sections.indices).astype(np.int64)
+        own = [
+            CrossSections(
+                np.moveaxis(labels == s.value, sections.axis, 0)[planes],
+                sections.indices,
+                sections.axis,
+                sections.affine,
+                sections.grid_shape,
+            )
+            for s in label_map.structures
+        ]
+        annotation = annotation_from_sections(
+            label_map.structures,
+            own,
+            shared=True,
+            coordinates=label_map.coordinates,
+            exclusive=True,
+        )
+    else:
+        annotation = _views_annotation(label_map, labels, grid_affine, reading.planes)
     dense = cropped is not None
-    reading = "dense mask" if dense else "sparse label map"
-    annotation = annotation_from_sections(
-        label_map.structures,
-        own,
-        shared=True,
-        coordinates=label_map.coordinates,
-        exclusive=True,
-    )
+    how = "dense mask" if dense else reading.describe(crop.spacing)
     annotation = replace(
         annotation,
-        source=f"{reading}, {len(label_map.structures)} structure(s): {annotation.describe()}",
+        source=f"{how}; {len(label_map.structures)} structure(s): {annotation.describe()}",
     )
     dense_labels = (
-        LabelMap(labels, sections.affine, label_map.structures, label_map.coordinates)
+        LabelMap(labels, grid_affine, label_map.structures, label_map.coordinates)
         if dense
         else None
     )
@@ -273,6 +292,31 @@ def case_from_label_map(
         label_map.affine,
         label_map.shape,
         crop_lo,
+    )
+
+
+def _views_annotation(
+    label_map: LabelMap,
+    labels: NDArray[np.integer],
+    affine: NDArray[np.float64],
+    planes: dict[int, NDArray[np.int64]],
+) -> Annotation:
+    """A label map annotated along several axes: each annotated slice, every structure."""
+    drawn = []
+    for axis in sorted(planes):
+        for index in planes[axis]:
+            image = np.take(labels, int(index), axis=axis)
+            masks = {s.value: image == s.value for s in label_map.structures}
+            drawn.append(
+                AnnotatedPlane(plane_pose(affine, labels.shape, axis, float(index)), masks)
+            )
+    return Annotation(
+        tuple(drawn),
+        label_map.structures,
+        affine,
+        labels.shape,
+        label_map.coordinates,
+        exclusive=True,
     )
 
 

@@ -16,10 +16,12 @@ import os
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .errors import OptionError
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.projections import read_projection_files
+from .plane_detection import detect_planes
 from .sampling import projections_from_sections, projections_from_volume, sample_sections
 from .sections import AXIS_NAMES, CrossSections, Projections, Volume, axis_index
 
@@ -30,6 +32,7 @@ __all__ = [
     "axis_upsample",
     "looks_sparse",
     "prepare_inputs",
+    "sparse_sections",
 ]
 
 logger = logging.getLogger(__name__)
@@ -40,29 +43,23 @@ DEFAULT_SLICES = 16
 """Planes kept from a dense mask when neither ``slices`` nor ``every`` is given."""
 
 
-def _sparse_volume_to_sections(volume: Volume, axis: int) -> CrossSections:
-
-    planes = volume.occupied_planes(axis)
+def sparse_sections(volume: Volume, axis: int, planes: ArrayLike) -> CrossSections:
+    """The annotated slices ``planes`` (indices along ``axis``) of a mask, as cross-sections."""
     full = sample_sections(volume, every=1, axis=axis)
-    keep = np.flatnonzero(np.isin(full.indices.astype(np.int64), planes))
+    keep = np.flatnonzero(np.isin(full.indices.astype(np.int64), np.asarray(planes)))
     return full.select(keep)
 
 
 def looks_sparse(volume: Volume, axis: int) -> bool:
-    """Guess whether a mask annotates only some planes along ``axis``.
+    """Whether a mask is annotated on some planes along ``axis`` alone.
 
-    A mask is taken as sparse when at least two planes hold foreground and
-    more than half of the planes between the first and the last of them are
-    empty (a dense organ mask has no empty planes inside its extent). Two
-    annotated planes with a gap between them are sparse (ITK's morphological
-    contour interpolation examples are such label maps); two neighbouring
-    planes are a dense mask two slices thick.
+    The rule of :func:`slicerecon.plane_detection.detect_planes`: the mask is
+    a set of sheets (annotated slices, at any density: every 2nd slice
+    included) rather than a solid, and its annotated planes are all
+    perpendicular to ``axis``.
     """
-    planes = volume.occupied_planes(axis)
-    if planes.size < 2:
-        return False
-    span = int(planes[-1] - planes[0] + 1)
-    return (span - planes.size) > 0.5 * span
+    reading = detect_planes(volume.mask)
+    return not reading.dense and reading.axes == (axis_index(axis),)
 
 
 def prepare_inputs(
@@ -73,13 +70,16 @@ def prepare_inputs(
     axis: int | str = "z",
     projections: str | Sequence[str | os.PathLike[str]] = "auto",
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+    annotation: str | tuple[int, ...] = "auto",
 ) -> tuple[CrossSections, Projections, Volume | None]:
     """Turn a loaded input into cross-sections, projections and (maybe) ground truth.
 
     A dense volume is cropped to its foreground (plus a margin), sampled at
-    ``slices`` / ``every`` planes and kept as ground truth. A volume that
-    annotates only some planes (see :func:`looks_sparse`) and contour inputs
-    are used as they are, without ground truth.
+    ``slices`` / ``every`` planes and kept as ground truth. A volume annotated
+    on some planes of one axis (:func:`slicerecon.plane_detection.detect_planes`,
+    or as ``annotation`` states) and contour inputs are used as they are,
+    without ground truth. A volume annotated along several axes is refused
+    here: :func:`slicerecon.case.reconstruct_structures` reconstructs it.
 
     ``projections`` is ``"gt"`` (from the dense mask), ``"sections"``
     (derived from the sections), ``"auto"`` (``gt`` when there is a dense
@@ -96,6 +96,12 @@ def prepare_inputs(
     sections : CrossSections
     projections : Projections
     ground_truth : Volume or None
+
+    Raises
+    ------
+    OptionError
+        ``--slices`` / ``--every`` on a sparse input; a mask annotated along
+        several axes; projections that cannot be had.
     """
 
     if isinstance(projections, str):
@@ -113,9 +119,16 @@ def prepare_inputs(
     if isinstance(data, Volume):
         volume = data.crop(pad=3)
         check_grid(volume.shape, what="the reconstruction grid", memory_budget_gb=memory_budget_gb)
-        if looks_sparse(volume, ax):
-            logger.info("the mask annotates only some planes: using them as sections")
-            sections = _sparse_volume_to_sections(volume, ax)
+        reading = detect_planes(volume.mask, annotation)
+        if not reading.dense:
+            if len(reading.axes) != 1:
+                raise OptionError(
+                    f"the mask is a {reading.describe(volume.spacing)}: several views are "
+                    "reconstructed by slicerecon run (slicerecon.case.reconstruct_structures)"
+                )
+            logger.info("the mask is a %s", reading.describe(volume.spacing))
+            (only,) = reading.axes
+            sections = sparse_sections(volume, only, reading.planes[only])
         else:
             spanned = int(volume.occupied_planes(ax).size)
             if slices is None and every is None:

@@ -36,6 +36,7 @@ from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget
 from .options import INTERPOLATIONS, OPTION_NAMES, PLAIN_SDF, ReconstructOptions
 from .partition.lookahead import PlanningSurface
 from .partition.planner import Plan, PlanPart, plan_partition, planner_names
+from .plane_detection import parse_annotation
 from .sampling import pool_any, pool_sections, visual_hull
 from .sections import Box, CrossSections, Projections, Volume, axis_index
 from .selection import parse_selector
@@ -99,6 +100,10 @@ class ReconstructConfig(ReconstructOptions):
     """Keep every K-th plane of a dense input instead of ``slices``."""
     axis: str = "z"
     """Grid axis the section planes of a dense input are perpendicular to (x, y or z)."""
+    annotation: str = "auto"
+    """How a label map is read: ``auto`` (dense, or annotated on some planes of
+    any axes, by the rule of :mod:`slicerecon.plane_detection`), ``dense``, or
+    the annotated axes (``z``, ``xz``, ``x,y,z``) when the rule cannot tell."""
     projections: str = "auto"
     """Where the orthographic projections come from: ``gt`` (the dense input,
     the paper's prior), ``sections`` (derived from the sections alone),
@@ -169,6 +174,7 @@ class ReconstructConfig(ReconstructOptions):
         if self.every is not None and self.every < 1:
             raise OptionError(f"--every must be at least 1 (got {self.every})")
         axis_index(self.axis)
+        parse_annotation(self.annotation)
         if self.mesh_format not in MESH_FORMATS:
             raise OptionError(
                 f"--format must be one of {', '.join(MESH_FORMATS)} (got {self.mesh_format!r})"
