@@ -309,8 +309,19 @@ def reconstruct_case(
         resolve them on; silhouette files with several structures.
     """
     annotation = case.annotation
+    sparse = not case.dense
     options = config.options
+    options = options.with_changes(planner=options.resolved_planner(sparse=sparse))
     one_axis = annotation.grid_axis() is not None
+    # A sparse annotation in one part (the default: a partition measured no better on
+    # sparse input) is reconstructed from all its views at once (surface.views); for
+    # one view that is the implicit surface of one part, uncarved.
+    views = (
+        sparse
+        and not options.planner_entry.partitions
+        and options.method_entry.implicit
+        and config.projections in ("auto", "sections")
+    )
     shared = annotation.cross_sections(axis=None if one_axis else annotation.main_axis())
     drawn = annotation.structures
     joint = annotation.exclusive and len(drawn) > 1
@@ -320,13 +331,14 @@ def reconstruct_case(
             f"use --method sdf (got {options.method!r}), or choose one structure with "
             "--label, or --union"
         )
-    if not one_axis and not options.method_entry.implicit:
+    if not one_axis and not views:
         raise OptionError(
-            f"planes along several axes are reconstructed on their signed distances: use "
-            f"--method sdf (got {options.method!r}), or --annotation to read one axis"
+            "planes along several axes are reconstructed in one part on their signed "
+            f"distances: use --planner auto or none and --method sdf (got --planner "
+            f"{options.planner}, --method {options.method}), or --annotation to read one axis"
         )
     per_structure = options.with_changes(smooth=False) if joint else options
-    upsample = axis_upsample(shared) if one_axis else 1
+    upsample = axis_upsample(shared) if not views else 1
     timings: dict[str, float] = {}
     results: list[StructureResult] = []
     fields: list[Any] = []
@@ -344,7 +356,7 @@ def reconstruct_case(
             fields.append(None)
             continue
         start = time.perf_counter()
-        if not one_axis:
+        if views:
             results.append(_from_views(case, structure, per_structure, crossed))
             fields.append(results[-1].field)
             timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
@@ -402,7 +414,13 @@ def _from_views(
     case: CaseInput, structure: Structure, options: ReconstructOptions, crossed: int
 ) -> StructureResult:
     """A structure drawn in several views (:mod:`slicerecon.surface.views`): no partition."""
-    made = views_surface(case.annotation, structure.value, interpolation=options.interpolation)
+    made = views_surface(
+        case.annotation,
+        structure.value,
+        interpolation=options.interpolation,
+        join_drift=options.join_drift,
+        slabs=case.kind.kind in ("rtstruct", "contours"),
+    )
     mesh = taubin_smooth(made.mesh) if options.smooth else made.mesh
     return StructureResult(
         structure,

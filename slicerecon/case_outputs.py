@@ -121,7 +121,8 @@ def _plan_record(case: CaseInput, result: CaseReconstruction) -> dict[str, Any]:
 
 
 def case_planner(result: CaseReconstruction) -> str:
-    """The planner that made the case's plans (the first structure's)."""
+    """The planner that made the case's plans (the first structure's; ``none`` for a
+    reconstruction from views, which is one part)."""
     return next((r.plan.planner for r in result.results if r.plan is not None), "none")
 
 
@@ -218,7 +219,8 @@ def write_case(
     plan = _plan_record(case, result)
     plan["input"] = str(case.input_path)
     plan["ground_truth"] = None if ground_truth is None else str(ground_truth)
-    plan["config"] = config.to_dict()
+    # the configuration as it ran: ``auto`` resolved to the planner the input chose
+    plan["config"] = {**config.to_dict(), "planner": config.resolved_planner(sparse=not case.dense)}
     plan["timings_s"] = {k: round(v, 4) for k, v in times.items()}
     write_json(outdir / PLAN_FILE, plan)
     mesh_path = (

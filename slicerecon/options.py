@@ -27,12 +27,15 @@ from .partition.planner import PLANNERS, PlannerEntry, planner_entry, planner_na
 from .surface.methods import METHODS, MethodEntry, method_entry
 
 __all__ = [
+    "AUTO",
     "INTERPOLATIONS",
     "OPTION_NAMES",
     "PLAIN_SDF",
     "ReconstructOptions",
 ]
 
+AUTO = "auto"
+"""The planner chosen by the input: partitioned when dense, one part when sparse."""
 INTERPOLATIONS = ("pchip", "linear")
 """How signed distances are interpolated across planes."""
 
@@ -53,12 +56,15 @@ class ReconstructOptions:
         does not exist.
     """
 
-    planner: str = "heuristic"
-    """How the shape is partitioned into cuboid parts: ``heuristic`` (the
-    paper's expert), ``lookahead`` (the expert checked by a one-step lookahead
-    on held-out planes), ``none`` (one part: the paper's no-projection
-    baseline) or ``policy`` (a trained actor, ``docs/policy.md``); see
-    :data:`slicerecon.partition.planner.PLANNERS`."""
+    planner: str = "auto"
+    """How the shape is partitioned into cuboid parts: ``auto`` (the default:
+    ``heuristic`` when the projections come from a dense mask or from files,
+    ``none`` when they are derived from the sections of a sparse input, where
+    a partition measured no better, ``docs/results.md`` "Annotations"),
+    ``heuristic`` (the paper's expert), ``lookahead`` (the expert checked by a
+    one-step lookahead on held-out planes), ``none`` (one part: the paper's
+    no-projection baseline) or ``policy`` (a trained actor,
+    ``docs/policy.md``); see :data:`slicerecon.partition.planner.PLANNERS`."""
     method: str = "sdf"
     """How each part is reconstructed: ``sdf`` (signed-distance interpolation
     across planes + marching cubes, carved by the hull in the implicit
@@ -95,9 +101,10 @@ class ReconstructOptions:
 
     def __post_init__(self) -> None:
         planner = self.planner.strip().lower() if isinstance(self.planner, str) else ""
-        if planner not in planner_names():
+        if planner != AUTO and planner not in planner_names():
             raise OptionError(
-                f"--planner must be one of {', '.join(planner_names())} (got {self.planner!r})"
+                f"--planner must be auto or one of {', '.join(planner_names())} "
+                f"(got {self.planner!r})"
             )
         object.__setattr__(self, "planner", planner)
         if not isinstance(self.method, str) or self.method.strip().lower() not in METHODS:
@@ -122,10 +129,23 @@ class ReconstructOptions:
             if not Path(self.weights).is_file():
                 raise OptionError(f"policy weights file not found: {self.weights}")
 
+    def resolved_planner(self, *, sparse: bool) -> str:
+        """The planner that runs: :attr:`planner`, with ``auto`` resolved.
+
+        Parameters
+        ----------
+        sparse : bool
+            Whether the projections are derived from the sections (a sparse input).
+        """
+        if self.planner != AUTO:
+            return self.planner
+        return "none" if sparse else "heuristic"
+
     @property
     def planner_entry(self) -> PlannerEntry:
-        """The registry entry of :attr:`planner` (its capabilities)."""
-        return planner_entry(self.planner)
+        """The registry entry of :attr:`planner` (``auto``: of ``heuristic``, what it
+        runs on a dense input)."""
+        return planner_entry(self.resolved_planner(sparse=False))
 
     @property
     def method_entry(self) -> MethodEntry:

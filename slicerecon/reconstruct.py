@@ -339,6 +339,9 @@ def reconstruct(
     entry = options.method_entry
     if not entry.per_part:
         return _reconstruct_whole_shape(sections, projections, options)
+    options = options.with_changes(
+        planner=options.resolved_planner(sparse=projections.source == "sections")
+    )
     planner = options.planner_entry
     timings: dict[str, float] = {}
     with _timed(timings, "plan"):

@@ -120,14 +120,21 @@ AxisOpt = Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")]
 PlannerOpt = Annotated[
     str,
     typer.Option(
-        help="heuristic, lookahead (the heuristic checked on held-out planes), none or policy "
-        "(learned planner)."
+        help="auto (heuristic for a dense mask, none for sparse input), heuristic, lookahead "
+        "(the heuristic checked on held-out planes), none or policy (learned planner)."
     ),
 ]
 MethodOpt = Annotated[str, typer.Option(help=_METHOD_HELP)]
 InterpolationOpt = Annotated[
     str,
     typer.Option(help="Across planes: pchip (default: monotone cubic) or linear (classic)."),
+]
+AnnotationOpt = Annotated[
+    str,
+    typer.Option(
+        help="How a label map was annotated: auto (detected: dense, or some planes of any "
+        "axes), dense, or the axes, e.g. z or xz."
+    ),
 ]
 ProjectionsOpt = Annotated[
     str,

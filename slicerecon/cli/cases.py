@@ -16,6 +16,7 @@ import typer
 from ..console import StageProgress, ctrl_c_after, print_run_summary
 from .app import (
     DEFAULT_MAX_MEMORY_GB,
+    AnnotationOpt,
     AxisOpt,
     CarveOpt,
     CoverOpt,
@@ -110,7 +111,8 @@ def run(
     slices: SlicesOpt = None,
     every: EveryOpt = None,
     axis: AxisOpt = "z",
-    planner: PlannerOpt = "heuristic",
+    annotation: AnnotationOpt = "auto",
+    planner: PlannerOpt = "auto",
     weights: WeightsOpt = None,
     method: MethodOpt = "sdf",
     interpolation: InterpolationOpt = "pchip",
@@ -202,7 +204,8 @@ def batch(
     slices: SlicesOpt = None,
     every: EveryOpt = None,
     axis: AxisOpt = "z",
-    planner: PlannerOpt = "heuristic",
+    annotation: AnnotationOpt = "auto",
+    planner: PlannerOpt = "auto",
     weights: WeightsOpt = None,
     method: MethodOpt = "sdf",
     interpolation: InterpolationOpt = "pchip",
@@ -353,7 +356,9 @@ def evaluate_dataset(
     method: Annotated[
         str, typer.Option(help="Comma-separated surface methods, e.g. sdf,loft,hybrid.")
     ] = "sdf",
-    planner: Annotated[str, typer.Option(help="Partition planner.")] = "heuristic",
+    planner: Annotated[
+        str, typer.Option(help="Partition planner (auto, heuristic, lookahead, none, policy).")
+    ] = "auto",
     slices: SlicesOpt = None,
     every: EveryOpt = None,
     axis: AxisOpt = "z",

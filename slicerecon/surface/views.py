@@ -5,8 +5,9 @@ sagittal and coronal ones. Each **view** (the planes of one orientation) is
 interpolated across its own planes as shape-based interpolation does
 (:func:`slicerecon.surface.across_planes.fill_between`: the in-plane signed
 distances, linear or monotone cubic along the view's normal), and the views are
-blended voxel by voxel with weights ``1 / (D + eps) ** p``, ``D`` the distance
-to the view's nearest plane (inverse-distance weighting, Shepard 1968):
+blended voxel by voxel with weights ``(D_min / D) ** p``, ``D`` the distance
+to the view's nearest plane and ``D_min`` the nearest view's (inverse-distance
+weighting, Shepard 1968; ``p`` = :data:`VIEW_WEIGHT_EXPONENT`):
 
 * on a drawn plane its own view has ``D = 0``, so the result's section there is
   the drawn mask (the zero level lies half-way between pixel centres, as in
@@ -14,9 +15,11 @@ to the view's nearest plane (inverse-distance weighting, Shepard 1968):
 * between the axial planes the axial view dominates, near a sagittal plane the
   sagittal view, and where the axial stack ends, a sagittal plane that shows
   the structure going on takes over;
-* a view of three planes or more is taken to cover the structure along its
-  normal (it ends at its outer planes, as shape-based interpolation ends);
-  a view of one or two planes is extruded beyond them and weighs only near them.
+* a view of three planes or more (or the view with the most planes) is taken
+  to cover the structure along its normal: the structure ends beyond its
+  outer planes by half a voxel (a label map's slice) or half the plane spacing
+  (contours, each standing for the slab half-way to its neighbours); another
+  view of one or two planes is extruded beyond them and weighs only near them.
 
 Between two planes of one view and nothing else, the result is that view's own
 interpolation: a single-axis annotation gives shape-based interpolation.
@@ -36,6 +39,7 @@ from ..annotation import Annotation
 from ..errors import EmptyMaskError, GeometryError
 from ..sections import Volume, in_plane_axes
 from .across_planes import fill_between
+from .drift import join_drifting_regions
 from .marching import march_field
 from .sdf import SdfField, plane_signed_distance
 
@@ -43,10 +47,15 @@ __all__ = ["VIEW_WEIGHT_EXPONENT", "ViewsSurface", "views_field", "views_surface
 
 logger = logging.getLogger(__name__)
 
-VIEW_WEIGHT_EXPONENT = 2.0
+VIEW_WEIGHT_EXPONENT = 6.0
 """``p`` of the views' inverse-distance weights (chosen on the development shapes)."""
 COMPLETE_VIEW = 3
-"""A view of this many planes or more is taken to cover the structure along its normal."""
+"""A view of this many planes or more (or the view with the most planes) is taken to cover
+the structure along its normal."""
+SLAB_REACH = 0.5
+"""How far a structure goes on beyond a complete view's outer plane of contours, in plane
+spacings: each contour stands for the slab half-way to its neighbours (RTSTRUCT's convention).
+A label map's slice stands for its own voxels: half a voxel."""
 CROP_PAD = 3
 """Voxels kept around the drawn foreground."""
 _EPS_MM = 1e-3
@@ -60,8 +69,9 @@ class ViewsSurface:
     ----------
     mesh : trimesh.Trimesh
         Closed, outward, world mm.
-    occupancy : Volume
-        The voxel centres inside, on the crop of the reference grid.
+    occupancy : Volume or None
+        The voxel centres inside, on the crop of the reference grid (None when
+        the main axis is sampled finer than its voxels: rasterize the mesh).
     field : SdfField
         The blended signed-distance field (padded), for a joint resolution.
     """
@@ -100,6 +110,8 @@ def views_field(
     value: int,
     *,
     interpolation: str = "pchip",
+    join_drift: bool = True,
+    slabs: bool = False,
     exponent: float = VIEW_WEIGHT_EXPONENT,
 ) -> SdfField:
     """The blended signed-distance field of one structure drawn in several views.
@@ -112,6 +124,13 @@ def views_field(
         The structure.
     interpolation : {"pchip", "linear"}
         Across each view's planes.
+    join_drift : bool
+        Join regions of consecutive planes of a view that overlap nothing on
+        the other plane (:mod:`slicerecon.surface.drift`).
+    slabs : bool
+        Planes of contours, each standing for the slab half-way to its
+        neighbours: a complete view reaches :data:`SLAB_REACH` of its spacing
+        beyond its outer planes. Otherwise (label-map slices) half a voxel.
     exponent : float
         ``p`` of the inverse-distance weights.
 
@@ -119,8 +138,8 @@ def views_field(
     -------
     SdfField
         mm, negative inside, on the crop of the reference grid around the
-        drawn foreground, padded by one positive sample (``axis`` 2,
-        ``upsample`` 1).
+        drawn foreground (finer along the main axis, :func:`views_upsample`),
+        padded by one positive sample.
 
     Raises
     ------
@@ -130,7 +149,7 @@ def views_field(
         A plane that is not a slice of the reference grid.
     """
     views = _view_axes(annotation, value)
-    shape = np.asarray(annotation.grid_shape)
+    shape = np.asarray(annotation.grid_shape, dtype=np.int64)
     lo, hi = shape.copy(), np.zeros(3, dtype=np.int64)
     for axis, planes in views.items():
         a, b = in_plane_axes(axis)
@@ -145,24 +164,61 @@ def views_field(
             lo[axis], hi[axis] = min(lo[axis], k), max(hi[axis], k + 1)
     if np.any(hi <= lo):
         raise EmptyMaskError(f"structure {value} is drawn on no plane")
-    lo = np.maximum(lo - CROP_PAD, 0)
-    hi = np.minimum(hi + CROP_PAD, shape)
-    size = tuple(int(v) for v in hi - lo)
+    main = max(views, key=lambda axis: len(views[axis]))
+    reach = {
+        axis: _reach(planes, slabs) if len(planes) >= COMPLETE_VIEW or axis == main else None
+        for axis, planes in views.items()
+    }
+    pad = np.full(3, CROP_PAD, dtype=np.int64)
+    for axis, extent in reach.items():
+        if extent is not None:
+            pad[axis] += int(np.ceil(extent))
+    # not clipped to the grid: a structure may reach beyond a grid that holds only
+    # its drawn slices (a SEG of one frame); what lies outside is not written
+    lo = lo - pad
+    hi = hi + pad
     spacing = np.linalg.norm(annotation.affine[:3, :3], axis=0)
-    far = np.float32(np.linalg.norm(np.asarray(size) * spacing) + spacing.max())
+    along = annotation.main_axis()
+    upsample = views_upsample(annotation)
+    size = [int(v) for v in hi - lo]
+    size[along] *= upsample
+    # sample positions along the main axis, in voxel index units (planes stay on samples)
+    positions = lo[along] - 0.5 + (np.arange(size[along]) + 0.5) / upsample
+    far = np.float32(np.linalg.norm(np.asarray(hi - lo) * spacing) + spacing.max())
+    fields, distances = [], []
+    for axis, planes in views.items():
+        own, distance = _view(
+            planes,
+            axis,
+            lo,
+            hi,
+            spacing,
+            far,
+            interpolation,
+            join_drift,
+            reach[axis],
+            along,
+            positions,
+        )
+        fields.append(own)
+        distances.append(distance)
+    # weights relative to the nearest view's distance: (D_min / D) ** p, never overflowing
+    nearest = np.minimum.reduce(distances) + np.float32(_EPS_MM)
     numerator = np.zeros(size, dtype=np.float32)
     denominator = np.zeros(size, dtype=np.float32)
-    for axis, planes in views.items():
-        own, distance = _view(planes, axis, lo, hi, spacing, far, interpolation)
-        weight = 1.0 / np.power(distance + _EPS_MM, exponent, dtype=np.float32)
+    for own, distance in zip(fields, distances, strict=True):
+        weight = np.power(nearest / (distance + np.float32(_EPS_MM)), exponent, dtype=np.float32)
         numerator += weight * own
         denominator += weight
     values = numerator / denominator
     padded = np.full(tuple(n + 2 for n in size), far, dtype=np.float32)
     padded[1:-1, 1:-1, 1:-1] = values
-    affine = annotation.affine.copy()
-    affine[:3, 3] = annotation.affine[:3, :3] @ (lo - 1.0) + annotation.affine[:3, 3]
-    return SdfField(padded, affine, (int(lo[0]), int(lo[1]), int(lo[2])), 1, 2)
+    to_index = np.eye(4)
+    to_index[:3, 3] = lo - 1.0
+    to_index[along, along] = 1.0 / upsample
+    to_index[along, 3] = lo[along] - 0.5 + (0.5 - 1) / upsample
+    affine = annotation.affine @ to_index
+    return SdfField(padded, affine, (int(lo[0]), int(lo[1]), int(lo[2])), upsample, along)
 
 
 def _view(
@@ -173,34 +229,115 @@ def _view(
     spacing: NDArray[np.float64],
     far: np.float32,
     interpolation: str,
+    join_drift: bool,
+    reach: float | None,
+    along: int,
+    positions: NDArray[np.float64],
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """One view's interpolated field and each voxel's distance (mm) to its nearest plane,
-    both on the crop in grid axis order."""
+    """One view's interpolated field and each sample's distance (mm) to its nearest plane.
+
+    Both on the crop in grid axis order, sampled at ``positions`` (voxel index
+    units) along axis ``along`` and at the voxels along the others. ``reach``:
+    how far (index units) a complete view's structure goes on beyond its outer
+    planes; None: an incomplete view, extruded beyond them.
+    """
     a, b = in_plane_axes(axis)
     pixel = spacing[[a, b]]
     indices = np.array([p[0] for p in planes], dtype=np.float64)
-    distances = {}
-    for n, (_, mask) in enumerate(planes):
-        d = plane_signed_distance(mask[lo[a] : hi[a], lo[b] : hi[b]], pixel)
-        distances[n] = d
-    samples = np.arange(lo[axis], hi[axis], dtype=np.float64)
+    distances = {
+        n: plane_signed_distance(_window(mask, lo[[a, b]], hi[[a, b]]), pixel)
+        for n, (_, mask) in enumerate(planes)
+    }
+    samples = positions if axis == along else np.arange(lo[axis], hi[axis], dtype=np.float64)
     field = np.full((samples.size, hi[a] - lo[a], hi[b] - lo[b]), far, dtype=np.float32)
     used = np.arange(len(planes))
     fill_between(field, samples, indices, used, distances, interpolation)
+    if join_drift and len(planes) > 1:
+        masks = np.stack([_window(mask, lo[[a, b]], hi[[a, b]]) for _, mask in planes])
+        join_drifting_regions(
+            field, samples, indices, used, masks, pixel, float(spacing[axis]), plane_signed_distance
+        )
+    for n, index in enumerate(indices):  # a plane's own samples hold its distances
+        field[np.isclose(samples, index, atol=1e-9)] = np.minimum(distances[n], far)
     for side, n in ((0, 0), (1, len(planes) - 1)):
-        beyond = samples < indices[n] if side == 0 else samples > indices[n]
         base = np.minimum(distances[n], far)
-        if len(planes) >= COMPLETE_VIEW:
-            gap = np.abs(samples[beyond] - indices[n]).astype(np.float32) * np.float32(
+        if reach is not None:
+            # at and beyond the outer plane the structure ends ``reach`` beyond it:
+            # max(d, distance past the end), which keeps the plane's own section
+            beyond = samples <= indices[n] + 1e-9 if side == 0 else samples >= indices[n] - 1e-9
+            gap = (np.abs(samples[beyond] - indices[n]) - reach).astype(np.float32) * np.float32(
                 spacing[axis]
             )
             field[beyond] = np.maximum(base[None], gap[:, None, None])
         else:
+            beyond = samples < indices[n] if side == 0 else samples > indices[n]
             field[beyond] = base[None]
     field = np.minimum(np.nan_to_num(field, posinf=far), far)
     nearest = np.min(np.abs(samples[:, None] - indices[None, :]), axis=1) * spacing[axis]
-    distance = np.broadcast_to(nearest.astype(np.float32)[:, None, None], field.shape)
-    return np.moveaxis(field, 0, axis), np.moveaxis(distance, 0, axis)
+    out = np.moveaxis(field, 0, axis)
+    distance = np.broadcast_to(
+        np.expand_dims(nearest.astype(np.float32), tuple(d for d in range(3) if d != axis)),
+        out.shape,
+    )
+    if axis != along:  # from the voxels along ``along`` to its samples, linearly
+        out = _resample(out, along, lo[along], positions)
+        distance = np.broadcast_to(np.take(distance, [0], axis=along), out.shape)
+    return out, distance
+
+
+def _resample(
+    values: NDArray[np.float32], axis: int, first: int, positions: NDArray[np.float64]
+) -> NDArray[np.float32]:
+    """``values`` (voxel layers ``first, first + 1, ...`` along ``axis``) at ``positions``."""
+    n = values.shape[axis]
+    where = np.clip(positions - first, 0, n - 1)
+    below = np.floor(where).astype(np.int64)
+    above = np.minimum(below + 1, n - 1)
+    t = (where - below).astype(np.float32)
+    shape = [1, 1, 1]
+    shape[axis] = t.size
+    t = t.reshape(shape)
+    return (1 - t) * np.take(values, below, axis=axis) + t * np.take(values, above, axis=axis)
+
+
+def views_upsample(annotation: Annotation) -> int:
+    """Field samples per voxel along the annotation's main axis (:meth:`Annotation.main_axis`).
+
+    As :func:`slicerecon.inputs.axis_upsample`: when the main view's planes
+    lie fewer than four voxels apart, or one plane is drawn, and the axis's
+    voxels are longer than the in-plane pixels, the axis is sampled about as
+    finely as the pixels (an odd factor, so that planes stay on samples; at
+    most 9); else one sample per voxel.
+    """
+    along = annotation.main_axis()
+    indices = np.sort(annotation.cross_sections(axis=along).indices)
+    if indices.size > 1 and float(np.median(np.diff(indices))) >= 4.0:
+        return 1
+    spacing = np.linalg.norm(annotation.affine[:3, :3], axis=0)
+    a, b = in_plane_axes(along)
+    factor = max(1, int(np.ceil(float(spacing[along] / min(spacing[a], spacing[b])) - 1e-6)))
+    factor += 1 - factor % 2
+    return int(min(factor, 9))
+
+
+def _window(mask: NDArray[np.bool_], lo: NDArray[np.int64], hi: NDArray[np.int64]) -> NDArray:
+    """``mask[lo[0]:hi[0], lo[1]:hi[1]]``, background where the window leaves the mask."""
+    out = np.zeros((int(hi[0] - lo[0]), int(hi[1] - lo[1])), dtype=bool)
+    src_lo = np.maximum(lo, 0)
+    src_hi = np.minimum(hi, mask.shape)
+    if np.all(src_hi > src_lo):
+        dst = src_lo - lo
+        out[dst[0] : dst[0] + src_hi[0] - src_lo[0], dst[1] : dst[1] + src_hi[1] - src_lo[1]] = (
+            mask[src_lo[0] : src_hi[0], src_lo[1] : src_hi[1]]
+        )
+    return out
+
+
+def _reach(planes: list[tuple[float, NDArray]], slabs: bool) -> float:
+    """How far (index units) a complete view reaches beyond its outer planes."""
+    if slabs and len(planes) > 1:
+        return SLAB_REACH * float(np.median(np.diff([index for index, _ in planes])))
+    return 0.5
 
 
 def views_surface(
@@ -208,6 +345,8 @@ def views_surface(
     value: int,
     *,
     interpolation: str = "pchip",
+    join_drift: bool = True,
+    slabs: bool = False,
     exponent: float = VIEW_WEIGHT_EXPONENT,
 ) -> ViewsSurface:
     """Mesh and occupancy of one structure drawn in several views (:func:`views_field`).
@@ -221,7 +360,14 @@ def views_surface(
     EmptyMaskError
         Nothing inside.
     """
-    field = views_field(annotation, value, interpolation=interpolation, exponent=exponent)
+    field = views_field(
+        annotation,
+        value,
+        interpolation=interpolation,
+        join_drift=join_drift,
+        slabs=slabs,
+        exponent=exponent,
+    )
     values = field.values
     if not np.any(values < 0):
         raise EmptyMaskError(f"structure {value}: the blended views hold no inside sample")
@@ -231,7 +377,9 @@ def views_surface(
     near = np.flatnonzero(np.abs(flat) < nudge)
     flat[near] = np.where(flat[near] < 0, -nudge, nudge)
     mesh = march_field(values, field.affine)
-    occupancy_affine = field.affine.copy()
-    occupancy_affine[:3, 3] = field.affine[:3, :3] @ np.ones(3) + field.affine[:3, 3]
-    occupancy = Volume(values[1:-1, 1:-1, 1:-1] < 0, occupancy_affine)
+    occupancy = None
+    if field.upsample == 1:
+        occupancy_affine = field.affine.copy()
+        occupancy_affine[:3, 3] = field.affine[:3, :3] @ np.ones(3) + field.affine[:3, 3]
+        occupancy = Volume(values[1:-1, 1:-1, 1:-1] < 0, occupancy_affine)
     return ViewsSurface(mesh, occupancy, field)
