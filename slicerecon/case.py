@@ -52,10 +52,11 @@ from .labels import LabelMap, Structure
 from .metrics import evaluate
 from .metrics.inputs import place
 from .options import ReconstructOptions
+from .partition.planner import Plan, PlanPart
 from .rasterize import mesh_to_mask
 from .reconstruct import ReconstructConfig, reconstruct
 from .sampling import projections_from_sections, projections_from_volume
-from .sections import CrossSections, Projections, Volume
+from .sections import Box, CrossSections, Projections, Volume
 from .surface.joint import resolve
 from .surface.smooth import taubin_smooth
 from .surface.views import views_surface
@@ -413,22 +414,34 @@ def reconstruct_case(
 def _from_views(
     case: CaseInput, structure: Structure, options: ReconstructOptions, crossed: int
 ) -> StructureResult:
-    """A structure drawn in several views (:mod:`slicerecon.surface.views`): no partition."""
+    """A structure drawn in one or several views (:mod:`slicerecon.surface.views`), in one
+    part: its plan records that part's box."""
+    annotation = case.annotation
     made = views_surface(
-        case.annotation,
+        annotation,
         structure.value,
         interpolation=options.interpolation,
         join_drift=options.join_drift,
         slabs=case.kind.kind in ("rtstruct", "contours"),
     )
     mesh = taubin_smooth(made.mesh) if options.smooth else made.mesh
+    field = made.field
+    size = np.asarray(field.values.shape) - 2
+    size[field.axis] //= field.upsample
+    lo = np.maximum(np.asarray(field.lo), 0)
+    hi = np.minimum(np.asarray(field.lo) + size, annotation.grid_shape)
+    box = Box(tuple(int(v) for v in lo), tuple(int(v) for v in np.maximum(hi, lo + 1)))
+    voxels = 0 if made.occupancy is None else int(np.count_nonzero(made.occupancy.mask))
     return StructureResult(
         structure,
         RECONSTRUCTED,
         mesh=mesh,
         planes=crossed,
         occupancy=None if options.smooth else made.occupancy,
-        field=made.field,
+        plan=Plan("none", (PlanPart(box, None, voxels),), annotation.grid_shape),
+        sections=(own := annotation.cross_sections(structure.value, axis=annotation.main_axis())),
+        projections=projections_from_sections(own),
+        field=field,
     )
 
 

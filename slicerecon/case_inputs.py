@@ -36,7 +36,7 @@ from .reconstruct import ReconstructConfig
 from .sections import CrossSections, Volume
 from .selection import choose_structure
 
-__all__ = ["CaseInput", "case_from_label_map", "load_case"]
+__all__ = ["CaseInput", "case_from_label_map", "load_case", "reading_of"]
 
 logger = logging.getLogger(__name__)
 
@@ -412,3 +412,35 @@ def _with_ground_truth(
     )
     assert truth_map is not None
     return replace(case, truth=truth_map)
+
+
+def reading_of(
+    path: str | os.PathLike[str],
+    *,
+    annotation: str = "auto",
+    allow_irregular: bool = False,
+    memory_budget_gb: float | None = None,
+) -> str | None:
+    """How ``slicerecon run`` reads a label map, in one line (None for other inputs).
+
+    ``dense mask (detected)`` or ``sparse annotation (detected): 12 planes
+    along z (spacing 5 mm), 2 planes along x ...``: the rule of
+    :func:`slicerecon.plane_detection.detect_planes` on every structure
+    together, or as ``annotation`` states it.
+    """
+    from .io.limits import DEFAULT_MEMORY_BUDGET_GB
+
+    kind = detect_kind(path)
+    if kind.kind not in LABEL_MAP_KINDS:
+        return None
+    label_map = read_label_map(
+        kind.path,
+        allow_irregular=allow_irregular,
+        memory_budget_gb=DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb,
+    )
+    assert label_map is not None
+    union = label_map.union()
+    if union.is_empty:
+        return None
+    crop = union.crop(pad=3)
+    return detect_planes(crop.mask, parse_annotation(annotation)).describe(crop.spacing)

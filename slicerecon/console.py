@@ -89,6 +89,8 @@ def print_run_summary(summary: dict[str, Any], outdir: Path) -> None:
     from rich.table import Table
 
     console = Console()
+    if summary.get("annotation"):
+        console.print(f"read as: {summary['annotation']}", highlight=False)
     console.print(
         f"[bold]{summary['parts']}[/] part(s) from [bold]{summary['planes']}[/] planes -> "
         f"{summary['mesh']} (watertight: {summary['watertight']})"

@@ -62,6 +62,11 @@ def info(
         allow_irregular=allow_irregular,
         memory_budget_gb=max_memory,
     )
+    from ..case_inputs import reading_of
+
+    read_as = reading_of(input, allow_irregular=allow_irregular, memory_budget_gb=max_memory)
+    if read_as is not None:
+        details["read as"] = read_as
     if as_json:
         typer.echo(json.dumps(details, indent=2, default=str))
         return

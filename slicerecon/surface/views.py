@@ -56,6 +56,9 @@ SLAB_REACH = 0.5
 """How far a structure goes on beyond a complete view's outer plane of contours, in plane
 spacings: each contour stands for the slab half-way to its neighbours (RTSTRUCT's convention).
 A label map's slice stands for its own voxels: half a voxel."""
+BEYOND_PENALTY = 2.0
+"""Factor on the distance of a sample beyond the outer planes of a view of one or two
+planes, which is extruded there (chosen on the development shapes)."""
 CROP_PAD = 3
 """Voxels kept around the drawn foreground."""
 _EPS_MM = 1e-3
@@ -274,6 +277,9 @@ def _view(
             field[beyond] = base[None]
     field = np.minimum(np.nan_to_num(field, posinf=far), far)
     nearest = np.min(np.abs(samples[:, None] - indices[None, :]), axis=1) * spacing[axis]
+    if reach is None:  # an incomplete view weighs less beyond its outer planes
+        outside = (samples < indices[0]) | (samples > indices[-1])
+        nearest[outside] *= BEYOND_PENALTY
     out = np.moveaxis(field, 0, axis)
     distance = np.broadcast_to(
         np.expand_dims(nearest.astype(np.float32), tuple(d for d in range(3) if d != axis)),

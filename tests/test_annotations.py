@@ -1,0 +1,193 @@
+"""Annotations as clinicians draw them: any density, several views, nested ROIs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import nibabel as nib
+import numpy as np
+import pytest
+import trimesh
+
+from slicerecon.case import reconstruct_structures
+from slicerecon.cli import main
+from slicerecon.errors import OptionError
+from slicerecon.plane_detection import detect_planes, parse_annotation
+
+SPACING = (1.0, 1.0, 2.0)
+AFFINE = np.diag([*SPACING, 1.0])
+
+
+def _ellipsoid(shape: tuple[int, int, int] = (48, 44, 30)) -> np.ndarray:
+    x, y, z = (
+        a * s
+        for a, s in zip(
+            np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), SPACING, strict=True
+        )
+    )
+    return ((x - 24) / 17) ** 2 + ((y - 22) / 13) ** 2 + ((z - 30) / 22) ** 2 < 1
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum() / (a | b).sum())
+
+
+def _keep(mask: np.ndarray, planes: dict[int, list[int]]) -> np.ndarray:
+    out = np.zeros_like(mask)
+    for axis, indices in planes.items():
+        np.moveaxis(out, axis, 0)[indices] = np.moveaxis(mask, axis, 0)[indices]
+    return out
+
+
+def _plain_sdf_iou(truth: np.ndarray, planes: list[int]) -> float:
+    """Linear shape-based interpolation between the axial planes (independent of slicerecon)."""
+    from scipy import ndimage
+
+    field = np.full(truth.shape, np.inf, dtype=np.float32)
+    sdf = {}
+    for k in planes:
+        plane = np.pad(truth[:, :, k], 1)
+        inside = ndimage.distance_transform_edt(plane)[1:-1, 1:-1]
+        outside = ndimage.distance_transform_edt(~plane)[1:-1, 1:-1]
+        sdf[k] = (outside - inside).astype(np.float32)
+    for k0, k1 in zip(planes[:-1], planes[1:], strict=True):
+        for k in range(k0, k1 + 1):
+            t = (k - k0) / (k1 - k0)
+            field[:, :, k] = (1 - t) * sdf[k0] + t * sdf[k1]
+    return _iou(field < 0, truth)
+
+
+def test_a_dense_mask_is_dense_and_every_2nd_slice_is_an_annotation() -> None:
+    truth = _ellipsoid()
+    assert detect_planes(truth).dense
+    every2 = _keep(truth, {2: list(range(0, truth.shape[2], 2))})
+    reading = detect_planes(every2)
+    assert not reading.dense and reading.axes == (2,)
+    assert reading.describe(SPACING).startswith(
+        f"sparse annotation (detected): {len(reading.planes[2])} planes along z (spacing 4 mm)"
+    )
+
+
+def test_every_2nd_slice_is_interpolated_not_taken_as_the_shape() -> None:
+    truth = _ellipsoid()
+    occupied = np.flatnonzero(truth.any(axis=(0, 1)))
+    planes = list(range(int(occupied[0]), int(occupied[-1]) + 1, 2))
+    result = reconstruct_structures((_keep(truth, {2: planes}).astype(np.uint8), AFFINE))
+    assert result.truth is None  # sparse: no ground truth, no self-scored metrics
+    ours = _iou(result.labels > 0, truth)
+    assert ours >= _plain_sdf_iou(truth, planes) - 0.005
+    assert ours > 0.9
+
+
+def test_planes_along_another_axis_are_interpolated(tmp_path: Path) -> None:
+    """ITK's SevenLabels example is annotated on two y planes."""
+    labels = np.zeros((40, 30, 36), np.uint8)
+    x, z = np.meshgrid(np.arange(40), np.arange(36), indexing="ij")
+    for value, (cx, cz) in enumerate([(10, 10), (28, 10), (10, 26), (28, 26)], start=1):
+        labels[:, 6, :][((x - cx) / 6) ** 2 + ((z - cz) / 5) ** 2 <= 1] = value
+        labels[:, 22, :][((x - cx - 1) / 5) ** 2 + ((z - cz) / 6) ** 2 <= 1] = value
+    path = tmp_path / "two_y_planes.nii.gz"
+    nib.save(nib.Nifti1Image(labels, np.eye(4)), path)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 0
+    for mesh_file in sorted((out / "meshes").glob("*.stl")):
+        mesh = trimesh.load(mesh_file)
+        assert mesh.is_watertight and len(mesh.split(only_watertight=False)) == 1
+        lo, hi = mesh.bounds[:, 1]
+        assert lo <= 6 and hi >= 22  # one body spanning both y planes, not two slabs
+    written = np.asanyarray(nib.load(out / "labels.nii.gz").dataobj)
+    assert np.count_nonzero(written[:, 14, :]) > 0  # filled half-way between the planes
+
+
+def test_several_views_are_used_at_once_and_every_drawn_plane_is_kept() -> None:
+    truth = _ellipsoid()
+    axial = [5, 9, 13, 17, 21, 25]
+    planes = {2: axial, 0: [16, 32], 1: [15, 29]}
+    sparse = _keep(truth, planes)
+    reading = detect_planes(sparse)
+    assert {a: len(p) for a, p in reading.planes.items()} == {0: 2, 1: 2, 2: 6}
+    views = reconstruct_structures((sparse.astype(np.uint8), AFFINE)).labels > 0
+    axial_only = reconstruct_structures((_keep(truth, {2: axial}).astype(np.uint8), AFFINE))
+    # the extra views change the result (their gain is measured on real shapes:
+    # benchmarks/annotations.py); on this smooth ellipsoid it stays close to the truth
+    assert np.count_nonzero(views ^ (axial_only.labels > 0)) > 0
+    assert _iou(views, truth) > 0.9
+    for axis, indices in planes.items():  # the result's section is the drawn mask
+        for k in indices:
+            drawn = np.take(truth, k, axis=axis)
+            made = np.take(views, k, axis=axis)
+            assert np.count_nonzero(drawn ^ made) <= 0.02 * np.count_nonzero(drawn)
+
+
+def test_the_reading_can_be_stated_and_a_bad_one_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert parse_annotation("x,z") == (0, 2) and parse_annotation("DENSE") == "dense"
+    with pytest.raises(OptionError, match="--annotation"):
+        parse_annotation("w")
+    truth = _ellipsoid()
+    path = tmp_path / "e.nii.gz"
+    nib.save(nib.Nifti1Image(truth.astype(np.uint8), AFFINE), path)
+    # every slice annotated reads as dense unless stated
+    stated = reconstruct_structures(path, annotation="z")
+    assert stated.truth is None and _iou(stated.labels > 0, truth) > 0.97
+    assert main(["run", str(path), "--annotation", "w", "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--annotation" in err[0]
+
+
+def test_info_and_run_say_how_a_label_map_was_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    truth = _ellipsoid()
+    path = tmp_path / "every2.nii.gz"
+    nib.save(
+        nib.Nifti1Image(_keep(truth, {2: list(range(1, 30, 2))}).astype(np.uint8), AFFINE), path
+    )
+    assert main(["info", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["read as"].startswith("sparse annotation")
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 0
+    assert "read as: sparse annotation (detected): 11 planes along z" in capsys.readouterr().out
+    assert not (out / "metrics.json").exists()  # no "quality vs ground truth" of a sparse input
+    plan = json.loads((out / "plan.json").read_text())
+    assert (
+        plan["annotation"].startswith("sparse annotation") and plan["config"]["planner"] == "none"
+    )
+
+
+def test_nested_rois_are_each_reconstructed_whole(tmp_path: Path) -> None:
+    """BODY ⊃ Liver ⊃ GTV: an ROI inside another is never given away."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0], [-31.5, -31.5, 0.0]
+    )
+    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 21), np.uint16), affine, modality="CT")
+    radii = {"BODY": 26.0, "Liver": 14.0, "GTV": 6.0}
+
+    def rings(radius: float) -> list:
+        return [
+            factory.contour_item(factory.circle(np.sqrt(radius**2 - (z - 30) ** 2), (0, 0), z))
+            for z in np.arange(21) * 3.0
+            if abs(z - 30) < radius - 1
+        ]
+
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {(n, name): rings(r) for n, (name, r) in enumerate(radii.items(), start=1)},
+    )
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out)]) == 0
+    records = {
+        r["name"]: r for r in json.loads((out / "structures.json").read_text())["structures"]
+    }
+    assert [records[n]["status"] for n in radii] == ["reconstructed"] * 3
+    for name, radius in radii.items():
+        mesh = trimesh.load(out / records[name]["mesh"])
+        assert mesh.is_watertight
+        # Dice of the mesh against its sphere, from volumes of nested shapes
+        sphere = 4 / 3 * np.pi * radius**3
+        assert mesh.volume == pytest.approx(sphere, rel=0.1), name
+        assert np.linalg.norm(mesh.centroid - [0, 0, 30]) < 1.0
