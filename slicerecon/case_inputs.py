@@ -28,7 +28,7 @@ from .inputs import axis_upsample, prepare_inputs
 from .io import DICOM_KINDS, InputKind, detect_kind, load_ground_truth, load_input
 from .io.dicom import dicom_info
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
-from .io.limits import check_grid
+from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.rtstruct import read_rtstruct_structures
 from .labels import LabelMap, Structure
 from .plane_detection import detect_planes, parse_annotation
@@ -428,8 +428,6 @@ def reading_of(
     :func:`slicerecon.plane_detection.detect_planes` on every structure
     together, or as ``annotation`` states it.
     """
-    from .io.limits import DEFAULT_MEMORY_BUDGET_GB
-
     kind = detect_kind(path)
     if kind.kind not in LABEL_MAP_KINDS:
         return None
