@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
-from .errors import OptionError
+from .errors import GeometryError, OptionError
 from .evaluation import mean_metrics
 from .inputs import axis_upsample
 from .io.projections import read_projection_files
@@ -323,7 +323,7 @@ def reconstruct_case(
         and options.method_entry.implicit
         and config.projections in ("auto", "sections")
     )
-    shared = annotation.cross_sections(axis=None if one_axis else annotation.main_axis())
+    shared = _shared_sections(annotation, one_axis)
     drawn = annotation.structures
     joint = annotation.exclusive and len(drawn) > 1
     if joint and not options.method_entry.implicit:
@@ -439,10 +439,25 @@ def _from_views(
         planes=crossed,
         occupancy=None if options.smooth else made.occupancy,
         plan=Plan("none", (PlanPart(box, None, voxels),), annotation.grid_shape),
-        sections=(own := annotation.cross_sections(structure.value, axis=annotation.main_axis())),
-        projections=projections_from_sections(own),
+        sections=(own := _main_sections(annotation, structure.value)),
+        projections=None if own is None else projections_from_sections(own),
         field=field,
     )
+
+
+def _main_sections(annotation: Annotation, value: int | None) -> CrossSections | None:
+    """The planes (of structure ``value``, or all) perpendicular to the annotation's main
+    grid axis, or None when no plane is a slice of the grid (a radial set)."""
+    try:
+        return annotation.cross_sections(value, axis=annotation.main_axis())
+    except GeometryError:
+        return None
+
+
+def _shared_sections(annotation: Annotation, one_axis: bool) -> CrossSections | None:
+    if one_axis:
+        return annotation.cross_sections()
+    return _main_sections(annotation, None)
 
 
 def _resolve(

@@ -29,7 +29,7 @@ from .io import DICOM_KINDS, InputKind, detect_kind, load_ground_truth, load_inp
 from .io.dicom import dicom_info
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
-from .io.rtstruct import read_rtstruct_structures
+from .io.rtstruct import read_rtstruct_annotation
 from .labels import LabelMap, Structure
 from .plane_detection import detect_planes, parse_annotation
 from .reconstruct import ReconstructConfig
@@ -323,29 +323,34 @@ def _views_annotation(
 def _load_rtstruct(
     kind: InputKind, config: ReconstructConfig, image_dir: str | os.PathLike[str] | None
 ) -> CaseInput:
-    """Every chosen ROI of an RTSTRUCT on its own contour planes of one shared grid."""
+    """Every chosen ROI of an RTSTRUCT on its own contour planes, of any orientation."""
     if config.union:
         raise OptionError("--union applies to label maps; choose RTSTRUCT ROIs with --label")
-    structures, sections, _ = read_rtstruct_structures(
+    if config.slices is not None or config.every is not None:
+        raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
+    annotation, missing = read_rtstruct_annotation(
         kind.path,
         rois=config.selectors,
         allow_irregular=config.allow_irregular,
         image_dir=image_dir if image_dir is not None else kind.image_dir,
         memory_budget_gb=config.max_memory_gb,
     )
-    missing = tuple(s for s, own in zip(structures, sections, strict=True) if own is None)
     for structure in missing:
         logger.warning("ROI %s has no contours: nothing to reconstruct", structure.label)
-    drawn = [(s, own) for s, own in zip(structures, sections, strict=True) if own is not None]
-    case = _load_sparse_sections(
-        kind,
-        config,
-        [s for s, _ in drawn],
-        [own for _, own in drawn],
-        exclusive=False,
-        coordinates="LPS",
+    annotation = replace(
+        annotation,
+        source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}",
     )
-    return replace(case, missing=missing)
+    return CaseInput(
+        annotation,
+        None,
+        kind.path,
+        kind,
+        annotation.affine,
+        annotation.grid_shape,
+        np.zeros(3, np.int64),
+        missing=missing,
+    )
 
 
 def _load_sparse_sections(

@@ -91,29 +91,39 @@ def check_outdir(outdir: str | os.PathLike[str]) -> Path:
 
 def _plan_record(case: CaseInput, result: CaseReconstruction) -> dict[str, Any]:
     """``plan.json`` without the configuration and timings."""
-    items = [r for r in result.results if r.structure in case.annotation.structures]
+    annotation = case.annotation
+    items = [r for r in result.results if r.structure in annotation.structures]
     one = items[0] if len(items) == 1 and items[0].plan is not None else None
     sections = one.sections if one is not None and one.sections is not None else result.sections
     parts: list[dict[str, Any]] = []
     structures = []
     for item in result.results:
         plan = None
-        if item.plan is not None and item.sections is not None:
-            plan = item.plan.to_dict(affine=item.sections.affine)
+        if item.plan is not None:
+            affine = annotation.affine if item.sections is None else item.sections.affine
+            plan = item.plan.to_dict(affine=affine)
             parts += [{**p, "structure": item.structure.value} for p in plan["parts"]]
         structures.append({**item.structure.to_dict(), "plan": plan})
+    views = [
+        {"normal": [round(float(c), 6) for c in normal], "n_planes": len(members)}
+        for normal, members in annotation.orientations()
+    ]
+    planes: dict[str, Any] = {"n_planes": len(annotation.planes), "views": views}
+    if sections is not None and len(views) == 1:
+        planes.update(
+            axis="xyz"[sections.axis],
+            n_planes=sections.n_planes,
+            plane_indices=sections.indices.tolist(),
+            positions_mm=sections.positions.tolist(),
+        )
+    grid = one.plan.grid_shape if one is not None else annotation.grid_shape
     record: dict[str, Any] = {
         "planner": one.plan.planner if one is not None else case_planner(result),
-        "grid_shape": list(one.plan.grid_shape if one is not None else sections.grid_shape),
+        "grid_shape": list(grid),
         "parts": parts,
         "structures": structures,
-        "sections": {
-            "axis": "xyz"[sections.axis],
-            "n_planes": sections.n_planes,
-            "plane_indices": sections.indices.tolist(),
-            "positions_mm": sections.positions.tolist(),
-        },
-        "annotation": case.annotation.source,
+        "sections": planes,
+        "annotation": annotation.source,
     }
     if one is not None and one.projections is not None:
         record["projections"] = one.projections.source

@@ -191,3 +191,51 @@ def test_nested_rois_are_each_reconstructed_whole(tmp_path: Path) -> None:
         sphere = 4 / 3 * np.pi * radius**3
         assert mesh.volume == pytest.approx(sphere, rel=0.1), name
         assert np.linalg.norm(mesh.centroid - [0, 0, 30]) < 1.0
+
+
+def _ellipsoid_section(normal: np.ndarray, offset: float, n: int = 120) -> np.ndarray:
+    """The ellipse where the plane ``x · normal = offset`` cuts x²/20² + y²/20² + z²/30² = 1."""
+    normal = normal / np.linalg.norm(normal)
+    world = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    u = world - (world @ normal) * normal
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    scale = np.array([20.0, 20.0, 30.0])
+    points = []
+    centre = offset * normal
+    for t in np.linspace(0, 2 * np.pi, n, endpoint=False):
+        d = np.cos(t) * u + np.sin(t) * v
+        # |(centre + r d) / scale|^2 = 1, solved for r > 0
+        a, b, c = (d / scale) @ (d / scale), 2 * (centre / scale) @ (d / scale), 0.0
+        c = (centre / scale) @ (centre / scale) - 1
+        points.append(centre + (-b + np.sqrt(b * b - 4 * a * c)) / (2 * a) * d)
+    return np.array(points)
+
+
+@pytest.mark.parametrize("layout", ["radial", "axial+sagittal+coronal", "axial+tilted"])
+def test_contours_on_planes_of_any_orientation(layout: str, tmp_path: Path) -> None:
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    z_axis = np.array([0.0, 0.0, 1.0])
+    if layout == "radial":  # 8 planes through the long axis, 22.5 degrees apart
+        planes = [
+            (np.array([-np.sin(t), np.cos(t), 0.0]), 0.0) for t in np.radians(22.5 * np.arange(8))
+        ]
+    else:
+        planes = [(z_axis, z) for z in np.linspace(-26, 26, 8)]
+        if layout == "axial+sagittal+coronal":
+            planes += [(np.array([1.0, 0, 0]), x) for x in (-10.0, 0.0, 10.0)]
+            planes += [(np.array([0, 1.0, 0]), y) for y in (-10.0, 0.0, 10.0)]
+        else:
+            planes += [(np.array([np.sin(a), 0, np.cos(a)]), 0.0) for a in np.radians([30, 45, 60])]
+    items = [factory.contour_item(_ellipsoid_section(n, o)) for n, o in planes]
+    path = factory.write_rtstruct(tmp_path / "rs.dcm", {(1, "Prostate"): items})
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 0
+    mesh = trimesh.load(out / "mesh.stl")
+    assert mesh.is_watertight
+    truth = 4 / 3 * np.pi * 20 * 20 * 30
+    assert mesh.volume == pytest.approx(truth, rel=0.06)
+    plan = json.loads((out / "plan.json").read_text())
+    expected = {"radial": 8, "axial+sagittal+coronal": 3, "axial+tilted": 4}[layout]
+    assert len(plan["sections"]["views"]) == expected

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..annotation import Annotation, annotation_from_sections
 from ..errors import (
     EmptyMaskError,
     FormatError,
@@ -39,9 +40,16 @@ from ..selection import choose_structure, parse_selector
 from .dicom.series import dicom_series_geometry
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
+from .plane_groups import annotation_from_polygons, orientation_count
 from .polygons import sections_from_polygons
 
-__all__ = ["list_rois", "read_rtstruct", "read_rtstruct_structures", "roi_contours"]
+__all__ = [
+    "list_rois",
+    "read_rtstruct",
+    "read_rtstruct_annotation",
+    "read_rtstruct_structures",
+    "roi_contours",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -435,3 +443,95 @@ def _read_structures(
     except SlicereconError as exc:
         raise type(exc)(f"{p}: {exc}") from exc
     return structures, sections, union
+
+
+def read_rtstruct_annotation(
+    path: str | os.PathLike[str],
+    *,
+    rois: Sequence[int | str] = (),
+    image_dir: str | os.PathLike[str] | None = None,
+    pixel_spacing: float | None = None,
+    allow_irregular: bool = False,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> tuple[Annotation, tuple[Structure, ...]]:
+    """Every ROI of an RTSTRUCT (or those chosen) as an annotation, contours of any orientation.
+
+    Contours on parallel planes are read as :func:`read_rtstruct_structures`
+    reads them (one shared grid, each ROI on its own planes). Contours on
+    several orientations (axial plus sagittal contours; a radial set of planes
+    through an organ's axis; tilted views) are grouped into planes by normal
+    and offset and rasterized each in its own plane
+    (:func:`slicerecon.io.plane_groups.annotation_from_polygons`), on the image
+    series' grid when ``image_dir`` is given.
+
+    Parameters
+    ----------
+    path, rois, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+        As for :func:`read_rtstruct_structures`.
+
+    Returns
+    -------
+    annotation : Annotation
+        The ROIs with contours; not a partition (ROIs may overlap or nest), LPS mm.
+    missing : tuple of Structure
+        The chosen ROIs without closed planar contours (each reported with a warning).
+
+    Raises
+    ------
+    InputError, FormatError, GeometryError
+        As :func:`read_rtstruct_structures`.
+    EmptyMaskError
+        No chosen ROI has a closed planar contour.
+    """
+    with reading(path):
+        ds, p = _read_dataset(path)
+        available = _rois(ds, p)
+        if not available:
+            raise EmptyMaskError(f"{p} holds no ROI (its StructureSetROISequence is empty)")
+        chosen = [_choose_roi(available, r, p) for r in rois] if rois else available
+        colours = _roi_colours(ds)
+        structures = [Structure(number, name, colours.get(number)) for number, name in chosen]
+        polygons: list[list[NDArray[np.float64]]] = []
+        for number, name in chosen:
+            try:
+                polygons.append(_roi_polygons(ds, number, name, p)[0])
+            except EmptyMaskError as exc:
+                logger.warning("%s", exc)
+                polygons.append([])
+        everything = [poly for group in polygons for poly in group]
+        if not everything:
+            raise EmptyMaskError(f"{p}: no chosen ROI has a closed planar contour")
+        missing = tuple(s for s, group in zip(structures, polygons, strict=True) if not group)
+        drawn = [(s, group) for s, group in zip(structures, polygons, strict=True) if group]
+        if orientation_count(everything) <= 1:
+            found, sections, _ = _read_structures(
+                path, rois, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+            )
+            own = [(s, x) for s, x in zip(found, sections, strict=True) if x is not None]
+            annotation = annotation_from_sections(
+                [s for s, _ in own],
+                [x for _, x in own],
+                shared=False,
+                coordinates="LPS",
+                exclusive=False,
+            )
+            return annotation, missing
+        reference = None
+        if image_dir is not None:
+            from .dicom.series import dicom_series_geometry
+
+            affine, shape, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
+            reference = (affine, shape)
+        try:
+            annotation = annotation_from_polygons(
+                [s for s, _ in drawn],
+                [group for _, group in drawn],
+                reference=reference,
+                pixel_spacing=pixel_spacing,
+                coordinates="LPS",
+                exclusive=False,
+                memory_budget_gb=memory_budget_gb,
+            )
+        except SlicereconError as exc:
+            raise type(exc)(f"{p}: {exc}") from exc
+        return annotation, missing

@@ -15,8 +15,9 @@ weighting, Shepard 1968; ``p`` = :data:`VIEW_WEIGHT_EXPONENT`):
 * between the axial planes the axial view dominates, near a sagittal plane the
   sagittal view, and where the axial stack ends, a sagittal plane that shows
   the structure going on takes over;
-* a view of three planes or more (or the view with the most planes) is taken
-  to cover the structure along its normal: the structure ends beyond its
+* a view of three planes or more (or the view with the most planes, when it
+  has two, or when it is the only view) is taken to cover the structure along
+  its normal: the structure ends beyond its
   outer planes by half a voxel (a label map's slice) or half the plane spacing
   (contours, each standing for the slab half-way to its neighbours); another
   view of one or two planes is extruded beyond them and weighs only near them.
@@ -35,8 +36,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..annotation import Annotation
+from ..annotation import Annotation, PlanePose
 from ..errors import EmptyMaskError, GeometryError
+from ..io.limits import check_grid
 from ..sections import Volume, in_plane_axes
 from .across_planes import fill_between
 from .drift import join_drifting_regions
@@ -84,28 +86,48 @@ class ViewsSurface:
     field: SdfField
 
 
-def _view_axes(annotation: Annotation, value: int) -> dict[int, list[tuple[float, NDArray]]]:
-    """The planes of structure ``value`` by grid axis: ``{axis: [(index, mask), ...]}``."""
+@dataclass
+class _Oblique:
+    """The planes of one orientation that is not perpendicular to a grid axis."""
+
+    normal: NDArray[np.float64]
+    planes: list[tuple[float, PlanePose, NDArray[np.bool_]]]  # (offset mm, pose, mask)
+
+
+def _views(
+    annotation: Annotation, value: int
+) -> tuple[dict[int, list[tuple[float, NDArray]]], list[_Oblique]]:
+    """The planes of structure ``value``: by grid axis ``{axis: [(index, mask), ...]}`` for
+    slices of the reference grid, and by orientation for any other plane."""
     inverse = np.linalg.inv(annotation.affine)
-    views: dict[int, list[tuple[float, NDArray]]] = {}
+    aligned: dict[int, list[tuple[float, NDArray]]] = {}
+    oblique: list[_Oblique] = []
+    limit = np.sin(np.radians(0.5))
     for plane in annotation.planes_of(value):
-        normal = plane.pose.normal
+        pose = plane.pose
         found = None
         for axis in range(3):
             a, b = in_plane_axes(axis)
-            if np.allclose(plane.pose.affine[:3, 0], annotation.affine[:3, a]) and np.allclose(
-                plane.pose.affine[:3, 1], annotation.affine[:3, b]
+            if np.allclose(pose.affine[:3, 0], annotation.affine[:3, a]) and np.allclose(
+                pose.affine[:3, 1], annotation.affine[:3, b]
             ):
                 found = axis
                 break
-        if found is None or not np.isfinite(normal).all():
-            raise GeometryError(
-                "a plane is not a slice of the reference grid: several views are reconstructed "
-                "on grid-aligned planes"
-            )
-        index = (inverse[:3, :3] @ plane.pose.affine[:3, 3] + inverse[:3, 3])[found]
-        views.setdefault(found, []).append((float(index), plane.mask(value)))
-    return {axis: sorted(p, key=lambda item: item[0]) for axis, p in views.items()}
+        if found is not None:
+            index = (inverse[:3, :3] @ pose.affine[:3, 3] + inverse[:3, 3])[found]
+            aligned.setdefault(found, []).append((float(index), plane.mask(value)))
+            continue
+        normal = pose.normal
+        for view in oblique:
+            if np.linalg.norm(np.cross(view.normal, normal)) < limit:
+                sign = 1.0 if view.normal @ normal > 0 else -1.0
+                view.planes.append((sign * pose.offset_mm, pose, plane.mask(value)))
+                break
+        else:
+            oblique.append(_Oblique(normal, [(pose.offset_mm, pose, plane.mask(value))]))
+    for view in oblique:
+        view.planes.sort(key=lambda item: item[0])
+    return {axis: sorted(p, key=lambda item: item[0]) for axis, p in aligned.items()}, oblique
 
 
 def views_field(
@@ -122,7 +144,9 @@ def views_field(
     Parameters
     ----------
     annotation : Annotation
-        Planes perpendicular to grid axes of its reference grid.
+        Planes of any orientation: slices of its reference grid are
+        interpolated on the grid's own voxels, other planes through their
+        projections (bilinear in-plane, linear along their normal).
     value : int
         The structure.
     interpolation : {"pchip", "linear"}
@@ -148,12 +172,13 @@ def views_field(
     ------
     EmptyMaskError
         The structure is drawn nowhere.
-    GeometryError
-        A plane that is not a slice of the reference grid.
+    MemoryBudgetError
+        The field's samples would exceed the default memory budget.
     """
-    views = _view_axes(annotation, value)
-    shape = np.asarray(annotation.grid_shape, dtype=np.int64)
-    lo, hi = shape.copy(), np.zeros(3, dtype=np.int64)
+    views, oblique = _views(annotation, value)
+    inverse = np.linalg.inv(annotation.affine)
+    lo = np.full(3, np.iinfo(np.int64).max, dtype=np.int64)
+    hi = np.full(3, np.iinfo(np.int64).min, dtype=np.int64)
     for axis, planes in views.items():
         a, b = in_plane_axes(axis)
         for index, mask in planes:
@@ -165,26 +190,59 @@ def views_field(
             lo[a], hi[a] = min(lo[a], rows[0]), max(hi[a], rows[-1] + 1)
             lo[b], hi[b] = min(lo[b], cols[0]), max(hi[b], cols[-1] + 1)
             lo[axis], hi[axis] = min(lo[axis], k), max(hi[axis], k + 1)
+    for view in oblique:
+        for _, pose, mask in view.planes:
+            if not mask.any():
+                continue
+            pixels = np.argwhere(mask)
+            ends = pose.to_world(
+                np.array(
+                    [
+                        [r, c]
+                        for r in (pixels[:, 0].min(), pixels[:, 0].max())
+                        for c in (pixels[:, 1].min(), pixels[:, 1].max())
+                    ],
+                    dtype=np.float64,
+                )
+            )
+            index = ends @ inverse[:3, :3].T + inverse[:3, 3]
+            lo = np.minimum(lo, np.floor(index.min(axis=0)).astype(np.int64))
+            hi = np.maximum(hi, np.ceil(index.max(axis=0)).astype(np.int64) + 1)
     if np.any(hi <= lo):
         raise EmptyMaskError(f"structure {value} is drawn on no plane")
-    main = max(views, key=lambda axis: len(views[axis]))
+    counts = {axis: len(planes) for axis, planes in views.items()}
+    counts.update({-1 - n: len(view.planes) for n, view in enumerate(oblique)})
+    main = max(counts, key=lambda key: counts[key])
+
+    def complete(key: int) -> bool:
+        # three planes or more; or the main view of two (or the only view): a radial
+        # set of single planes has no complete view
+        many = counts[key] >= 2 or len(counts) == 1
+        return counts[key] >= COMPLETE_VIEW or (key == main and many)
+
+    spacing = np.linalg.norm(annotation.affine[:3, :3], axis=0)
     reach = {
-        axis: _reach(planes, slabs) if len(planes) >= COMPLETE_VIEW or axis == main else None
-        for axis, planes in views.items()
+        axis: _reach(planes, slabs) if complete(axis) else None for axis, planes in views.items()
     }
+    oblique_reach = [
+        _oblique_reach(view, slabs, float(spacing.min())) if complete(-1 - n) else None
+        for n, view in enumerate(oblique)
+    ]
     pad = np.full(3, CROP_PAD, dtype=np.int64)
     for axis, extent in reach.items():
         if extent is not None:
             pad[axis] += int(np.ceil(extent))
+    extra_mm = max([r for r in oblique_reach if r is not None], default=0.0)
+    pad += np.ceil(extra_mm / spacing).astype(np.int64)
     # not clipped to the grid: a structure may reach beyond a grid that holds only
     # its drawn slices (a SEG of one frame); what lies outside is not written
     lo = lo - pad
     hi = hi + pad
-    spacing = np.linalg.norm(annotation.affine[:3, :3], axis=0)
-    along = annotation.main_axis()
+    along = _main_grid_axis(annotation)
     upsample = views_upsample(annotation)
     size = [int(v) for v in hi - lo]
     size[along] *= upsample
+    check_grid(size, what="the views' field")
     # sample positions along the main axis, in voxel index units (planes stay on samples)
     positions = lo[along] - 0.5 + (np.arange(size[along]) + 0.5) / upsample
     far = np.float32(np.linalg.norm(np.asarray(hi - lo) * spacing) + spacing.max())
@@ -202,6 +260,12 @@ def views_field(
             reach[axis],
             along,
             positions,
+        )
+        fields.append(own)
+        distances.append(distance)
+    for view, extent in zip(oblique, oblique_reach, strict=True):
+        own, distance = _oblique_view(
+            view, annotation.affine, lo, size, along, positions, far, extent
         )
         fields.append(own)
         distances.append(distance)
@@ -306,6 +370,96 @@ def _resample(
     return (1 - t) * np.take(values, below, axis=axis) + t * np.take(values, above, axis=axis)
 
 
+def _main_grid_axis(annotation: Annotation) -> int:
+    """The grid axis most planes are perpendicular to (2 when none is)."""
+    try:
+        return annotation.main_axis()
+    except GeometryError:
+        return 2
+
+
+def _oblique_reach(view: _Oblique, slabs: bool, voxel_mm: float) -> float:
+    """How far (mm) a complete oblique view reaches beyond its outer planes."""
+    offsets = [offset for offset, _, _ in view.planes]
+    if slabs and len(offsets) > 1:
+        return SLAB_REACH * float(np.median(np.diff(offsets)))
+    return 0.5 * voxel_mm
+
+
+def _oblique_view(
+    view: _Oblique,
+    affine: NDArray[np.float64],
+    lo: NDArray[np.int64],
+    size: list[int],
+    along: int,
+    positions: NDArray[np.float64],
+    far: np.float32,
+    reach_mm: float | None,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """One oblique view's field and distances (mm) on the crop's samples, slab by slab.
+
+    A sample between two planes of the view takes their in-plane signed
+    distances at its projections onto them (bilinear), blended linearly along
+    the normal; beyond the outer planes the view ends ``reach_mm`` past them
+    (a complete view) or is extruded (None).
+    """
+    from scipy import ndimage
+
+    offsets = np.array([offset for offset, _, _ in view.planes])
+    images = [
+        plane_signed_distance(mask, pose.pixel_spacing) if mask.any() else None
+        for _, pose, mask in view.planes
+    ]
+    to_pixels = [np.linalg.inv(pose.affine) for _, pose, _ in view.planes]
+    field = np.empty(size, dtype=np.float32)
+    distance = np.empty(size, dtype=np.float32)
+    grids = [np.arange(lo[d], lo[d] + size[d], dtype=np.float64) for d in range(3)]
+    grids[along] = positions
+    other = [d for d in range(3) if d != along]
+    mesh_a, mesh_b = np.meshgrid(grids[other[0]], grids[other[1]], indexing="ij")
+
+    def sample(n: int, world: NDArray[np.float64]) -> NDArray[np.float32]:
+        if images[n] is None:
+            return np.full(world.shape[0], far, dtype=np.float32)
+        pix = world @ to_pixels[n][:3, :3].T + to_pixels[n][:3, 3]
+        values = ndimage.map_coordinates(
+            images[n], [pix[:, 0], pix[:, 1]], order=1, mode="constant", cval=float(far)
+        )
+        return np.minimum(values, far).astype(np.float32)
+
+    for k, position in enumerate(grids[along]):
+        index = np.empty((mesh_a.size, 3))
+        index[:, other[0]] = mesh_a.ravel()
+        index[:, other[1]] = mesh_b.ravel()
+        index[:, along] = position
+        world = index @ affine[:3, :3].T + affine[:3, 3]
+        u = world @ view.normal
+        values = np.empty(u.size, dtype=np.float32)
+        slot = np.searchsorted(offsets, u)  # planes slot - 1 and slot bracket u
+        for j in np.unique(slot):
+            sel = np.flatnonzero(slot == j)
+            if j == 0 or j == len(offsets):
+                n = 0 if j == 0 else len(offsets) - 1
+                base = sample(n, world[sel])
+                if reach_mm is None:
+                    values[sel] = base
+                else:
+                    past = (np.abs(u[sel] - offsets[n]) - reach_mm).astype(np.float32)
+                    values[sel] = np.maximum(base, past)
+                continue
+            t = ((u[sel] - offsets[j - 1]) / (offsets[j] - offsets[j - 1])).astype(np.float32)
+            values[sel] = (1 - t) * sample(j - 1, world[sel]) + t * sample(j, world[sel])
+        nearest = np.min(np.abs(u[:, None] - offsets[None, :]), axis=1)
+        if reach_mm is None:
+            outside = (u < offsets[0]) | (u > offsets[-1])
+            nearest[outside] *= BEYOND_PENALTY
+        block = [slice(None)] * 3
+        block[along] = k
+        field[tuple(block)] = values.reshape(mesh_a.shape)
+        distance[tuple(block)] = nearest.reshape(mesh_a.shape).astype(np.float32)
+    return field, distance
+
+
 def views_upsample(annotation: Annotation) -> int:
     """Field samples per voxel along the annotation's main axis (:meth:`Annotation.main_axis`).
 
@@ -315,7 +469,10 @@ def views_upsample(annotation: Annotation) -> int:
     finely as the pixels (an odd factor, so that planes stay on samples; at
     most 9); else one sample per voxel.
     """
-    along = annotation.main_axis()
+    try:
+        along = annotation.main_axis()
+    except GeometryError:
+        return 1  # no plane is a slice of the grid
     indices = np.sort(annotation.cross_sections(axis=along).indices)
     if indices.size > 1 and float(np.median(np.diff(indices))) >= 4.0:
         return 1
