@@ -272,6 +272,7 @@ def batch(
             report=not no_report,
             follow_symlinks=follow_symlinks,
         )
+    _print_left_out(console, outcome.skipped_inputs)
     for failed in (c for c in outcome.cases if c.status == "failed"):
         console.print(
             f"[red]failed[/] {failed.case}: {failed.error_type}: {failed.error}",
@@ -287,6 +288,29 @@ def batch(
     )
     if not outcome.ok:
         raise typer.Exit(code=1)
+
+
+MAX_LEFT_OUT_LINES = 20
+"""Entries of INDIR that are not cases printed one per line (the rest are counted)."""
+
+
+def _print_left_out(console: Any, skipped: Any) -> None:
+    """One line per entry of INDIR that is not a case, and why (at most
+    :data:`MAX_LEFT_OUT_LINES`; all of them are logged with -v)."""
+    if not skipped:
+        return
+    console.print(
+        f"{len(skipped)} entr{'y' if len(skipped) == 1 else 'ies'} of INDIR left out "
+        "(not cases):",
+        highlight=False,
+    )
+    for item in skipped[:MAX_LEFT_OUT_LINES]:
+        console.print(f"  left out {item.relpath}: {item.reason}", markup=False, highlight=False)
+    if len(skipped) > MAX_LEFT_OUT_LINES:
+        console.print(
+            f"  ... and {len(skipped) - MAX_LEFT_OUT_LINES} more (slicerecon -v batch lists them)",
+            highlight=False,
+        )
 
 
 # ------------------------------------------------------------------------ evaluate
