@@ -259,6 +259,12 @@ def batch(
                 completed=done,
                 last=f"[{colour}]{result.status}[/] {result.case}",
             )
+            if not console.is_terminal:  # piped: one plain line per case instead of the bar
+                console.print(
+                    f"progress: case {done}/{total} {result.status}: {result.case}",
+                    markup=False,
+                    highlight=False,
+                )
 
         outcome = run_batch(
             indir,
@@ -300,8 +306,7 @@ def _print_left_out(console: Any, skipped: Any) -> None:
     if not skipped:
         return
     console.print(
-        f"{len(skipped)} entr{'y' if len(skipped) == 1 else 'ies'} of INDIR left out "
-        "(not cases):",
+        f"{len(skipped)} entr{'y' if len(skipped) == 1 else 'ies'} of INDIR left out (not cases):",
         highlight=False,
     )
     for item in skipped[:MAX_LEFT_OUT_LINES]:
