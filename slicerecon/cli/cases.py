@@ -69,12 +69,17 @@ def info(
 
     console = Console()
     table = Table(title=str(input), show_header=False)
+    refusal = details.get("not_a_label_map")
     lists = {k: v for k, v in details.items() if k in ("structures", "segments", "rois")}
+    hidden = {"not_a_label_map", "structures"} if refusal else set()
+    lists = {k: v for k, v in lists.items() if k not in hidden}
     for key, value in details.items():
-        if key in lists:
+        if key in lists or key in hidden:
             continue
         table.add_row(key, json.dumps(value, default=str) if not isinstance(value, str) else value)
     console.print(table)
+    if refusal:
+        console.print(f"[bold yellow]not a label map[/]: {refusal}", highlight=False)
     for key, records in lists.items():
         if not records:
             console.print(f"{key}: none")

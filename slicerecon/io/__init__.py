@@ -375,7 +375,7 @@ def _one_structure(
     from .labelmap import read_label_map
 
     label_map = read_label_map(
-        kind.path, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb
+        kind.path, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb, chosen=union
     )
     assert label_map is not None
     if len(label_map.structures) > 1 and not union:
