@@ -17,11 +17,18 @@ import numpy as np
 import trimesh
 
 from ..errors import EmptyMaskError, FormatError, GeometryError, InputError, OptionError
-from ..rasterize import mesh_to_mask, require_closed
+from ..rasterize import edge_face_counts, mesh_to_mask, require_closed
 from ..sections import Volume
 from .atomic import atomic_path
 
-__all__ = ["MESH_FORMATS", "read_mesh", "write_mesh", "voxelize_mesh", "read_mesh_volume"]
+__all__ = [
+    "MESH_FORMATS",
+    "mesh_file_closed",
+    "read_mesh",
+    "write_mesh",
+    "voxelize_mesh",
+    "read_mesh_volume",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -152,6 +159,36 @@ def write_mesh(
         mesh.export(tmp, file_type=fmt, **options)
     logger.info("wrote %s (%s, %d faces)", p, fmt, len(mesh.faces))
     return p
+
+
+def mesh_file_closed(path: str | os.PathLike[str]) -> bool:
+    """Whether a written mesh file is closed as a reader sees it: every edge in two faces.
+
+    The file is read back (:func:`read_mesh`: coincident vertices merged, as
+    every mesh tool does), so what is checked is the file, not the mesh in
+    memory: vertices that the format's precision makes coincide (STL stores
+    float32) are one vertex here, and a surface pinched by them fails.
+
+    Parameters
+    ----------
+    path : path-like
+        A mesh file.
+
+    Returns
+    -------
+    bool
+    """
+    mesh = read_mesh(path)
+    _, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
+    closed = bool(counts.size) and bool(np.all(counts == 2))
+    if not closed:
+        logger.warning(
+            "%s is not closed as written: %d open edges, %d edges in more than two faces",
+            path,
+            int(np.count_nonzero(counts == 1)),
+            int(np.count_nonzero(counts > 2)),
+        )
+    return closed
 
 
 def voxelize_mesh(
