@@ -100,7 +100,9 @@ def render_caption(case: CaseResult, note: str) -> str:
     caption = f"{case.case} — {case.method}/{case.planner}, {case.planes} planes"
     if case.several:
         names = ", ".join(s.label for s in case.structures)
-        caption += f", {len(case.structures)} structures ({names}), mean over them"
+        caption += f", {len(case.structures)} structures ({names})"
+        if case.metrics:
+            caption += ", metrics: their mean"
     if "volume_iou" in metrics:
         caption += f", volume IoU {metrics['volume_iou']:.3f}"
     if "chamfer_l1_mm" in metrics:
