@@ -88,7 +88,7 @@ from slicerecon.results import (
 )
 
 from .cluster import dask_setup, run_on_dask
-from .discover import Case, discover_cases, safe_case_name
+from .discover import Case, SkippedInput, discover, safe_case_name
 from .publish import clear_stale, sigint_deferred
 from .runner import (
     Job,
@@ -110,6 +110,7 @@ __all__ = [
     "Progress",
     "case_key",
     "check_dirs",
+    "config_for",
     "dask_setup",
     "process_case",
     "run_batch",
@@ -141,6 +142,9 @@ class BatchResult:
         Why the report failed (empty when it did not fail).
     seconds : float
         Wall time of the whole batch, s.
+    skipped_inputs : tuple of SkippedInput
+        The entries of INDIR that are not cases, each with the reason
+        (:func:`pipelines.discover.discover`; empty for :func:`run_cases`).
     """
 
     outdir: Path
@@ -149,6 +153,7 @@ class BatchResult:
     report: Path | None = None
     report_error: str = ""
     seconds: float = 0.0
+    skipped_inputs: tuple[SkippedInput, ...] = ()
 
     def count(self, status: str) -> int:
         """Number of cases with ``status`` (ok, failed or skipped)."""
@@ -220,6 +225,19 @@ def _named_configs(
     return named
 
 
+SPARSE_KINDS = ("contours", "rtstruct")
+"""Case kinds that hold their own planes: ``slices`` / ``every`` do not apply to them."""
+
+
+def config_for(case: Case, config: ReconstructConfig) -> ReconstructConfig:
+    """The options ``case`` runs with: ``config``, without ``slices`` / ``every`` for a
+    contour file or RTSTRUCT (its planes are the ones drawn), so that one batch may
+    mix dense masks and contours."""
+    if case.kind in SPARSE_KINDS and (config.slices is not None or config.every is not None):
+        return replace(config, slices=None, every=None)
+    return config
+
+
 def check_dirs(indir: Path, outdir: Path) -> None:
     """Refuse ``outdir == indir``: the outputs would be read back as inputs.
 
@@ -288,7 +306,7 @@ def run_cases(
     out.mkdir(parents=True, exist_ok=True)
     layout = ResultsLayout(out)
     jobs = [
-        Job(case, case.name if name is None else f"{case.name}/{name}", value)
+        Job(case, case.name if name is None else f"{case.name}/{name}", config_for(case, value))
         for case in cases
         for name, value in configs.items()
     ]
@@ -435,11 +453,13 @@ def run_batch(
     start = time.perf_counter()
     src, out = Path(indir).resolve(), Path(outdir).resolve()
     check_dirs(src, out)
-    cases = discover_cases(src, exclude=[out], follow_symlinks=follow_symlinks)
+    cases, skipped = discover(src, exclude=[out], follow_symlinks=follow_symlinks)
     if not cases:
+        left_out = f"; {len(skipped)} entries are not inputs" if skipped else ""
         raise InputError(
-            f"no cases found in {src}: expected NIfTI masks (.nii/.nii.gz), contour files "
-            "(.json/.csv), DICOM series folders, DICOM SEG or RTSTRUCT files"
+            f"no cases found in {src}: expected label maps (.nii/.nii.gz, .nrrd/.seg.nrrd, "
+            ".vti), contour files (.json/.csv), DICOM series folders, DICOM SEG or RTSTRUCT "
+            f"files{left_out}"
         )
     result = run_cases(
         cases,
@@ -452,4 +472,4 @@ def run_batch(
         retries=retries,
         report=report,
     )
-    return replace(result, seconds=time.perf_counter() - start)
+    return replace(result, seconds=time.perf_counter() - start, skipped_inputs=tuple(skipped))

@@ -4,8 +4,10 @@ A *case* is one input that :func:`slicerecon.reconstruct.run_case` reconstructs
 on its own. :func:`discover_cases` walks ``INDIR`` (recursively, in sorted
 order, skipping hidden files and folders) and finds:
 
-* NIfTI masks: ``*.nii``, ``*.nii.gz``;
-* contour files: ``*.json``, ``*.csv``;
+* every file whose name tells a kind :func:`slicerecon.io.detect_kind` reads
+  (:data:`slicerecon.io.INPUT_SUFFIXES`): NIfTI (``*.nii``, ``*.nii.gz``),
+  NRRD label maps and 3D Slicer segmentations (``*.nrrd``, ``*.seg.nrrd``),
+  VTK images (``*.vti``), contour files (``*.json``, ``*.csv``);
 * DICOM SEG files: one case each;
 * DICOM RTSTRUCT files: one case each. When the RTSTRUCT lies in a folder that
   also holds an image series, the contours are read on that series' voxel grid
@@ -22,8 +24,12 @@ the 128-byte preamble, by the readers' own sniffer
 files ``slicerecon run`` reads.
 
 Meshes (``.stl``, ``.ply``, ``.obj``, ``.off``) are not cases: a batch writes
-meshes, and an output directory inside ``INDIR`` must not be read back as
-input. Other files are ignored.
+meshes, and a mesh beside the masks is usually their ground truth. They, the
+folders holding a reconstruction's outputs, and every other file that is not
+an input are *skipped*: :func:`discover` lists each with the reason
+(:class:`SkippedInput`), so nothing is left out without a word. Hidden files
+and folders and the excluded folders (``OUTDIR``) are left out by design and
+not listed.
 
 Symbolic links
 --------------
@@ -66,16 +72,29 @@ import unicodedata
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
+from typing import NamedTuple
 
 from slicerecon.errors import InputError
+from slicerecon.io import kind_of_name
 from slicerecon.io.dicom.sniff import DICOM_SUFFIXES, dicom_role
 
-__all__ = ["CASE_KINDS", "RESERVED_NAMES", "Case", "discover_cases", "safe_case_name"]
+__all__ = [
+    "CASE_KINDS",
+    "RESERVED_NAMES",
+    "Case",
+    "Discovery",
+    "SkippedInput",
+    "discover",
+    "discover_cases",
+    "safe_case_name",
+]
 
 logger = logging.getLogger(__name__)
 
 CASE_KINDS = (
     "nifti",
+    "nrrd",
+    "vti",
     "contours",
     "dicom-series",
     "dicom-seg",
@@ -86,9 +105,8 @@ CASE_KINDS = (
 """The kinds of case :func:`discover_cases` reports (``symlink``: a link that is not
 followed; see :attr:`Case.error`)."""
 
-NIFTI_SUFFIXES = (".nii.gz", ".nii")
-CONTOUR_SUFFIXES = (".json", ".csv")
-MESH_SUFFIXES = (".stl", ".ply", ".obj", ".off")
+FILE_KINDS = ("nifti", "nrrd", "vti", "contours")
+"""Kinds told by a file's name (:func:`slicerecon.io.kind_of_name`) that make one case per file."""
 FOLLOW_HINT = (
     "copy the data into INDIR, or pass --follow-symlinks if you trust where the links point"
 )
@@ -144,6 +162,35 @@ class Case:
     error: str = ""
 
 
+@dataclass(frozen=True)
+class SkippedInput:
+    """A file or folder of ``INDIR`` that is not a case, and why.
+
+    Attributes
+    ----------
+    relpath : str
+        Its path relative to ``INDIR`` (POSIX separators).
+    reason : str
+        Why it is not a case, in a few words.
+    """
+
+    relpath: str
+    reason: str
+
+
+class Discovery(NamedTuple):
+    """What :func:`discover` found: the cases, and every entry left out with its reason."""
+
+    cases: list[Case]
+    skipped: list[SkippedInput]
+
+
+MESH_REASON = "a mesh: meshes are outputs or ground truths, not batch inputs"
+NOT_INPUT_REASON = "not an input format (NIfTI, NRRD, VTI, contours or DICOM)"
+OTHER_DICOM_REASON = "a DICOM object that is not an image, SEG or RTSTRUCT"
+OUTPUT_REASON = "a reconstruction's outputs (it holds plan.json)"
+
+
 def safe_case_name(relpath: str | os.PathLike[str]) -> str:
     """Turn a relative input path into a name that is safe as one folder in OUTDIR.
 
@@ -193,8 +240,11 @@ def safe_case_name(relpath: str | os.PathLike[str]) -> str:
 
 
 def _strip_suffix(name: str) -> str:
+    named = kind_of_name(PurePosixPath(name).name)
+    if named is not None:
+        return name[: -len(named[1])]
     lower = name.lower()
-    for suffix in (*NIFTI_SUFFIXES, *CONTOUR_SUFFIXES, *DICOM_SUFFIXES):
+    for suffix in DICOM_SUFFIXES:
         if lower.endswith(suffix) and len(name) > len(suffix):
             return name[: -len(suffix)]
     return name
@@ -206,27 +256,32 @@ def _relpath(path: Path, root: Path) -> str:
 
 def _folder_cases(
     folder: Path, files: list[Path], root: Path, *, dicom_files: bool = True
-) -> list[tuple[str, Case]]:
-    """Cases in one folder (not recursing), keyed by their unsanitised base name.
+) -> tuple[list[tuple[str, Case]], list[SkippedInput]]:
+    """Cases in one folder (not recursing), keyed by their unsanitised base name, and
+    the files of the folder that are not inputs.
 
-    With ``dicom_files=False`` only NIfTI and contour files make cases (the
-    folder's DICOM files are not opened).
+    With ``dicom_files=False`` only files whose name tells their kind make cases
+    (the folder's other files are not opened; the caller says why).
     """
     found: list[tuple[str, Case]] = []
+    skipped: list[SkippedInput] = []
     dicom: dict[str, list[Path]] = {}
     for f in files:
-        lower = f.name.lower()
         rel = _relpath(f, root)
-        if lower.endswith(NIFTI_SUFFIXES):
-            found.append((_strip_suffix(rel), Case("", f, "nifti", rel, (f,), f.parent)))
-            continue
-        if lower.endswith(CONTOUR_SUFFIXES):
-            found.append((_strip_suffix(rel), Case("", f, "contours", rel, (f,), f.parent)))
+        named = kind_of_name(f.name)
+        if named is not None:
+            kind, suffix = named
+            if kind in FILE_KINDS:
+                found.append((rel[: -len(suffix)], Case("", f, kind, rel, (f,), f.parent)))
+            else:
+                skipped.append(SkippedInput(rel, MESH_REASON))
             continue
         if not dicom_files:
             continue
         role = dicom_role(f)
-        if role is not None:
+        if role is None:
+            skipped.append(SkippedInput(rel, NOT_INPUT_REASON))
+        else:
             dicom.setdefault(role, []).append(f)
     images = dicom.get("image", [])
     annotations = dicom.get("seg", []) + dicom.get("rtstruct", [])
@@ -241,6 +296,10 @@ def _folder_cases(
         for f in dicom.get("unreadable", []):
             rel = _relpath(f, root)
             found.append((_strip_suffix(rel), Case("", f, "dicom-unreadable", rel, (f,), folder)))
+    if not images:
+        skipped += [
+            SkippedInput(_relpath(f, root), OTHER_DICOM_REASON) for f in dicom.get("other", [])
+        ]
     for f in dicom.get("seg", []):
         rel = _relpath(f, root)
         found.append((_strip_suffix(rel), Case("", f, "dicom-seg", rel, (f,), folder)))
@@ -249,7 +308,7 @@ def _folder_cases(
         rel = _relpath(f, root)
         case = Case("", f, "rtstruct", rel, (f, *reference), folder, folder if images else None)
         found.append((_strip_suffix(rel), case))
-    return found
+    return found, skipped
 
 
 @dataclass(frozen=True)
@@ -268,6 +327,7 @@ class _Folder:
     path: Path
     files: list[Path]
     links: list[_Link]
+    outputs: bool = False
 
 
 def _within(path: Path, folder: Path) -> bool:
@@ -294,6 +354,7 @@ def _walk(root: Path, skip: Iterable[Path], *, follow_symlinks: bool) -> list[_F
         if OUTPUT_MARKER in names:  # a case folder slicerecon wrote: outputs, not inputs
             logger.debug("not searching %s: it holds a reconstruction's outputs", folder)
             dirs[:] = []
+            out.append(_Folder(folder, [], [], outputs=True))
             continue
         links: list[_Link] = []
         keep: list[str] = []
@@ -336,14 +397,19 @@ def _walk(root: Path, skip: Iterable[Path], *, follow_symlinks: bool) -> list[_F
     return out
 
 
-def _link_cases(folder: _Folder, root: Path) -> tuple[list[tuple[str, Case]], bool]:
-    """Cases for the links of ``folder`` that were not followed, and whether some
-    of them may be DICOM files (then the folder's DICOM files make no case)."""
+def _link_cases(
+    folder: _Folder, root: Path
+) -> tuple[list[tuple[str, Case]], list[SkippedInput], bool]:
+    """Cases for the links of ``folder`` that were not followed, the links that are
+    not inputs, and whether some of them may be DICOM files (then the folder's
+    DICOM files make no case)."""
     found: list[tuple[str, Case]] = []
+    skipped: list[SkippedInput] = []
     grouped: list[_Link] = []
     for link in folder.links:
         rel = _relpath(link.path, root)
         lower = link.path.name.lower()
+        named = kind_of_name(link.path.name)
         hint = FOLLOW_HINT
         if link.kind == "folder":
             why = (
@@ -351,14 +417,16 @@ def _link_cases(folder: _Folder, root: Path) -> tuple[list[tuple[str, Case]], bo
                 "it was not searched"
             )
         elif link.kind == "broken":
-            if not lower.endswith(NIFTI_SUFFIXES + CONTOUR_SUFFIXES + DICOM_SUFFIXES):
+            if (named is None or named[0] == "mesh") and not lower.endswith(DICOM_SUFFIXES):
                 logger.info("ignoring %s: a broken symbolic link to %s", link.path, link.target)
+                skipped.append(SkippedInput(rel, f"a broken symbolic link to {link.target}"))
                 continue
             why = f"{rel} is a broken symbolic link: its target {link.target} does not exist"
             hint = "fix or remove the link"
-        elif lower.endswith(MESH_SUFFIXES):
-            continue  # never a case
-        elif lower.endswith(NIFTI_SUFFIXES + CONTOUR_SUFFIXES):
+        elif named is not None and named[0] not in FILE_KINDS:
+            skipped.append(SkippedInput(rel, MESH_REASON))  # never a case
+            continue
+        elif named is not None:
             why = (
                 f"{rel} is a symbolic link to a file outside INDIR ({link.target}); it was not read"
             )
@@ -380,16 +448,16 @@ def _link_cases(folder: _Folder, root: Path) -> tuple[list[tuple[str, Case]], bo
         logger.info("not reading %s", why)
         case = Case("", folder.path, "symlink", rel, (), folder.path, error=f"{why}; {FOLLOW_HINT}")
         found.append((rel, case))
-    return found, bool(grouped)
+    return found, skipped, bool(grouped)
 
 
-def discover_cases(
+def discover(
     indir: str | os.PathLike[str],
     *,
     exclude: Iterable[str | os.PathLike[str]] = (),
     follow_symlinks: bool = False,
-) -> list[Case]:
-    """List the cases in ``indir`` in a stable, sorted order.
+) -> Discovery:
+    """The cases in ``indir`` in a stable, sorted order, and what is not a case.
 
     Parameters
     ----------
@@ -405,8 +473,11 @@ def discover_cases(
 
     Returns
     -------
-    list of Case
-        Sorted by relative input path; names unique (case-insensitively).
+    Discovery
+        ``cases``: sorted by relative input path, names unique
+        (case-insensitively). ``skipped``: every file (or output folder) of
+        ``indir`` that is no case and no part of one, with the reason, sorted
+        by path; hidden entries and the ``exclude`` folders are not listed.
 
     Raises
     ------
@@ -419,10 +490,19 @@ def discover_cases(
     if not root.is_dir():
         raise InputError(f"{root} is not a directory; pass the folder that holds the cases")
     found: list[tuple[str, Case]] = []
+    skipped: list[SkippedInput] = []
     for folder in _walk(root, [Path(p) for p in exclude], follow_symlinks=follow_symlinks):
-        refused, some_dicom = _link_cases(folder, root)
+        if folder.outputs:
+            skipped.append(SkippedInput(_relpath(folder.path, root) or ".", OUTPUT_REASON))
+            continue
+        refused, links_skipped, some_dicom = _link_cases(folder, root)
         found.extend(refused)
-        found.extend(_folder_cases(folder.path, folder.files, root, dicom_files=not some_dicom))
+        skipped.extend(links_skipped)
+        cases_here, skipped_here = _folder_cases(
+            folder.path, folder.files, root, dicom_files=not some_dicom
+        )
+        found.extend(cases_here)
+        skipped.extend(skipped_here)
     found.sort(key=lambda item: item[1].relpath)
     cases: list[Case] = []
     taken: set[str] = {name.casefold() for name in RESERVED_NAMES}
@@ -436,5 +516,18 @@ def discover_cases(
         if unique != base:
             logger.debug("case %s is named %s", case.relpath, unique)
         cases.append(dataclasses.replace(case, name=unique))
-    logger.info("found %d case(s) in %s", len(cases), root)
-    return cases
+    skipped.sort(key=lambda item: item.relpath)
+    for item in skipped:
+        logger.info("not a case: %s: %s", item.relpath, item.reason)
+    logger.info("found %d case(s) in %s; %d entries skipped", len(cases), root, len(skipped))
+    return Discovery(cases, skipped)
+
+
+def discover_cases(
+    indir: str | os.PathLike[str],
+    *,
+    exclude: Iterable[str | os.PathLike[str]] = (),
+    follow_symlinks: bool = False,
+) -> list[Case]:
+    """The cases of :func:`discover` (same parameters), without the skipped entries."""
+    return discover(indir, exclude=exclude, follow_symlinks=follow_symlinks).cases

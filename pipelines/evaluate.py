@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from slicerecon.errors import InputError, OptionError
+from slicerecon.io import kind_of_name
 
 from .batch import Progress, check_dirs, run_cases
-from .discover import NIFTI_SUFFIXES, Case, discover_cases
+from .discover import Case, discover_cases
 
 if TYPE_CHECKING:
     from slicerecon.reconstruct import ReconstructConfig
@@ -30,7 +31,8 @@ def _is_mask(case: Case) -> bool:
     """A NIfTI mask, or a link named like one that is not followed (recorded as failed)."""
     if case.kind == "nifti":
         return True
-    return case.kind == "symlink" and case.relpath.lower().endswith(NIFTI_SUFFIXES)
+    named = kind_of_name(Path(case.relpath).name)
+    return case.kind == "symlink" and named is not None and named[0] == "nifti"
 
 
 def dataset_cases(

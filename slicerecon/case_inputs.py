@@ -180,6 +180,7 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         kind.path,
         allow_irregular=config.allow_irregular,
         memory_budget_gb=config.max_memory_gb,
+        chosen=bool(selectors) or config.union,
     )
     assert label_map is not None
     return case_from_label_map(label_map, config, kind=kind)

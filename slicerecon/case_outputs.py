@@ -10,7 +10,8 @@ atomically; the layout is :mod:`slicerecon.results`'s):
     The label map on the input's grid (:func:`slicerecon.io.outputs.write_label_outputs`).
 ``structures.json``
     Every structure: value, name, colour, status, planes, volume (mm³), parts,
-    and its mesh's path relative to the case folder; how the input was read.
+    and its mesh's path relative to the case folder; how the input was read;
+    the world frame of the meshes (``coordinates``: RAS, or LPS for DICOM).
 ``plan.json``
     Each structure's plan (cuboid parts and cuts), all parts together under
     ``parts``, the planes, the configuration, the timings.
@@ -31,18 +32,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import trimesh
 
 from .errors import OptionError
 from .io.atomic import write_json
-from .io.mesh import write_mesh
+from .io.mesh import mesh_file_closed, write_mesh
 from .io.outputs import dicom_image_series, write_label_outputs
-from .preview import write_preview
-from .rasterize import is_closed
+from .preview import PreviewStructure, display_colour, write_preview
 from .reconstruct import ReconstructConfig
 from .results import METRICS_FILE, PLAN_FILE, PREVIEW_FILE, STRUCTURES_FILE, mesh_file
-from .sampling import projections_from_sections, projections_from_volume
-from .sections import Volume
 
 if TYPE_CHECKING:
     from .case import CaseInput, CaseReconstruction
@@ -175,14 +172,14 @@ def write_case(
     start = time.perf_counter()
     several = len(case.annotation.structures) > 1
     records = []
-    written: list[trimesh.Trimesh] = []
+    written: list[Path] = []
     for item in result.results:
         record = item.to_dict()
         if item.mesh is not None:
             name = mesh_file(item.structure.label, config.mesh_format, several=several)
             write_mesh(item.mesh, outdir / name)
             record["mesh"] = name
-            written.append(item.mesh)
+            written.append(outdir / name)
         if item.metrics is not None:
             record["metrics"] = item.metrics
         records.append(record)
@@ -211,6 +208,7 @@ def write_case(
         {
             "structures": records,
             "annotation": case.annotation.source,
+            "coordinates": result.coordinates,
             "overlap": {
                 "exclusive": result.exclusive,
                 "voxels": result.overlap_voxels,
@@ -243,7 +241,7 @@ def write_case(
         "mesh": str(mesh_path),
         "parts": len(plan["parts"]),
         "planes": plan["sections"]["n_planes"],
-        "watertight": bool(written) and all(is_closed(m) for m in written),
+        "watertight": bool(written) and all([mesh_file_closed(p) for p in written]),
         "metrics": mean,
         "structures": records,
         "annotation": case.annotation.source,
@@ -254,52 +252,40 @@ def write_case(
 def _write_preview(
     path: Path, case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
 ) -> None:
-    """The preview: one structure's own view, or every structure together."""
-
-    items = result.reconstructed
-    if len(case.annotation.structures) == 1 and items and items[0].sections is not None:
-        item = items[0]
-        truth: Any = case.truth
-        if truth is None and case.labels is not None:
-            truth = _crop(case.labels.mask(item.structure.value), item.sections.affine, item)
-        write_preview(
-            path,
-            mesh=item.mesh,
-            boxes=item.plan.boxes,
-            planner=item.plan.planner,
-            sections=item.sections,
-            projections=item.projections,
-            occupancy=item.occupancy,
-            truth=truth,
-        )
-        return
-    meshes = [r.mesh for r in items]
-    if not meshes:
-        return
+    """The preview (:mod:`slicerecon.preview`): the result in 3-D beside the annotated planes."""
     sections = result.sections
     region = tuple(
         slice(int(a), int(a) + n) for a, n in zip(result.crop_lo, sections.grid_shape, strict=True)
     )
-    union = Volume(result.labels[region] != 0, sections.affine)
-    truth_union = None if case.labels is None else case.labels.union()
+    annotation = case.annotation
+    order = np.argsort(annotation.plane_indices(sections.axis), kind="stable")
+    planes = [annotation.planes[int(n)] for n in order]
+    if len(planes) != sections.n_planes:
+        planes = []
+    items = result.results
+    structures = []
+    for index, item in enumerate(items):
+        colour = display_colour(item.structure, index, len(items))
+        annotated = np.stack([p.mask(item.structure.value) for p in planes]) if planes else None
+        structure = item.structure
+        structures.append(
+            PreviewStructure(structure.value, structure.label, colour, item.mesh, annotated)
+        )
+    one = items[0] if len(items) == 1 and items[0].plan is not None else None
+    n_parts = sum(len(r.plan.boxes) for r in items if r.plan is not None)
+    drawn = sum(r.mesh is not None for r in items)
+    title = (
+        f"{case.input_path.name}: {drawn} of {len(items)} structure(s) reconstructed from "
+        f"{sections.n_planes} planes along {'xyz'[sections.axis]}; {config.method}, "
+        f"planner {case_planner(result)}, {n_parts} part(s)"
+    )
     write_preview(
         path,
-        mesh=trimesh.util.concatenate(meshes),
-        boxes=[],
-        planner=f"{config.planner}, {len(meshes)} structures",
+        structures=structures,
         sections=sections,
-        projections=projections_from_sections(sections)
-        if truth_union is None
-        else projections_from_volume(truth_union),
-        occupancy=union,
-        truth=truth_union,
+        result=result.labels[region],
+        title=title,
+        frame=result.coordinates,
+        boxes=one.plan.boxes if one is not None else (),
+        box_affine=one.sections.affine if one is not None and one.sections is not None else None,
     )
-
-
-def _crop(truth: Volume, affine: np.ndarray, item: Any) -> Volume:
-    """A structure's ground truth on its own crop (the grid its preview is drawn on)."""
-    offset = np.rint(
-        np.linalg.solve(truth.affine[:3, :3], affine[:3, 3] - truth.affine[:3, 3])
-    ).astype(np.int64)
-    shape = item.sections.grid_shape
-    return truth.subgrid(offset, offset + np.asarray(shape))

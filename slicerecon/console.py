@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -41,39 +42,78 @@ def ctrl_c_after() -> Iterator[None]:
 class StageProgress:
     """Stage progress on stderr, shown only once a run has taken about two seconds.
 
-    Called with each stage name. A timer starts a rich spinner after
-    :attr:`DELAY_S` seconds naming the current stage, so quick runs print
-    nothing and long ones show where they are.
+    Called with each stage name (``"read"``, ``"reconstruct 2/4: 2_Liver"``,
+    ``"evaluate"``, ``"write"``). Quick runs print nothing. Once a run has
+    taken :attr:`DELAY_S` seconds it shows where it is: in a terminal, a rich
+    spinner naming the current stage; when stderr is not a terminal (piped
+    into a file or a log), one plain line per stage from then on,
+    ``progress: <stage> (<seconds> s)``, which a log keeps and ``grep`` finds.
+
+    Parameters
+    ----------
+    enabled : bool
+        False shows nothing (``run -q``).
+    stream : file-like, optional
+        Where to write (default: ``sys.stderr`` when the progress is created).
     """
 
     DELAY_S = 2.0
 
-    def __init__(self, *, enabled: bool) -> None:
+    def __init__(self, *, enabled: bool, stream: Any = None) -> None:
         import threading
 
         self._enabled = enabled
+        self._stream = sys.stderr if stream is None else stream
+        isatty = getattr(self._stream, "isatty", None)
+        self._plain = not (callable(isatty) and isatty())
         self._lock = threading.Lock()
         self._status: Any = None
-        self._stage = "reading"
+        self._shown = False
+        self._stage = "read"
+        self._start = time.perf_counter()
         self._timer = threading.Timer(self.DELAY_S, self._show)
         self._timer.daemon = True
 
+    @property
+    def plain(self) -> bool:
+        """True when stages are written as plain lines (stderr is not a terminal)."""
+        return self._plain
+
     def __enter__(self) -> StageProgress:
+        self._start = time.perf_counter()
         if self._enabled:
             self._timer.start()
         return self
 
-    def _show(self) -> None:
-        from rich.console import Console
+    def _line(self) -> None:
+        elapsed = time.perf_counter() - self._start
+        try:
+            self._stream.write(f"progress: {self._stage} ({elapsed:.1f} s)\n")
+            self._stream.flush()
+        except (OSError, ValueError):  # a closed pipe must not stop the run
+            pass
 
+    def _show(self) -> None:
         with self._lock:
-            self._status = Console(stderr=True).status(self._stage)
+            self._shown = True
+            if self._plain:
+                self._line()
+                return
+            from rich.console import Console
+
+            self._status = Console(file=self._stream).status(self._stage)
             self._status.start()
 
     def __call__(self, stage: str) -> None:
         with self._lock:
+            if stage == self._stage:
+                return
             self._stage = stage
-            if self._status is not None:
+            if not self._shown:
+                return
+            if self._plain:
+                self._line()
+            elif self._status is not None:
                 self._status.update(stage)
 
     def __exit__(self, *exc: object) -> None:

@@ -30,6 +30,14 @@ ROIName (`docs/formats.md`, "What every reader guarantees").
 would need more are refused before anything is allocated, with the grid, the
 estimate and the limit in the message.
 
+**Progress.** A run that takes more than about two seconds shows its stage
+and structure on stderr (`read`, `reconstruct 2/4: 2_Liver`, `evaluate`,
+`write`): a spinner in a terminal; when stderr is not a terminal (piped, or
+redirected into a log) one plain line per stage instead,
+`progress: reconstruct 2/4: 2_Liver (3.1 s)`. `batch` shows a bar in a
+terminal and, piped, one line per finished case (`progress: case 3/6 ok:
+liver_003`). `run -q` shows neither.
+
 **Planes.** A structure on one plane becomes a slab one slice thick. Contours
 drawn between the slices of their image series keep their exact positions: the
 surface spans the contours plus half a contour spacing at each end, as when the

@@ -75,12 +75,17 @@ def info(
 
     console = Console()
     table = Table(title=str(input), show_header=False)
+    refusal = details.get("not_a_label_map")
     lists = {k: v for k, v in details.items() if k in ("structures", "segments", "rois")}
+    hidden = {"not_a_label_map", "structures"} if refusal else set()
+    lists = {k: v for k, v in lists.items() if k not in hidden}
     for key, value in details.items():
-        if key in lists:
+        if key in lists or key in hidden:
             continue
         table.add_row(key, json.dumps(value, default=str) if not isinstance(value, str) else value)
     console.print(table)
+    if refusal:
+        console.print(f"[bold yellow]not a label map[/]: {refusal}", highlight=False)
     for key, records in lists.items():
         if not records:
             console.print(f"{key}: none")
@@ -267,6 +272,12 @@ def batch(
                 completed=done,
                 last=f"[{colour}]{result.status}[/] {result.case}",
             )
+            if not console.is_terminal:  # piped: one plain line per case instead of the bar
+                console.print(
+                    f"progress: case {done}/{total} {result.status}: {result.case}",
+                    markup=False,
+                    highlight=False,
+                )
 
         outcome = run_batch(
             indir,
@@ -280,6 +291,7 @@ def batch(
             report=not no_report,
             follow_symlinks=follow_symlinks,
         )
+    _print_left_out(console, outcome.skipped_inputs)
     for failed in (c for c in outcome.cases if c.status == "failed"):
         console.print(
             f"[red]failed[/] {failed.case}: {failed.error_type}: {failed.error}",
@@ -295,6 +307,28 @@ def batch(
     )
     if not outcome.ok:
         raise typer.Exit(code=1)
+
+
+MAX_LEFT_OUT_LINES = 20
+"""Entries of INDIR that are not cases printed one per line (the rest are counted)."""
+
+
+def _print_left_out(console: Any, skipped: Any) -> None:
+    """One line per entry of INDIR that is not a case, and why (at most
+    :data:`MAX_LEFT_OUT_LINES`; all of them are logged with -v)."""
+    if not skipped:
+        return
+    console.print(
+        f"{len(skipped)} entr{'y' if len(skipped) == 1 else 'ies'} of INDIR left out (not cases):",
+        highlight=False,
+    )
+    for item in skipped[:MAX_LEFT_OUT_LINES]:
+        console.print(f"  left out {item.relpath}: {item.reason}", markup=False, highlight=False)
+    if len(skipped) > MAX_LEFT_OUT_LINES:
+        console.print(
+            f"  ... and {len(skipped) - MAX_LEFT_OUT_LINES} more (slicerecon -v batch lists them)",
+            highlight=False,
+        )
 
 
 # ------------------------------------------------------------------------ evaluate

@@ -29,10 +29,12 @@ from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid, reading
 
 __all__ = [
     "DICOM_KINDS",
+    "INPUT_SUFFIXES",
     "InputKind",
     "MESH_SUFFIXES",
     "NIFTI_SUFFIXES",
     "detect_kind",
+    "kind_of_name",
     "load_ground_truth",
     "load_input",
 ]
@@ -45,6 +47,18 @@ CONTOUR_SUFFIXES = (".json", ".csv")
 DICOM_KINDS = ("dicom-series", "dicom-seg", "rtstruct")
 """Input kinds in DICOM patient coordinates (LPS)."""
 DICOM_SUFFIXES = (".dcm", ".dicom", "")
+INPUT_SUFFIXES: tuple[tuple[str, str], ...] = (
+    (".nii.gz", "nifti"),
+    (".nii", "nifti"),
+    (".seg.nrrd", "nrrd"),  # 3D Slicer segmentations
+    (".nrrd", "nrrd"),
+    (".vti", "vti"),
+    (".json", "contours"),
+    (".csv", "contours"),
+    *((suffix, "mesh") for suffix in MESH_SUFFIXES),
+)
+"""File-name endings that tell an input's kind (lower case; the longer ending first).
+Any other file is DICOM (recognised by content) or not an input."""
 
 
 @dataclass(frozen=True)
@@ -72,9 +86,25 @@ class InputKind:
         return self.kind in ("rtstruct", "contours")
 
 
-def _suffix(path: Path) -> str:
-    name = path.name.lower()
-    return ".nii.gz" if name.endswith(".nii.gz") else path.suffix.lower()
+def kind_of_name(name: str) -> tuple[str, str] | None:
+    """The kind a file's name tells, and the ending that tells it (:data:`INPUT_SUFFIXES`).
+
+    Parameters
+    ----------
+    name : str
+        A file name (case is ignored).
+
+    Returns
+    -------
+    (kind, suffix) or None
+        E.g. ``("nrrd", ".seg.nrrd")``; None for a name that tells nothing
+        (DICOM files are recognised by content, see :func:`detect_kind`).
+    """
+    lower = name.lower()
+    for suffix, kind in INPUT_SUFFIXES:
+        if lower.endswith(suffix) and len(lower) > len(suffix):
+            return kind, suffix
+    return None
 
 
 def detect_kind(path: str | os.PathLike[str]) -> InputKind:
@@ -105,17 +135,9 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
                 f"directory {p} holds {len(rtstructs)} RTSTRUCT files; pass one of them"
             )
         return InputKind("dicom-series", p)
-    suffix = _suffix(p)
-    if suffix in NIFTI_SUFFIXES:
-        return InputKind("nifti", p)
-    if suffix in MESH_SUFFIXES:
-        return InputKind("mesh", p)
-    if suffix == ".vti":
-        return InputKind("vti", p)
-    if suffix == ".nrrd":  # plain label maps and Slicer's .seg.nrrd
-        return InputKind("nrrd", p)
-    if suffix in CONTOUR_SUFFIXES:
-        return InputKind("contours", p)
+    named = kind_of_name(p.name)
+    if named is not None:
+        return InputKind(named[0], p)
     modality = dicom_modality(p)
     if modality == "SEG":
         return InputKind("dicom-seg", p)
@@ -353,7 +375,7 @@ def _one_structure(
     from .labelmap import read_label_map
 
     label_map = read_label_map(
-        kind.path, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb
+        kind.path, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb, chosen=union
     )
     assert label_map is not None
     if len(label_map.structures) > 1 and not union:

@@ -18,7 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from ..errors import EmptyMaskError
+from ..errors import EmptyMaskError, LabelError
+from ..labels import check_label_values
 from ..sections import AXIS_NAMES, CrossSections, Volume
 from . import detect_kind, load_input
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
@@ -108,6 +109,20 @@ def describe_label_map(
             }
         )
     return out
+
+
+def _label_values_refused(details: dict[str, Any], values: NDArray[Any], path: Path) -> bool:
+    """Whether ``values`` are no label map; then say why in ``details`` instead of
+    listing every value as a structure (``not_a_label_map``, ``values``)."""
+    try:
+        check_label_values(values, source=path)
+    except LabelError as exc:
+        data = np.asarray(values)
+        details["not_a_label_map"] = str(exc)
+        details["values"] = {"min": float(data.min()), "max": float(data.max())}
+        details["structures"] = []
+        return True
+    return False
 
 
 def describe_volume(volume: Volume) -> dict[str, Any]:
@@ -247,27 +262,31 @@ def describe_input(
             values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
             details["axcodes"] = "".join(str(c) for c in nib.aff2axcodes(affine))
             details.update(_grid(affine, values.shape))
-            details["structures"] = describe_label_map(values, affine)
-            details["labels"] = {str(s["value"]): s["voxels"] for s in details["structures"]}
+            if not _label_values_refused(details, values, kind.path):
+                details["structures"] = describe_label_map(values, affine)
+                details["labels"] = {str(s["value"]): s["voxels"] for s in details["structures"]}
         elif kind.kind == "nrrd":
             header = nrrd_info(kind.path)
             label_map = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
             details["coordinates"] = label_map.coordinates
             details.update(_grid(label_map.affine, label_map.shape))
-            records = describe_label_map(
-                label_map.labels,
-                label_map.affine,
-                names={s.value: s.name for s in label_map.structures},
-            )
-            for record, structure in zip(records, label_map.structures, strict=True):
-                record["colour"] = None if structure.colour is None else list(structure.colour)
-            details["structures"] = records
+            if not _label_values_refused(details, label_map.labels, kind.path):
+                records = describe_label_map(
+                    label_map.labels,
+                    label_map.affine,
+                    names={s.value: s.name for s in label_map.structures},
+                )
+                for record, structure in zip(records, label_map.structures, strict=True):
+                    colour = structure.colour
+                    record["colour"] = None if colour is None else list(colour)
+                details["structures"] = records
             if header.is_segmentation:
                 details["segments"] = [s.to_dict() for s in header.segments]
         elif kind.kind == "vti":
             image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
             details.update(_grid(image.affine, image.values.shape))
-            details["structures"] = describe_label_map(np.asarray(image.values), image.affine)
+            if not _label_values_refused(details, np.asarray(image.values), kind.path):
+                details["structures"] = describe_label_map(np.asarray(image.values), image.affine)
         elif kind.kind == "dicom-series":
             # described on the grid --allow-irregular would give: info never refuses
             details["dicom"] = dicom_info(kind.path, allow_irregular=True)
@@ -275,7 +294,8 @@ def describe_input(
                 kind.path, allow_irregular=True, memory_budget_gb=memory_budget_gb
             )
             details.update(_grid(affine, values.shape))
-            details["structures"] = describe_label_map(values, affine)
+            if not _label_values_refused(details, values, kind.path):
+                details["structures"] = describe_label_map(values, affine)
         elif kind.kind == "dicom-seg":
             details["dicom"] = dicom_info(kind.path)
             segments = []

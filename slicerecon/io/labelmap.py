@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, LabelError
-from ..labels import LPS_TO_RAS, LabelMap, as_labels
+from ..labels import LPS_TO_RAS, LabelMap, as_labels, check_label_values
 from . import detect_kind
 from .atomic import atomic_path
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
@@ -48,6 +48,7 @@ def read_label_map(
     *,
     allow_irregular: bool = False,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+    chosen: bool = False,
 ) -> LabelMap | None:
     """Every structure of a dense input, or None for inputs that hold one (or contours).
 
@@ -58,6 +59,11 @@ def read_label_map(
         and colours kept), a DICOM mask series, a DICOM SEG.
     allow_irregular, memory_budget_gb
         As for :func:`slicerecon.io.load_input`.
+    chosen : bool
+        The caller picks structures explicitly (``--label``, ``--union``):
+        values need only be whole numbers. Otherwise values that are not a
+        label map (an image, a probability map) are refused before the
+        structures are listed (:func:`slicerecon.labels.check_label_values`).
 
     Returns
     -------
@@ -67,14 +73,15 @@ def read_label_map(
     Raises
     ------
     InputError
-        What the readers raise; :class:`EmptyMaskError` when no structure holds a voxel.
+        What the readers raise; :class:`EmptyMaskError` when no structure holds a
+        voxel; :class:`LabelError` for values that are not a label map.
     """
     with reading(path):
-        return _read_label_map(path, allow_irregular, memory_budget_gb)
+        return _read_label_map(path, allow_irregular, memory_budget_gb, chosen)
 
 
 def _read_label_map(
-    path: str | os.PathLike[str], allow_irregular: bool, memory_budget_gb: float
+    path: str | os.PathLike[str], allow_irregular: bool, memory_budget_gb: float, chosen: bool
 ) -> LabelMap | None:
 
     kind = detect_kind(path)
@@ -84,16 +91,20 @@ def _read_label_map(
         from .nifti import read_label_values
 
         values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
+        check_label_values(values, source=kind.path, chosen=chosen)
         result = LabelMap.from_array(values, affine)
     elif kind.kind == "nrrd":
         result = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
+        check_label_values(result.labels, source=kind.path, chosen=chosen)
     elif kind.kind == "vti":
         image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
+        check_label_values(image.values, source=kind.path, chosen=chosen)
         result = LabelMap.from_array(np.asarray(image.values), image.affine)
     elif kind.kind == "dicom-series":
         values, affine = read_dicom_series_values(
             kind.path, allow_irregular=allow_irregular, memory_budget_gb=memory_budget_gb
         )
+        check_label_values(values, source=kind.path, chosen=chosen)
         if np.any(values != np.round(values)):
             raise LabelError(f"{kind.path} is not a label map: its pixel values are not integers")
         result = LabelMap.from_array(np.round(values), affine, coordinates="LPS")

@@ -17,11 +17,18 @@ import numpy as np
 import trimesh
 
 from ..errors import EmptyMaskError, FormatError, GeometryError, InputError, OptionError
-from ..rasterize import mesh_to_mask, require_closed
+from ..rasterize import edge_face_counts, mesh_to_mask, require_closed
 from ..sections import Volume
 from .atomic import atomic_path
 
-__all__ = ["MESH_FORMATS", "read_mesh", "write_mesh", "voxelize_mesh", "read_mesh_volume"]
+__all__ = [
+    "MESH_FORMATS",
+    "mesh_file_closed",
+    "read_mesh",
+    "write_mesh",
+    "voxelize_mesh",
+    "read_mesh_volume",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -152,6 +159,58 @@ def write_mesh(
         mesh.export(tmp, file_type=fmt, **options)
     logger.info("wrote %s (%s, %d faces)", p, fmt, len(mesh.faces))
     return p
+
+
+def mesh_file_closed(path: str | os.PathLike[str]) -> bool:
+    """Whether a written mesh file is closed as a reader sees it: every edge in two faces.
+
+    The file is read back and vertices with identical coordinates in it are
+    merged (as every mesh tool does), so what is checked is the file, not the
+    mesh in memory: vertices that the format's precision makes coincide (STL
+    stores float32) are one vertex here, and a surface they pinch fails.
+
+    Parameters
+    ----------
+    path : path-like
+        A mesh file (STL, PLY, OBJ or OFF).
+
+    Returns
+    -------
+    bool
+
+    Raises
+    ------
+    InputError, FormatError
+        As :func:`read_mesh`.
+    """
+    p = Path(path)
+    file_type = MESH_FORMATS.get(p.suffix.lower())
+    if not p.is_file() or file_type is None:
+        read_mesh(p)  # raises the reader's error
+    try:
+        loaded = trimesh.load(p, file_type=file_type, force="mesh", process=False)
+    except Exception as exc:  # trimesh's parsers raise many types on bad input
+        raise FormatError(f"cannot read {p} back as {file_type}: {exc}") from exc
+    vertices = np.asarray(loaded.vertices, dtype=np.float64)
+    faces = np.asarray(loaded.faces, dtype=np.int64)
+    if len(faces) == 0:
+        return False
+    order = np.lexsort((vertices[:, 2], vertices[:, 1], vertices[:, 0]))
+    ordered = vertices[order]
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
+    merged = np.empty(len(order), dtype=np.int64)
+    merged[order] = np.cumsum(first) - 1  # each vertex → its group of equal coordinates
+    _, counts = edge_face_counts(merged[faces], int(first.sum()))
+    closed = bool(counts.size) and bool(np.all(counts == 2))
+    if not closed:
+        logger.warning(
+            "%s is not closed as written: %d open edges, %d edges in more than two faces",
+            p,
+            int(np.count_nonzero(counts == 1)),
+            int(np.count_nonzero(counts > 2)),
+        )
+    return closed
 
 
 def voxelize_mesh(

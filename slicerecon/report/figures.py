@@ -40,8 +40,10 @@ BOX_METRICS = (
 
 CAPTIONS = {
     "boxplots": "Volume IoU, surface IoU and Chamfer-L1 per method (box: quartiles, "
-    "line: median, triangle: mean, dots: cases).",
-    "iou_vs_planes": "IoU against the number of section planes (line: mean per count).",
+    "line: median, triangle: mean, dots: cases; n: the cases with the metric, a case of "
+    "several structures counting once with their mean).",
+    "iou_vs_planes": "IoU against the number of section planes (line: mean per count; n: "
+    "the cases of each method).",
 }
 """Caption of each summary figure, by name."""
 
@@ -134,7 +136,8 @@ def box_plot(cases: Sequence[CaseResult]) -> bytes | None:
             ]
             for label in labels
         ]
-        ax.boxplot(data, tick_labels=labels, showmeans=True)
+        ticks = [f"{label}\nn={len(values)}" for label, values in zip(labels, data, strict=True)]
+        ax.boxplot(data, tick_labels=ticks, showmeans=True)
         for i, values in enumerate(data, start=1):
             ax.plot(np.full(len(values), float(i)), values, "o", ms=3, alpha=0.5, color="tab:blue")
         ax.set_title(title, fontsize=10)
@@ -186,7 +189,7 @@ def planes_plot(cases: Sequence[CaseResult]) -> bytes | None:
             ax.plot(xs, ys, "o", ms=3, alpha=0.35, color=colour)
             levels = np.unique(xs)
             means = [float(ys[xs == x].mean()) for x in levels]
-            ax.plot(levels, means, "-o", ms=4, color=colour, label=label)
+            ax.plot(levels, means, "-o", ms=4, color=colour, label=f"{label} (n={len(pts)})")
         ax.set_xlabel("number of planes", fontsize=9)
         ax.set_ylabel(title, fontsize=9)
         ax.set_title(f"{title} against number of planes", fontsize=9)

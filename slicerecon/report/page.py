@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 from .. import __version__
 from ..results import CaseResult
 from .figures import CAPTIONS
-from .renders import RENDER_FACES
+from .renders import PANEL_PX
 from .tables import sort_key
 
 if TYPE_CHECKING:
@@ -94,9 +94,15 @@ class _Link(NamedTuple):
 
 
 def render_caption(case: CaseResult, note: str) -> str:
-    """``"<case> — <method>/<planner>, <n> planes[, volume IoU …][, Chamfer-L1 … mm]; <note>"``."""
+    """``"<case> — <method>/<planner>, <n> planes[, <k> structures: …][, volume IoU …]
+    [, Chamfer-L1 … mm]; <note>"`` (IoU and Chamfer of several structures: their mean)."""
     metrics = case.metrics or {}
     caption = f"{case.case} — {case.method}/{case.planner}, {case.planes} planes"
+    if case.several:
+        names = ", ".join(s.label for s in case.structures)
+        caption += f", {len(case.structures)} structures ({names})"
+        if case.metrics:
+            caption += ", metrics: their mean"
     if "volume_iou" in metrics:
         caption += f", volume IoU {metrics['volume_iou']:.3f}"
     if "chamfer_l1_mm" in metrics:
@@ -131,20 +137,41 @@ def _environment() -> jinja2.Environment:
     return env
 
 
+def _href(target: Path, root: Path) -> str:
+    return urllib.parse.quote(target.relative_to(root).as_posix())
+
+
 def _links(case: CaseResult, root: Path) -> list[_Link]:
-    """Relative links to the case's mesh, preview and plan (or error record)."""
+    """Relative links to the case's mesh (or, for several structures, ``structures.json``:
+    each structure's row links its own mesh), preview and plan (or error record)."""
     if case.directory is None:
         return []
     record = case.directory / ("plan.json" if case.ok else "error.json")
+    listing = case.directory / "structures.json"
     found = [
-        (case.mesh_path, "mesh"),
+        (
+            listing if case.several and listing.is_file() else case.mesh_path,
+            "structures" if case.several else "mesh",
+        ),
         (case.preview_path, "preview"),
         (record, "plan" if case.ok else "error"),
     ]
+    return [_Link(_href(target, root), text) for target, text in found if target is not None]
+
+
+def _structure_rows(case: CaseResult, root: Path) -> list[dict[str, Any]]:
+    """One row per structure of a case of several: label, status, planes, metrics, mesh link."""
+    if not case.several:
+        return []
     return [
-        _Link(urllib.parse.quote(target.relative_to(root).as_posix()), text)
-        for target, text in found
-        if target is not None
+        {
+            "label": s.label,
+            "status": s.status,
+            "planes": s.planes,
+            "metrics": s.metrics or {},
+            "mesh": None if s.mesh_path is None else _href(s.mesh_path, root),
+        }
+        for s in case.structures
     ]
 
 
@@ -200,9 +227,11 @@ def render_page(
             {"method": m, "cases": [c for c in cases if c.method == m]} for m in methods
         ],
         "links": {c.case: _links(c, root) for c in cases},
+        "structure_rows": {c.case: _structure_rows(c, root) for c in cases},
+        "n_several": sum(1 for c in cases if c.ok and c.several),
         "renders": renders,
         "render_note": render_note,
         "failures": [c for c in cases if not c.ok],
-        "render_faces": RENDER_FACES,
+        "panel_px": PANEL_PX,
     }
     return _environment().get_template(TEMPLATE).render(context)

@@ -68,6 +68,36 @@ def _group_stats(cases: Sequence[CaseResult], names: Sequence[str]) -> dict[str,
     }
 
 
+def _structure_groups(cases: Sequence[CaseResult], names: Sequence[str]) -> list[dict[str, Any]]:
+    """Statistics per method/planner/structure over the structures of the finished cases."""
+    groups: dict[tuple[str | None, str | None, str], list[Any]] = {}
+    for case in cases:
+        if not case.ok:
+            continue
+        for record in case.structures:
+            name = record.name or record.label
+            groups.setdefault((case.method, case.planner, name), []).append(record)
+    out = []
+    for method, planner, name in sorted(
+        groups, key=lambda k: (sort_key(k[0]), sort_key(k[1]), k[2])
+    ):
+        members = groups[(method, planner, name)]
+        out.append(
+            {
+                "method": method,
+                "planner": planner,
+                "structure": name,
+                "count": len(members),
+                "reconstructed": sum(1 for r in members if r.mesh_path is not None),
+                "metrics": {
+                    key: _stats([r.metrics[key] for r in members if r.metrics and key in r.metrics])
+                    for key in names
+                },
+            }
+        )
+    return out
+
+
 def sort_key(value: str | int | None) -> tuple[int, str | int]:
     """Sort key that puts None after every value."""
     return (1, "") if value is None else (0, value)
@@ -90,9 +120,14 @@ def summarize(cases: Sequence[CaseResult]) -> dict[str, Any]:
         that have the metric, ``std`` the sample standard deviation (ddof 1,
         None below two values), ``seconds`` the same statistics of run time
         (the sum of each case's stage timings)), ``by_planes`` (the same per
-        method/planner/number of planes) and ``failures`` (case, method,
-        planner, input, error). Non-finite values are left out of the
-        statistics; absent statistics are None.
+        method/planner/number of planes), ``structures`` (per
+        method/planner/structure name over the structures of the finished
+        cases: ``count`` structures, ``reconstructed``, ``metrics`` with the
+        same statistics, ``n`` counting structures) and ``failures`` (case,
+        method, planner, input, error). A case of several structures counts
+        once in ``groups`` and ``by_planes``, with the mean over its
+        structures; every statistic has its ``n``. Non-finite values are left
+        out of the statistics; absent statistics are None.
     """
     names = metric_names(cases)
     groups: dict[tuple[str | None, str | None], list[CaseResult]] = {}
@@ -115,6 +150,7 @@ def summarize(cases: Sequence[CaseResult]) -> dict[str, Any]:
                 by_planes, key=lambda k: (sort_key(k[0]), sort_key(k[1]), sort_key(k[2]))
             )
         ],
+        "structures": _structure_groups(cases, names),
         "failures": [
             {
                 "case": c.case,

@@ -77,7 +77,7 @@ def _renders(
             continue
         if stats:
             where += (
-                f"; face-centre distance to truth mean {stats['mean_mm']:.2f} mm, "
+                f"; vertex distance to truth mean {stats['mean_mm']:.2f} mm, "
                 f"95th percentile {stats['p95_mm']:.2f} mm, max {stats['max_mm']:.2f} mm"
             )
         rendered.append(Render(case, png, where))

@@ -41,6 +41,8 @@ Records
 -------
 * :class:`CaseResult`: one case (status ``ok``, ``failed`` or ``skipped``,
   metrics, timings, paths); one row of ``summary.csv`` (:meth:`CaseResult.to_row`).
+* :class:`StructureRecord`: one structure of a case (``structures.json``: name,
+  colour, status, mesh, its own metrics), :attr:`CaseResult.structures`.
 * :class:`FailureRecord`: the one ``error.json`` format.
 * :class:`CaseFiles` / :class:`ResultsLayout`: where the files are.
 """
@@ -71,7 +73,7 @@ from .layout import (
     mesh_file,
 )
 from .reading import collect_results, read_case, write_summary
-from .records import CaseResult, FailureRecord
+from .records import CaseResult, FailureRecord, StructureRecord
 
 __all__ = [
     "DONE_FILE",
@@ -94,6 +96,7 @@ __all__ = [
     "CaseFiles",
     "CaseResult",
     "FailureRecord",
+    "StructureRecord",
     "ResultsLayout",
     "Status",
     "collect_results",

@@ -7,6 +7,7 @@ import csv
 import logging
 import os
 from collections.abc import Iterable, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ from .layout import (
     str_or_none,
     sub_object,
 )
-from .records import CaseResult, FailureRecord
+from .records import CaseResult, FailureRecord, StructureRecord
 
 __all__ = ["collect_results", "read_case", "write_summary"]
 
@@ -67,6 +68,49 @@ def _done_record(files: CaseFiles) -> dict[str, Any]:
         return sub_object(read_json(files.done), "result")
     except (OSError, ValueError):
         return {}
+
+
+def _colour(value: object) -> tuple[int, int, int] | None:
+    if isinstance(value, list | tuple) and len(value) == 3:
+        try:
+            r, g, b = (int(round(float(c))) for c in value)
+        except (TypeError, ValueError):
+            return None
+        return r, g, b
+    return None
+
+
+def _structures(
+    files: CaseFiles, per_structure: Mapping[str, Mapping[str, float]] | None
+) -> tuple[tuple[StructureRecord, ...], str | None]:
+    """``structures.json``'s structures (absent or unreadable: none) and frame."""
+    try:
+        payload = read_json(files.structures)
+    except (OSError, ValueError):
+        return (), None
+    records = []
+    for item in payload.get("structures") or []:
+        if not isinstance(item, dict) or _as_int(item.get("value")) is None:
+            continue
+        mesh = item.get("mesh")
+        path = files.directory / mesh if isinstance(mesh, str) and mesh else None
+        record = StructureRecord(
+            value=int(item["value"]),
+            name=str(item.get("name") or ""),
+            colour=_colour(item.get("colour")),
+            status=str(item.get("status") or ""),
+            planes=_as_int(item.get("planes")),
+            volume_mm3=_as_float(item.get("volume_mm3")),
+            parts=_as_int(item.get("parts")),
+            mesh_path=path if path is not None and path.is_file() else None,
+        )
+        own = item.get("metrics")
+        metrics = _numbers(own) if isinstance(own, dict) else None
+        if metrics is None and per_structure:
+            metrics = dict(per_structure.get(record.label) or {}) or None
+        records.append(replace(record, metrics=metrics))
+    frame = payload.get("coordinates")
+    return tuple(records), frame if frame in ("RAS", "LPS") else None
 
 
 def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> CaseResult:
@@ -147,6 +191,7 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
             for p in ((item.get("plan") or {}).get("parts") or [])
         ]
     watertight = done.get("watertight")
+    structures, frame = _structures(files, per_structure)
     return CaseResult(
         case=case,
         input=str_or_none(done.get("input")) or recorded_input,
@@ -167,6 +212,8 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
         mesh_path=files.find_mesh(),
         preview_path=files.find_preview(),
         structure_metrics=per_structure,
+        structures=structures,
+        coordinates=frame,
     )
 
 

@@ -12,9 +12,10 @@ from typing import Any
 
 from .. import __version__
 from ..io.atomic import atomic_path
+from ..labels import Structure
 from .layout import ERROR_FILE, KEY_METRICS, STATUSES, Status, str_or_none, sub_object
 
-__all__ = ["CaseResult", "FailureRecord", "error_text"]
+__all__ = ["CaseResult", "FailureRecord", "StructureRecord", "error_text"]
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,54 @@ class FailureRecord:
 
 
 @dataclass(frozen=True)
+class StructureRecord:
+    """One structure of a finished case, as ``structures.json`` records it.
+
+    Attributes
+    ----------
+    value : int
+        Its label value (SegmentNumber, ROINumber).
+    name : str
+        Its name ("" when the input has none).
+    colour : tuple of 3 int or None
+        Its own display colour (RGB 0-255), when the input gave one.
+    status : str
+        ``reconstructed``, or why it was not (``not on any kept plane``, ...).
+    planes : int or None
+        Planes that annotate it.
+    volume_mm3 : float or None
+        Volume of its reconstruction.
+    parts : int or None
+        Cuboid parts of its plan.
+    mesh_path : Path or None
+        Its mesh, when written and present.
+    metrics : mapping of str to float, or None
+        Its metrics against its own ground truth (when known).
+    """
+
+    value: int
+    name: str = ""
+    colour: tuple[int, int, int] | None = None
+    status: str = ""
+    planes: int | None = None
+    volume_mm3: float | None = None
+    parts: int | None = None
+    mesh_path: Path | None = None
+    metrics: Mapping[str, float] | None = None
+
+    @property
+    def label(self) -> str:
+        """``"<value>_<name>"`` (or the value alone): its key in ``metrics.json`` and
+        the stem of its mesh file."""
+        return self.structure.label
+
+    @property
+    def structure(self) -> Structure:
+        """The :class:`~slicerecon.labels.Structure` (value, name, colour)."""
+        return Structure(self.value, self.name, self.colour)
+
+
+@dataclass(frozen=True)
 class CaseResult:
     """One case: how it ended, what it measured and where its files are.
 
@@ -190,7 +239,13 @@ class CaseResult:
         A case with several structures: each structure's metrics by its
         ``<value>_<name>`` (then :attr:`metrics` holds their mean).
     mesh_path, preview_path : Path or None
-        The reconstructed mesh / preview PNG when present.
+        The reconstructed mesh / preview PNG when present (for several
+        structures, ``mesh_path`` is the first structure's mesh).
+    structures : tuple of StructureRecord
+        Every structure of ``structures.json`` (names, colours, statuses,
+        meshes, per-structure metrics); empty when the folder has none.
+    coordinates : str or None
+        The world frame of the meshes (``RAS`` or ``LPS``), when recorded.
     """
 
     case: str
@@ -214,6 +269,8 @@ class CaseResult:
     mesh_path: Path | None = None
     preview_path: Path | None = None
     structure_metrics: Mapping[str, Mapping[str, float]] | None = None
+    structures: tuple[StructureRecord, ...] = ()
+    coordinates: str | None = None
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -223,6 +280,11 @@ class CaseResult:
     def ok(self) -> bool:
         """True when the case is finished (``ok`` or ``skipped``; it may lack metrics)."""
         return self.status != "failed"
+
+    @property
+    def several(self) -> bool:
+        """True for a case of several structures."""
+        return len(self.structures) > 1
 
     @property
     def group(self) -> str:

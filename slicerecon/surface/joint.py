@@ -36,8 +36,18 @@ __all__ = ["JointResult", "resolve"]
 
 logger = logging.getLogger(__name__)
 
-_TIE = np.float32(1e-4)
-"""mm: how far off the level a sample exactly on it is moved (to its owner's side)."""
+LEVEL_GAP = 1e-2
+"""Smallest distance of a meshed sample from the zero level, in sample spacings.
+
+Samples nearer the level are moved off it (a tie, exactly on it, to its owner's
+side), so that no vertex lies within about 1 % of a spacing of a grid sample.
+Marching cubes puts a vertex on each grid edge the level crosses; vertices on
+the edges around one sample that nearly lies on the level are nearly one
+point, and a mesh file that stores float32 coordinates (STL) merges them when
+read back, pinching the surface: edges shared by 4 or 6 faces. The gap keeps
+them at least a few hundred float32 steps apart for grids within a metre of
+the origin. Both structures of an interface move their shared samples alike
+(``g_t = -g_s`` stays true), so their meshes still share the interface."""
 
 
 class JointResult(NamedTuple):
@@ -132,13 +142,27 @@ def resolve(fields: Sequence[SdfField | None], grid_shape: tuple[int, int, int])
             continue
         others = np.where(mine, second[where], best[where])
         competitive = np.maximum(field.values, 0.5 * (field.values - others)).astype(np.float32)
-        # a sample exactly on the level (a tie between two structures) goes to its owner
-        tie = competitive == 0
-        competitive[tie] = np.where(mine[tie], -_TIE, _TIE)
+        _off_the_level(competitive, mine, field.affine)
         meshes.append(march_field(competitive, field.affine))
     labels = _voxel_labels(owner, best, origin, axis, upsample, grid_shape)
     logger.debug("resolved %d structures on a %s sample grid", len(present), shape)
     return JointResult(labels, meshes)
+
+
+def _off_the_level(
+    values: NDArray[np.float32], mine: NDArray[np.bool_], affine: NDArray[np.float64]
+) -> None:
+    """Move samples within :data:`LEVEL_GAP` spacings of the zero level off it, in place.
+
+    A sample exactly on the level (a tie between two structures) goes to the
+    side of its owner (``mine``: inside).
+    """
+    gap = np.float32(LEVEL_GAP * float(np.min(np.linalg.norm(affine[:3, :3], axis=0))))
+    near = np.abs(values) < gap
+    if not near.any():
+        return
+    inside = np.where(values[near] == 0, mine[near], values[near] < 0)
+    values[near] = np.where(inside, -gap, gap)
 
 
 def _voxel_labels(
