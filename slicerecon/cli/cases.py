@@ -64,9 +64,10 @@ def info(
     )
     from ..case_inputs import reading_of
 
-    read_as = reading_of(input, allow_irregular=allow_irregular, memory_budget_gb=max_memory)
-    if read_as is not None:
-        details["read as"] = read_as
+    if "not_a_label_map" not in details:
+        read_as = reading_of(input, allow_irregular=allow_irregular, memory_budget_gb=max_memory)
+        if read_as is not None:
+            details["read as"] = read_as
     if as_json:
         typer.echo(json.dumps(details, indent=2, default=str))
         return
