@@ -48,7 +48,7 @@ from .errors import GeometryError, OptionError
 from .evaluation import mean_metrics
 from .inputs import axis_upsample
 from .io.projections import read_projection_files
-from .labels import LabelMap, Structure
+from .labels import LabelMap, Structure, check_label_values
 from .metrics import evaluate
 from .metrics.inputs import place
 from .options import ReconstructOptions
@@ -663,6 +663,13 @@ def reconstruct_structures(
     if isinstance(source, str | os.PathLike):
         case = load_case(source, config)
     else:
-        label_map = source if isinstance(source, LabelMap) else LabelMap.from_array(*source)
+        if isinstance(source, LabelMap):
+            label_map = source
+        else:
+            array, affine = source
+            check_label_values(
+                np.asarray(array), source="the array", chosen=config.union or bool(config.selectors)
+            )
+            label_map = LabelMap.from_array(array, affine)
         case = case_from_label_map(label_map, config)
     return reconstruct_case(case, config)
