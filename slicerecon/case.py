@@ -33,7 +33,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -569,7 +569,7 @@ def score_case(
 
 # ------------------------------------------------------------------------------- run
 def run_case(
-    input_path: str | os.PathLike[str],
+    input_path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     outdir: str | os.PathLike[str],
     config: ReconstructConfig,
     *,
@@ -578,6 +578,9 @@ def run_case(
     progress: Progress | None = None,
 ) -> dict[str, Any]:
     """Reconstruct one case and write its outputs: the one pipeline of ``slicerecon run``.
+
+    ``input_path`` is one input, or several sparse inputs of one study
+    (:func:`slicerecon.case_inputs.combine_cases`).
 
     Writes into ``outdir`` (:func:`slicerecon.case_outputs.write_case`, every
     file atomically): ``mesh.<format>`` for one structure or

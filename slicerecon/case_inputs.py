@@ -36,7 +36,7 @@ from .reconstruct import ReconstructConfig
 from .sections import CrossSections, Volume
 from .selection import choose_structure
 
-__all__ = ["CaseInput", "case_from_label_map", "load_case", "reading_of"]
+__all__ = ["CaseInput", "case_from_label_map", "combine_cases", "load_case", "reading_of"]
 
 logger = logging.getLogger(__name__)
 
@@ -105,18 +105,20 @@ def _as_label_map(volume: Volume, structure: Structure | None = None) -> LabelMa
 
 
 def load_case(
-    input_path: str | os.PathLike[str],
+    input_path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     config: ReconstructConfig,
     *,
     ground_truth: str | os.PathLike[str] | None = None,
     image_dir: str | os.PathLike[str] | None = None,
 ) -> CaseInput:
-    """Read an input into the annotation a case reconstructs from.
+    """Read an input (or several of one study) into the annotation a case reconstructs from.
 
     Parameters
     ----------
-    input_path : path-like
-        Any input :func:`slicerecon.io.detect_kind` knows.
+    input_path : path-like or sequence of path-like
+        Any input :func:`slicerecon.io.detect_kind` knows; or several sparse
+        inputs of one study (an axial and a sagittal annotation, a label map
+        and an RTSTRUCT), combined in world mm (:func:`combine_cases`).
     config : ReconstructConfig
         Plane choice (``slices``, ``every``, ``axis``), structures (``label``,
         ``roi``, ``union``), the memory budget, ``allow_irregular``.
@@ -136,6 +138,16 @@ def load_case(
         What the readers raise; ``--union`` on an RTSTRUCT; plane options on
         a sparse input.
     """
+    if not isinstance(input_path, str | os.PathLike):
+        paths = list(input_path)
+        if len(paths) == 1:
+            return load_case(paths[0], config, ground_truth=ground_truth, image_dir=image_dir)
+        cases = [load_case(path, config, image_dir=image_dir) for path in paths]
+        case = combine_cases(cases)
+        if ground_truth is not None:
+            case = _with_ground_truth(case, ground_truth, config)
+        logger.info("%s", case.annotation.source)
+        return case
     kind = detect_kind(input_path)
     if image_dir is not None and kind.kind != "rtstruct":
         raise OptionError(
@@ -448,3 +460,88 @@ def reading_of(
         return None
     crop = union.crop(pad=3)
     return detect_planes(crop.mask, parse_annotation(annotation)).describe(crop.spacing)
+
+
+def _key(structure: Structure) -> str:
+    return " ".join(structure.name.split()).casefold()
+
+
+def combine_cases(cases: Sequence[CaseInput]) -> CaseInput:
+    """Several sparse inputs of one study as one annotation, in world mm.
+
+    The first input's grid is the reference grid (the label map is written on
+    it); the others' planes keep their poses in world mm (a plane that is not a
+    slice of that grid is sampled through its projection). Structures are
+    matched by name (case and spaces ignored), unnamed ones by value; a
+    structure new to the first input keeps its value, or takes the next free
+    one. The structures form a partition only when every input is a label map.
+
+    Raises
+    ------
+    OptionError
+        A dense input among several (a dense mask is its own case), or one
+        value named differently in two inputs.
+    """
+    for case in cases:
+        if case.dense:
+            raise OptionError(
+                f"{case.input_path} is a dense mask: several inputs combine sparse annotations "
+                "of one study; reconstruct a dense mask on its own"
+            )
+    first = cases[0]
+    structures: list[Structure] = list(first.annotation.structures)
+    # each input's planes speak for that input's structures only
+    own_first = frozenset(first.annotation.values)
+    planes: list[AnnotatedPlane] = [
+        AnnotatedPlane(p.pose, p.masks, own_first if p.structures is None else p.structures)
+        for p in first.annotation.planes
+    ]
+    for case in cases[1:]:
+        remap: dict[int, int] = {}
+        for structure in case.annotation.structures:
+            match = next(
+                (
+                    s
+                    for s in structures
+                    if (structure.name and s.name and _key(s) == _key(structure))
+                    or (not structure.name and not s.name and s.value == structure.value)
+                ),
+                None,
+            )
+            if match is None:
+                clash = next((s for s in structures if s.value == structure.value), None)
+                if clash is not None and clash.name and structure.name:
+                    raise OptionError(
+                        f"structure {structure.value} is {clash.name!r} in {first.input_path} "
+                        f"and {structure.name!r} in {case.input_path}: name the structures "
+                        "alike in both, or choose them with --label"
+                    )
+                value = structure.value if clash is None else max(s.value for s in structures) + 1
+                match = replace(structure, value=value)
+                structures.append(match)
+            remap[structure.value] = match.value
+        for plane in case.annotation.planes:
+            masks = {remap[v]: m for v, m in plane.masks.items()}
+            own = (
+                None if plane.structures is None else frozenset(remap[v] for v in plane.structures)
+            )
+            if own is None and not case.annotation.exclusive:
+                own = frozenset(remap.values())
+            planes.append(AnnotatedPlane(plane.pose, masks, own))
+    exclusive = all(c.annotation.exclusive for c in cases)
+    annotation = Annotation(
+        tuple(planes),
+        tuple(structures),
+        first.annotation.affine,
+        first.annotation.grid_shape,
+        first.annotation.coordinates,
+        exclusive,
+    )
+    names = ", ".join(str(c.input_path) for c in cases)
+    annotation = replace(
+        annotation,
+        source=f"{len(cases)} inputs ({names}), {len(structures)} structure(s): "
+        f"{annotation.describe()}",
+    )
+    missing = tuple(s for c in cases for s in c.missing)
+    return replace(first, annotation=annotation, missing=missing)

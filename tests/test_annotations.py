@@ -239,3 +239,52 @@ def test_contours_on_planes_of_any_orientation(layout: str, tmp_path: Path) -> N
     plan = json.loads((out / "plan.json").read_text())
     expected = {"radial": 8, "axial+sagittal+coronal": 3, "axial+tilted": 4}[layout]
     assert len(plan["sections"]["views"]) == expected
+
+
+def test_several_inputs_of_one_study_are_combined_in_world_mm(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from slicerecon.io.nrrd_writer import write_seg_nrrd
+    from slicerecon.labels import Structure
+
+    truth = _ellipsoid()
+    axial = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    sagittal = _keep(truth, {0: [16, 32]}).astype(np.uint8)
+    liver = [Structure(1, "Liver")]
+    write_seg_nrrd(axial, AFFINE, liver, tmp_path / "axial.seg.nrrd")
+    # the sagittal file names the same organ, under another value and spelling
+    write_seg_nrrd(sagittal * 3, AFFINE, [Structure(3, " liver ")], tmp_path / "sag.seg.nrrd")
+    out = tmp_path / "out"
+    assert (
+        main(
+            [
+                "run",
+                str(tmp_path / "axial.seg.nrrd"),
+                str(tmp_path / "sag.seg.nrrd"),
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    assert "read as: 2 inputs" in capsys.readouterr().out
+    combined = np.asanyarray(nib.load(out / "labels.nii.gz").dataobj)
+    one_file = reconstruct_structures(((axial | sagittal).astype(np.uint8), AFFINE)).labels
+    np.testing.assert_array_equal(combined > 0, one_file > 0)  # the same as drawn in one file
+    assert set(np.unique(combined)) == {0, 1}  # matched by name, the first file's value
+    # one value named differently in two files cannot be matched: one line
+    write_seg_nrrd(sagittal, AFFINE, [Structure(1, "Spleen")], tmp_path / "other.seg.nrrd")
+    assert (
+        main(
+            [
+                "run",
+                str(tmp_path / "axial.seg.nrrd"),
+                str(tmp_path / "other.seg.nrrd"),
+                "-o",
+                str(tmp_path / "o2"),
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'Liver'" in err[0] and "'Spleen'" in err[0]

@@ -115,7 +115,13 @@ def _cell(value: Any) -> str:
 # ----------------------------------------------------------------------------- run
 @app.command()
 def run(
-    input: Annotated[Path, typer.Argument(help="Dense mask, sparse mask or contour input.")],
+    input: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Dense mask, sparse annotation or contours; several sparse inputs of one study "
+            "(an axial and a sagittal annotation, a label map and an RTSTRUCT) are combined."
+        ),
+    ],
     outdir: Annotated[Path, typer.Option("-o", "--outdir", help="Output directory.")] = Path(
         "slicerecon-out"
     ),
@@ -158,7 +164,8 @@ def run(
 
     config = _reconstruct_config(locals())
     with StageProgress(enabled=not quiet) as progress:
-        summary = run_case(input, outdir, config, ground_truth=gt, progress=progress)
+        inputs = input[0] if len(input) == 1 else input
+        summary = run_case(inputs, outdir, config, ground_truth=gt, progress=progress)
     if not quiet:
         print_run_summary(summary, outdir)
 

@@ -98,7 +98,8 @@ def _views(
     annotation: Annotation, value: int
 ) -> tuple[dict[int, list[tuple[float, NDArray]]], list[_Oblique]]:
     """The planes of structure ``value``: by grid axis ``{axis: [(index, mask), ...]}`` for
-    slices of the reference grid, and by orientation for any other plane."""
+    slices of the reference grid (each mask on the grid's in-plane voxels), and by
+    orientation for any other plane."""
     inverse = np.linalg.inv(annotation.affine)
     aligned: dict[int, list[tuple[float, NDArray]]] = {}
     oblique: list[_Oblique] = []
@@ -114,9 +115,17 @@ def _views(
                 found = axis
                 break
         if found is not None:
-            index = (inverse[:3, :3] @ pose.affine[:3, 3] + inverse[:3, 3])[found]
-            aligned.setdefault(found, []).append((float(index), plane.mask(value)))
-            continue
+            origin = inverse[:3, :3] @ pose.affine[:3, 3] + inverse[:3, 3]
+            a, b = in_plane_axes(found)
+            shift = np.rint(origin[[a, b]]).astype(np.int64)
+            if np.allclose(origin[[a, b]], shift, atol=1e-6):
+                # the plane's pixels on the grid's voxels (another input's grid may
+                # start elsewhere): its mask moved by whole pixels
+                mask = plane.mask(value)
+                size = (annotation.grid_shape[a], annotation.grid_shape[b])
+                grid_mask = _window(mask, -shift, -shift + np.asarray(size))
+                aligned.setdefault(found, []).append((float(origin[found]), grid_mask))
+                continue
         normal = pose.normal
         for view in oblique:
             if np.linalg.norm(np.cross(view.normal, normal)) < limit:
