@@ -304,6 +304,10 @@ class Annotation:
             raise GeometryError("no annotated plane is perpendicular to an axis of the grid")
         return int(np.argmax(counts))
 
+    def axis_of(self, pose: PlanePose) -> int | None:
+        """The grid axis a plane is perpendicular to, or None (an oblique plane)."""
+        return self._axis_of(pose)
+
     def _axis_of(self, pose: PlanePose) -> int | None:
         for axis in range(3):
             a, b = in_plane_axes(axis)

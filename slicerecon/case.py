@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
-from .errors import GeometryError, OptionError
+from .errors import OptionError
 from .evaluation import mean_metrics
 from .inputs import axis_upsample
 from .io.projections import read_projection_files
@@ -448,10 +448,15 @@ def _from_views(
 def _main_sections(annotation: Annotation, value: int | None) -> CrossSections | None:
     """The planes (of structure ``value``, or all) perpendicular to the annotation's main
     grid axis, or None when no plane is a slice of the grid (a radial set)."""
-    try:
-        return annotation.cross_sections(value, axis=annotation.main_axis())
-    except GeometryError:
+    planes = annotation.planes if value is None else annotation.planes_of(value)
+    counts = [0, 0, 0]
+    for plane in planes:
+        axis = annotation.axis_of(plane.pose)
+        if axis is not None:
+            counts[axis] += 1
+    if not any(counts):
         return None
+    return annotation.cross_sections(value, axis=int(np.argmax(counts)))
 
 
 def _shared_sections(annotation: Annotation, one_axis: bool) -> CrossSections | None:

@@ -23,9 +23,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .annotation import AnnotatedPlane, Annotation, annotation_from_sections, plane_pose
-from .errors import EmptyMaskError, InputError, OptionError
+from .errors import EmptyMaskError, OptionError
 from .inputs import axis_upsample, prepare_inputs
-from .io import DICOM_KINDS, InputKind, detect_kind, load_ground_truth, load_input
+from .io import InputKind, detect_kind, load_ground_truth, load_input
+from .io.contours import read_contour_annotation
 from .io.dicom import dicom_info
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
@@ -156,15 +157,7 @@ def load_case(
     if kind.kind == "rtstruct":
         case = _load_rtstruct(kind, config, image_dir)
     elif kind.kind == "contours":
-        if config.union:
-            raise OptionError("--union applies to label maps; a contour file holds one structure")
-        data = load_input(
-            kind.path,
-            label=config.label,
-            roi=config.roi,
-            memory_budget_gb=config.max_memory_gb,
-        )
-        case = _load_sparse_sections(kind, config, [Structure(1)], [data], exclusive=True)
+        case = _load_contours(kind, config)
     else:
         case = _load_label_map(kind, config)
     if ground_truth is not None:
@@ -366,32 +359,27 @@ def _load_rtstruct(
     )
 
 
-def _load_sparse_sections(
-    kind: InputKind,
-    config: ReconstructConfig,
-    structures: Sequence[Structure],
-    sections: Sequence[Volume | CrossSections],
-    *,
-    exclusive: bool,
-    coordinates: str | None = None,
-) -> CaseInput:
-    """Contours already on their planes: each structure's own planes, no ground truth."""
+def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
+    """A contour file (JSON of either version, or CSV): its structures on their planes."""
+    if config.union:
+        raise OptionError(
+            "--union applies to label maps; choose a contour file's structures with --label"
+        )
     if config.slices is not None or config.every is not None:
         raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
-    own = [s for s in sections if isinstance(s, CrossSections)]
-    if len(own) != len(sections):
-        raise InputError(f"{kind.path} holds a dense mask where contours were expected")
-    first = own[0]
-    shape = list(first.grid_shape)
-    shape[first.axis] *= axis_upsample(first)
-    check_grid(shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
-    frame = coordinates or ("LPS" if kind.kind in DICOM_KINDS else "RAS")
-    annotation = annotation_from_sections(
-        structures, own, shared=False, coordinates=frame, exclusive=exclusive
-    )
+    annotation = read_contour_annotation(kind.path, memory_budget_gb=config.max_memory_gb)
+    if config.selectors:
+        annotation = annotation.select(config.selectors, source=kind.path)
+    first = annotation.grid_axis()
+    if first is not None:
+        check_grid(
+            _upsampled(annotation, first),
+            what="the reconstruction grid",
+            memory_budget_gb=config.max_memory_gb,
+        )
     annotation = replace(
         annotation,
-        source=f"contours, {len(structures)} structure(s): {annotation.describe()}",
+        source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}",
     )
     return CaseInput(
         annotation,
@@ -402,6 +390,13 @@ def _load_sparse_sections(
         annotation.grid_shape,
         np.zeros(3, np.int64),
     )
+
+
+def _upsampled(annotation: Annotation, axis: int) -> list[int]:
+    """The grid's shape sampled along ``axis`` as the signed-distance surface samples it."""
+    shape = list(annotation.grid_shape)
+    shape[axis] *= axis_upsample(annotation.cross_sections(axis=axis))
+    return shape
 
 
 def _with_ground_truth(

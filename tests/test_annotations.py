@@ -288,3 +288,42 @@ def test_several_inputs_of_one_study_are_combined_in_world_mm(
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "'Liver'" in err[0] and "'Spleen'" in err[0]
+
+
+def test_contour_file_version_2_holds_planes_of_any_orientation_and_several_structures(
+    tmp_path: Path,
+) -> None:
+    radial = [np.array([-np.sin(t), np.cos(t), 0.0]) for t in np.radians(22.5 * np.arange(8))]
+    gland = [_ellipsoid_section(n, 0.0).tolist() for n in radial]
+    lesion = [
+        (_ellipsoid_section(np.array([0, 0, 1.0]), z) * 0.3 + [0, 0, 0.7 * z]).tolist()
+        for z in (-6.0, 0.0, 6.0)
+    ]
+    doc = {
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "structures": [{"value": 1, "name": "gland"}, {"value": 2, "name": "lesion"}],
+        "planes": [{"structure": "gland", "polygons": [p]} for p in gland]
+        + [{"structure": 2, "polygons": [p]} for p in lesion],
+    }
+    path = tmp_path / "radial.json"
+    path.write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 0
+    records = {
+        r["name"]: r for r in json.loads((out / "structures.json").read_text())["structures"]
+    }
+    gland_mesh = trimesh.load(out / records["gland"]["mesh"])
+    assert gland_mesh.is_watertight
+    assert gland_mesh.volume == pytest.approx(4 / 3 * np.pi * 20 * 20 * 30, rel=0.06)
+    assert records["lesion"]["status"] == "reconstructed"  # nested in the gland, kept whole
+    # a version 1 file with such planes says what to do
+    doc_v1 = {
+        "format": "slicerecon-contours",
+        "version": 1,
+        "units": "mm",
+        "planes": [{"polygons": [p]} for p in gland[:2]],
+    }
+    path.write_text(json.dumps(doc_v1))
+    assert main(["run", str(path), "-o", str(tmp_path / "o1")]) == 2

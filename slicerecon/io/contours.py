@@ -1,4 +1,4 @@
-"""Contour files: closed polygons on parallel planes, as JSON or CSV.
+"""Contour files: closed polygons on planes, as JSON or CSV.
 
 The formats are specified in ``docs/formats.md``. In short:
 
@@ -10,6 +10,18 @@ JSON (``.json``)::
      "grid": {"affine": [[...], ...], "shape": [I, J, K]},   # optional
      "planes": [{"position": 12.5,               # optional, mm along the normal
                  "polygons": [[[x, y, z], ...], ...]}, ...]}
+
+Version 2 (JSON) adds planes of any orientation and several structures::
+
+    {"format": "slicerecon-contours", "version": 2, "units": "mm",
+     "structures": [{"value": 1, "name": "prostate", "colour": [230, 25, 75]}],  # optional
+     "planes": [{"normal": [0, 0.38, 0.92],      # optional: the polygons' own otherwise
+                 "position": 4.0,                # optional, mm along the plane's normal
+                 "structure": "prostate",        # value or name; needed with several
+                 "polygons": [[[x, y, z], ...], ...]}, ...]}
+
+Version 1 files keep working unchanged (:func:`read_contours`);
+:func:`read_contour_annotation` reads both versions into an annotation.
 
 CSV (``.csv``): a header naming the columns ``plane,polygon,x,y,z`` then one
 row per vertex; the rows of one polygon are contiguous and in order.
@@ -43,66 +55,48 @@ import logging
 import math
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, ClassVar
 
 import numpy as np
-from numpy.typing import NDArray
-from pydantic import (
-    AfterValidator,
-    AllowInfNan,
-    BaseModel,
-    BeforeValidator,
-    ConfigDict,
-    Field,
-    Strict,
-    ValidationError,
-    ValidatorFunctionWrapHandler,
-    WrapValidator,
-    field_validator,
-    model_validator,
-)
-from pydantic_core import ErrorDetails, PydanticCustomError
 
-from ..errors import FormatError, InputError, OptionError, SlicereconError
+from ..annotation import Annotation, annotation_from_sections
+from ..errors import FormatError, GeometryError, InputError, OptionError, SlicereconError
+from ..labels import Structure
 from ..sections import CrossSections
 from .atomic import atomic_path
+from .contour_schema import (
+    CONTOUR_FORMAT,
+    CONTOUR_VERSION,
+    CONTOUR_VERSIONS,
+    CSV_COLUMNS,
+    ContourFile,
+    ContourGrid,
+    ContourPlane,
+    ContourStructure,
+    Parsed,
+    closed_polygon,
+    parse_json,
+)
 from .limits import DEFAULT_MEMORY_BUDGET_GB
+from .plane_groups import annotation_from_polygons, orientation_count
 from .polygons import polygons_from_sections, sections_from_polygons
 
 __all__ = [
     "CONTOUR_FORMAT",
     "CONTOUR_VERSION",
+    "CONTOUR_VERSIONS",
+    "ContourStructure",
     "CSV_COLUMNS",
     "ContourFile",
     "ContourGrid",
     "ContourPlane",
+    "read_contour_annotation",
     "read_contours",
     "write_contours_csv",
     "write_contours_json",
 ]
 
 logger = logging.getLogger(__name__)
-
-CONTOUR_FORMAT = "slicerecon-contours"
-"""Value of the ``"format"`` key of a JSON contour file."""
-CONTOUR_VERSION = 1
-"""The JSON format version this module reads and writes."""
-CSV_COLUMNS = ("plane", "polygon", "x", "y", "z")
-"""Columns a CSV contour file must have (in any order)."""
-
-
-@dataclass
-class _Parsed:
-    """Polygons of a contour file, flattened, with what else the file says."""
-
-    polygons: list[NDArray[np.float64]] = field(default_factory=list)
-    names: list[str] = field(default_factory=list)
-    n_planes: int = 0
-    normal: NDArray[np.float64] | None = None
-    empty_positions: list[float] = field(default_factory=list)
-    grid: tuple[NDArray[np.float64], tuple[int, int, int]] | None = None
 
 
 # ----------------------------------------------------------------------------- reading
@@ -147,20 +141,12 @@ def read_contours(
         The grid the contours need exceeds ``memory_budget_gb``.
     """
     p = Path(path)
-    if not p.exists():
-        raise InputError(f"contour file not found: {p}")
-    if not p.is_file():
-        raise InputError(f"{p} is a directory; pass a contour file (.json or .csv)")
-    suffix = p.suffix.lower()
-    if suffix not in (".json", ".csv"):
-        raise InputError(f"{p}: contour files must end in .json or .csv (got {suffix!r})")
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"{p} is not UTF-8 text ({exc.reason}); is it a contour file?") from exc
-    except OSError as exc:
-        raise InputError(f"cannot read {p}: {exc.strerror or exc}") from exc
-    parsed = _parse_json(text, p) if suffix == ".json" else _parse_csv(text, p)
+    parsed = _read_parsed(p)
+    if len(parsed.structures) > 1:
+        raise FormatError(
+            f"{p} holds {len(parsed.structures)} structures: read it with "
+            "read_contour_annotation (slicerecon run reads every one)"
+        )
 
     reference = parsed.grid if pixel_spacing is None else None
     if parsed.grid is not None and pixel_spacing is not None:
@@ -188,263 +174,94 @@ def read_contours(
     return sections
 
 
-def _fail(path: Path, where: str, message: str) -> FormatError:
-    return FormatError(f"{path}: {where}: {message}" if where else f"{path}: {message}")
+def read_contour_annotation(
+    path: str | os.PathLike[str],
+    *,
+    pixel_spacing: float | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> Annotation:
+    """Read a contour file (either JSON version, or CSV) into an annotation.
 
+    One structure on parallel planes is read as :func:`read_contours` reads it
+    (annotated empty planes included); planes of several orientations, or
+    several structures (version 2), are grouped and rasterized each in its own
+    plane (:func:`slicerecon.io.plane_groups.annotation_from_polygons`), on
+    the file's ``grid`` when it has one.
 
-def _kind(value: Any) -> str:
-    """How a JSON value is named in messages: ``a string``, ``a list``, ``true/false``, ..."""
-    names = {dict: "an object", list: "a list", str: "a string", bool: "true/false"}
-    if value is None:
-        return "null"
-    return names.get(type(value), type(value).__name__)
+    Parameters
+    ----------
+    path, pixel_spacing, memory_budget_gb
+        As for :func:`read_contours`.
 
+    Returns
+    -------
+    Annotation
+        In the file's world frame (its coordinates are taken as they are).
 
-def _closed(points: NDArray[np.float64], path: Path, where: str) -> NDArray[np.float64]:
-    if points.shape[0] > 1 and np.array_equal(points[0], points[-1]):
-        points = points[:-1]
-    if points.shape[0] < 3:
-        raise _fail(path, where, f"needs at least 3 points (got {points.shape[0]})")
-    return points
-
-
-# ----------------------------------------------------------------------------- JSON schema
-def _refuse(message: str) -> PydanticCustomError:
-    """A schema error whose text is ours (shown after the JSON path)."""
-    return PydanticCustomError("slicerecon", "{message}", {"message": message})
-
-
-def _expect(what: str, length: int | None = None) -> WrapValidator:
-    """A list of ``length`` items (any length when None), checked before its items."""
-
-    def validate(value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
-        if not isinstance(value, list) or (length is not None and len(value) != length):
-            got = _kind(value) + (f" of length {len(value)}" if isinstance(value, list) else "")
-            raise _refuse(f"expected {what} (got {got})")
-        return handler(value)
-
-    return WrapValidator(validate)
-
-
-def _not_null(what: str) -> BeforeValidator:
-    """An optional key may be left out, but not given as null."""
-
-    def validate(value: Any) -> Any:
-        if value is None:
-            raise _refuse(f"expected {what} (got null)")
-        return value
-
-    return BeforeValidator(validate)
-
-
-def _polygon_points(points: list[list[float]]) -> list[list[float]]:
-    if len(points) > 1 and points[0] == points[-1]:
-        points = points[:-1]  # closed implicitly: a repeated first point is dropped
-    if len(points) < 3:
-        raise _refuse(f"needs at least 3 points (got {len(points)})")
-    return points
-
-
-def _non_zero(normal: list[float]) -> list[float]:
-    if not any(normal):
-        raise _refuse("must not be the zero vector")
-    return normal
-
-
-def _homogeneous(rows: list[list[float]]) -> list[list[float]]:
-    affine = np.array(rows)
-    if not np.allclose(affine[3], [0, 0, 0, 1]):
-        raise _refuse("the last row must be [0, 0, 0, 1]")
-    if abs(np.linalg.det(affine[:3, :3])) < 1e-12:
-        raise _refuse("is singular (a voxel axis has zero length)")
-    return rows
-
-
-def _grid_shape(value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
-    try:
-        return handler(value)
-    except ValidationError:
-        raise _refuse(f"expected 3 positive integers (got {value!r})") from None
-
-
-Number = Annotated[float, Strict(), AllowInfNan(False)]
-"""A finite JSON number (an integer is accepted; true/false and strings are not)."""
-Point = Annotated[list[Number], _expect("[x, y, z]", 3)]
-Polygon = Annotated[
-    list[Point], _expect("a list of [x, y, z] points"), AfterValidator(_polygon_points)
-]
-Normal = Annotated[list[Number], _expect("[nx, ny, nz]", 3), AfterValidator(_non_zero)]
-AffineRow = Annotated[list[Number], _expect("4 numbers", 4)]
-Affine = Annotated[list[AffineRow], _expect("4 rows of 4 numbers", 4), AfterValidator(_homogeneous)]
-GridShape = Annotated[
-    list[Annotated[int, Field(gt=0)]],
-    Field(min_length=3, max_length=3),
-    WrapValidator(_grid_shape),
-]
-
-
-class _JsonObject(BaseModel):
-    """A JSON object with exactly the keys of the model's fields (in this order)."""
-
-    model_config = ConfigDict(
-        extra="forbid", strict=True, frozen=True, use_attribute_docstrings=True
-    )
-    _not_an_object: ClassVar[str] = "expected an object"
-
-    @model_validator(mode="before")
-    @classmethod
-    def _known_keys(cls, data: Any) -> Any:
-        if not isinstance(data, dict):
-            raise _refuse(f"{cls._not_an_object} (got {_kind(data)})")
-        unknown = sorted(set(data) - set(cls.model_fields))
-        if unknown:
-            allowed = ", ".join(cls.model_fields)
-            raise _refuse(f"unknown key {unknown[0]!r} (allowed: {allowed})")
-        return data
-
-
-class ContourGrid(_JsonObject):
-    """``grid``: the voxel grid to rasterize on."""
-
-    affine: Affine
-    """Voxel index → world mm, 4 rows of 4 numbers, last row ``[0, 0, 0, 1]``, not singular."""
-    shape: GridShape
-    """``[I, J, K]``, positive integers."""
-
-
-class ContourPlane(_JsonObject):
-    """``planes[i]``: the polygons of one plane."""
-
-    position: Annotated[Number | None, _not_null("a number")] = None
-    """Position along the file's ``normal``, mm (checked against the polygons when given)."""
-    polygons: Annotated[list[Polygon], _expect("a list")]
-    """Closed polygons, each at least 3 ``[x, y, z]`` points in world mm."""
-
-
-class ContourFile(_JsonObject):
-    """A JSON contour file (``docs/formats.md``); ``model_json_schema()`` gives its schema."""
-
-    _not_an_object: ClassVar[str] = "the top level must be a JSON object"
-
-    format: Annotated[Any, Field(json_schema_extra={"const": CONTOUR_FORMAT})]
-    """The string ``"slicerecon-contours"``."""
-    version: Annotated[int, Field(json_schema_extra={"const": CONTOUR_VERSION})]
-    """The integer 1."""
-    units: Annotated[Any, Field(json_schema_extra={"const": "mm"})]
-    """The string ``"mm"``."""
-    label: Annotated[str | None, _not_null("a string")] = None
-    """A name for the structure (informative)."""
-    normal: Annotated[Normal | None, _not_null("[nx, ny, nz]")] = None
-    """The plane normal, any non-zero length."""
-    grid: Annotated[ContourGrid | None, _not_null("an object")] = None
-    """The voxel grid to rasterize on."""
-    planes: Annotated[list[ContourPlane], _expect("a list of planes")]
-    """The planes, each with its polygons."""
-
-    @field_validator("format", mode="after")
-    @classmethod
-    def _format(cls, value: Any) -> Any:
-        if value != CONTOUR_FORMAT:
-            raise _refuse(f"expected {CONTOUR_FORMAT!r} (got {value!r}): not a contour file")
-        return value
-
-    @field_validator("version", mode="after")
-    @classmethod
-    def _version(cls, value: int) -> int:
-        if value != CONTOUR_VERSION:
-            raise _refuse(
-                f"version {value} is not supported; this slicerecon reads version {CONTOUR_VERSION}"
+    Raises
+    ------
+    InputError, FormatError, GeometryError, EmptyMaskError, MemoryBudgetError
+        As :func:`read_contours`.
+    """
+    p = Path(path)
+    parsed = _read_parsed(p)
+    reference = parsed.grid if pixel_spacing is None else None
+    simple = len(parsed.structures) == 1 and orientation_count(parsed.polygons) <= 1
+    if simple or parsed.version == 1:  # version 1: one structure on parallel planes
+        try:
+            sections = read_contours(
+                p, pixel_spacing=pixel_spacing, memory_budget_gb=memory_budget_gb
             )
-        return value
-
-    @field_validator("units", mode="after")
-    @classmethod
-    def _units(cls, value: Any) -> Any:
-        if value != "mm":
-            raise _refuse(f'must be "mm" (got {value!r}); convert the coordinates to millimetres')
-        return value
-
-
-def _json_path(loc: tuple[int | str, ...]) -> str:
-    """``("planes", 3, "polygons", 1)`` → ``planes[3].polygons[1]``."""
-    out = ""
-    for part in loc:
-        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
-    return out
-
-
-def _schema_error(error: ErrorDetails, path: Path) -> FormatError:
-    """One pydantic error as our message: the file, the JSON path, what was wrong."""
-    loc, kind, value = tuple(error["loc"]), error["type"], error.get("input")
-    if kind == "missing":
-        hint = "" if len(loc) > 1 else "; see docs/formats.md"
-        return _fail(path, _json_path(loc[:-1]), f"missing key {loc[-1]!r}{hint}")
-    if kind == "slicerecon":
-        message = str((error.get("ctx") or {}).get("message", error["msg"]))
-    elif kind == "finite_number":
-        message = f"must be finite (got {value})"
-    elif kind == "float_type" and isinstance(value, int) and not isinstance(value, bool):
-        message = f"must be finite (got an integer of {len(str(value))} digits)"
-    elif kind in ("float_type", "float_parsing"):
-        message = f"expected a number (got {_kind(value)})"
-    elif kind in ("int_type", "int_parsing"):
-        message = f"expected an integer (got {_kind(value)})"
-    elif kind == "string_type":
-        message = f"expected a string (got {_kind(value)})"
-    else:  # not reached by the schema above; pydantic's own words, still with the path
-        message = error["msg"]
-    return _fail(path, _json_path(loc), message)
-
-
-def _parse_json(text: str, path: Path) -> _Parsed:
+        except GeometryError as exc:
+            if "parallel" not in str(exc):
+                raise
+            raise GeometryError(
+                f"{exc} (planes of several orientations: write the file as version 2)"
+            ) from exc
+        return annotation_from_sections(
+            parsed.structures, [sections], shared=True, coordinates="RAS", exclusive=True
+        )
+    groups = [
+        [
+            poly
+            for poly, owner in zip(parsed.polygons, parsed.owners, strict=True)
+            if owner == s.value
+        ]
+        for s in parsed.structures
+    ]
     try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FormatError(
-            f"{path} is not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}"
-        ) from exc
-    except (ValueError, RecursionError) as exc:  # 4,301-digit integers, 100,000-deep nesting
-        raise FormatError(
-            f"{path} is not valid JSON: {type(exc).__name__}: {str(exc)[:200]}"
-        ) from exc
-    try:
-        model = ContourFile.model_validate(doc)
-    except ValidationError as exc:
-        raise _schema_error(exc.errors()[0], path) from None
+        return annotation_from_polygons(
+            parsed.structures,
+            groups,
+            reference=reference,
+            pixel_spacing=pixel_spacing,
+            coordinates="RAS",
+            exclusive=False,
+            memory_budget_gb=memory_budget_gb,
+        )
+    except SlicereconError as exc:
+        raise type(exc)(f"{p}: {exc}") from exc
 
-    # the rules that join several fields: positions against polygons, empty planes
-    parsed = _Parsed(n_planes=len(model.planes))
-    if model.normal is not None:
-        normal = np.array(model.normal)
-        parsed.normal = normal / np.linalg.norm(normal)
-    if model.grid is not None:
-        shape = model.grid.shape
-        parsed.grid = (np.array(model.grid.affine), (shape[0], shape[1], shape[2]))
-    for p, plane in enumerate(model.planes):
-        where = f"planes[{p}]"
-        if not plane.polygons:
-            if plane.position is None or parsed.normal is None:
-                raise _fail(
-                    path,
-                    where,
-                    'a plane without polygons needs a "position" and the file a top-level "normal"',
-                )
-            parsed.empty_positions.append(plane.position)
-            continue
-        for q, polygon in enumerate(plane.polygons):
-            pname = f"{where}.polygons[{q}]"
-            points = np.array(polygon, dtype=np.float64)
-            if plane.position is not None and parsed.normal is not None:
-                at = float(points.mean(axis=0) @ parsed.normal)
-                if abs(at - plane.position) > max(0.01, 1e-6 * abs(plane.position)):
-                    raise _fail(
-                        path,
-                        pname,
-                        f"lies at {at:.6g} mm along the normal but the "
-                        f"plane's position is {plane.position:.6g} mm",
-                    )
-            parsed.polygons.append(points)
-            parsed.names.append(pname)
+
+def _read_parsed(p: Path) -> Parsed:
+    """The parsed polygons of a contour file (the checks of :func:`read_contours`)."""
+    if not p.exists():
+        raise InputError(f"contour file not found: {p}")
+    if not p.is_file():
+        raise InputError(f"{p} is a directory; pass a contour file (.json or .csv)")
+    suffix = p.suffix.lower()
+    if suffix not in (".json", ".csv"):
+        raise InputError(f"{p}: contour files must end in .json or .csv (got {suffix!r})")
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"{p} is not UTF-8 text ({exc.reason}); is it a contour file?") from exc
+    except OSError as exc:
+        raise InputError(f"cannot read {p}: {exc.strerror or exc}") from exc
+    parsed = parse_json(text, p) if suffix == ".json" else _parse_csv(text, p)
+    if not parsed.owners:
+        parsed.owners = [1] * len(parsed.polygons)
+        parsed.structures = parsed.structures or [Structure(1)]
     return parsed
 
 
@@ -457,7 +274,7 @@ def _csv_rows(text: str) -> Iterator[tuple[int, list[str]]]:
         yield number, [cell.strip() for cell in next(csv.reader([line]))]
 
 
-def _parse_csv(text: str, path: Path) -> _Parsed:
+def _parse_csv(text: str, path: Path) -> Parsed:
     rows = _csv_rows(text)
     try:
         header_line, header = next(rows)
@@ -513,10 +330,10 @@ def _parse_csv(text: str, path: Path) -> _Parsed:
             current = key
         polygons[key].append(xyz)
 
-    parsed = _Parsed()
+    parsed = Parsed()
     for key, points in polygons.items():
         where = f"line {first_line[key]} (plane {key[0]}, polygon {key[1]})"
-        parsed.polygons.append(_closed(np.array(points), path, where))
+        parsed.polygons.append(closed_polygon(np.array(points), path, where))
         parsed.names.append(where)
     parsed.n_planes = len({plane for plane, _ in polygons})
     return parsed

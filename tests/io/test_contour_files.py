@@ -150,7 +150,7 @@ def test_non_parallel_planes_raise_geometry_error(tmp_path):
         ([], "top level must be a JSON object"),
         ({"format": "slicerecon-contours", "version": 1, "units": "mm"}, "missing key 'planes'"),
         (_json_doc([]) | {"format": "other"}, "format: expected 'slicerecon-contours'"),
-        (_json_doc([]) | {"version": 2}, "version: version 2 is not supported"),
+        (_json_doc([]) | {"version": 3}, "version: version 3 is not supported"),
         (_json_doc([]) | {"units": "cm"}, 'units: must be "mm"'),
         (_json_doc([]) | {"colour": "red"}, "unknown key 'colour'"),
         (_json_doc({"polygons": []}), "planes: expected a list of planes"),
