@@ -11,6 +11,14 @@ some planes of the true mask, in one of these layouts:
                  of the structure's extent along x and y)
 ``axial6+2+2``   6 axial planes plus the same 2 sagittal and 2 coronal ones
 
+or, as contours (the polygons an RTSTRUCT holds, traced on each plane of the
+true mask, in world mm; written as a version 2 contour file on the mask's grid):
+
+``rt-axial8``          8 axial planes
+``rt-axial8+3+3``      the 8 axial planes plus 3 sagittal and 3 coronal ones (1/4, 1/2, 3/4)
+``rt-radial8``         8 planes through the structure's long axis, 22.5° apart
+``rt-axial8+tilted3``  the 8 axial planes plus 3 planes through the centre tilted 30°, 45°, 60°
+
 and reconstructed from that sparse label map alone, as a user would
 (``slicerecon.case.reconstruct_structures`` on the array and its affine: the
 reading is detected, not told), beside the two baselines:
@@ -52,7 +60,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from plain_sdf import plain_sdf_field  # noqa: E402
 from real_anatomy import SPLIT_FILE, load_case, load_split  # noqa: E402
 
-LAYOUTS = ("axial12", "every2", "axial12+2+2", "axial6+2+2")
+LAYOUTS = (
+    "axial12",
+    "every2",
+    "axial12+2+2",
+    "axial6+2+2",
+    "rt-axial8",
+    "rt-axial8+3+3",
+    "rt-radial8",
+    "rt-axial8+tilted3",
+)
+CONTOUR_LAYOUTS = ("rt-axial8", "rt-axial8+3+3", "rt-radial8", "rt-axial8+tilted3")
+"""Layouts drawn as contours (polygons in world mm, as an RTSTRUCT holds them)."""
 TIE = 0.001
 """|IoU difference| at most this is a tie."""
 
@@ -129,15 +148,188 @@ def itk_mci(sparse: np.ndarray, spacing: np.ndarray) -> np.ndarray:
     return filled | sparse
 
 
+def _plane_mask(
+    mask: np.ndarray,
+    affine: np.ndarray,
+    origin: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    step: float,
+    size: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The true mask on a plane's pixels (nearest voxel), and the pixels' world positions."""
+    from scipy import ndimage
+
+    r, c = np.meshgrid(np.arange(size) - size / 2, np.arange(size) - size / 2, indexing="ij")
+    world = origin + (r[..., None] * u + c[..., None] * v) * step
+    index = (world - affine[:3, 3]) @ np.linalg.inv(affine[:3, :3]).T
+    values = ndimage.map_coordinates(
+        mask.astype(np.uint8), index.reshape(-1, 3).T, order=0, mode="constant"
+    ).reshape(r.shape)
+    return values.astype(bool), world
+
+
+def _traced(
+    mask: np.ndarray, affine: np.ndarray, normal: np.ndarray, point: np.ndarray
+) -> list[list[list[float]]]:
+    """The polygons of the true mask's section by the plane through ``point``, world mm."""
+    from skimage import measure
+
+    normal = normal / np.linalg.norm(normal)
+    directions = affine[:3, :3] / np.linalg.norm(affine[:3, :3], axis=0)
+    aligned = np.flatnonzero(np.abs(directions.T @ normal) > 1 - 1e-9)
+    if aligned.size:  # a slice of the image: traced on its own pixels, as drawn on it
+        axis = int(aligned[0])
+        k = int(round(np.linalg.solve(affine[:3, :3], point - affine[:3, 3])[axis]))
+        rows, cols = (a for a in range(3) if a != axis)
+        polygons = []
+        for contour in measure.find_contours(
+            np.pad(np.take(mask, k, axis=axis), 1).astype(float), 0.5
+        ):
+            rc = contour[:-1] - 1.0
+            if len(rc) < 3:
+                continue
+            ijk = np.zeros((len(rc), 3))
+            ijk[:, rows], ijk[:, cols], ijk[:, axis] = rc[:, 0], rc[:, 1], k
+            polygons.append((ijk @ affine[:3, :3].T + affine[:3, 3]).tolist())
+        return polygons
+    world_axis = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    u = world_axis - (world_axis @ normal) * normal
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    step = float(np.min(np.linalg.norm(affine[:3, :3], axis=0)))
+    extent = np.linalg.norm(np.asarray(mask.shape) * np.linalg.norm(affine[:3, :3], axis=0))
+    size = int(np.ceil(extent / step)) + 4
+    # the plane's pixels centred on the grid's centre, projected onto the plane
+    middle = affine[:3, :3] @ ((np.asarray(mask.shape) - 1) / 2.0) + affine[:3, 3]
+    point = middle + ((point - middle) @ normal) * normal
+    section, world = _plane_mask(mask, affine, point, u, v, step, size)
+    polygons = []
+    for contour in measure.find_contours(np.pad(section.astype(float), 1), 0.5):
+        rc = contour[:-1] - 1.0
+        if len(rc) < 3:
+            continue
+        r, c = rc[:, 0] - size / 2, rc[:, 1] - size / 2
+        pts = point + (r[:, None] * u + c[:, None] * v) * step
+        polygons.append(pts.tolist())
+    return polygons
+
+
+def _long_axis(mask: np.ndarray, affine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The structure's centre and long axis (first principal direction), world mm."""
+    points = np.argwhere(mask).astype(np.float64) @ affine[:3, :3].T + affine[:3, 3]
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    return centre, vt[0]
+
+
+def contour_planes(mask: np.ndarray, affine: np.ndarray, layout: str) -> list[tuple]:
+    """The planes ``(normal, point)`` of a contour layout, world mm."""
+    index_to_world = lambda ijk: affine[:3, :3] @ np.asarray(ijk, float) + affine[:3, 3]  # noqa: E731
+    z = np.flatnonzero(mask.any(axis=(0, 1)))
+    axial_normal = affine[:3, 2] / np.linalg.norm(affine[:3, 2])
+    planes = []
+    if layout != "rt-radial8":
+        for k in _evenly(z, 8):
+            planes.append((axial_normal, index_to_world([0, 0, k])))
+    centre, axis = _long_axis(mask, affine)
+    if layout == "rt-axial8+3+3":
+        for ax in (0, 1):
+            occupied = np.flatnonzero(mask.any(axis=tuple(a for a in range(3) if a != ax)))
+            normal = affine[:3, ax] / np.linalg.norm(affine[:3, ax])
+            for f in (0.25, 0.5, 0.75):
+                ijk = [0, 0, 0]
+                ijk[ax] = int(occupied[0] + round((occupied[-1] - occupied[0]) * f))
+                planes.append((normal, index_to_world(ijk)))
+    elif layout == "rt-radial8":
+        side = np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
+        side /= np.linalg.norm(side)
+        other = np.cross(axis, side)
+        for t in np.radians(22.5 * np.arange(8)):
+            planes.append((np.cos(t) * side + np.sin(t) * other, centre))
+    elif layout == "rt-axial8+tilted3":
+        tilt_axis = affine[:3, 0] / np.linalg.norm(affine[:3, 0])
+        for degrees in (30, 45, 60):
+            t = np.radians(degrees)
+            normal = np.cos(t) * axial_normal + np.sin(t) * np.cross(tilt_axis, axial_normal)
+            planes.append((normal, centre))
+    return planes
+
+
+def contours_sparse(truth: Any, layout: str, directory: Path) -> tuple[Path, np.ndarray | None]:
+    """The layout's contours as a version 2 contour file on the truth's grid, and (for a
+    layout on grid slices) the same planes as a sparse label map."""
+    import json
+
+    mask, affine = truth.mask, truth.affine
+    planes = contour_planes(mask, affine, layout)
+    doc = {
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "grid": {"affine": affine.tolist(), "shape": list(mask.shape)},
+        "planes": [
+            {"normal": list(map(float, n)), "polygons": polys}
+            for n, p in planes
+            if (polys := _traced(mask, affine, n, p))
+        ],
+    }
+    path = directory / f"{layout}.json"
+    path.write_text(json.dumps(doc))
+    sparse = None
+    if layout in ("rt-axial8", "rt-axial8+3+3"):
+        inverse = np.linalg.inv(affine)
+        by_axis: dict[int, list[int]] = {}
+        for normal, point in planes:
+            ax = int(
+                np.argmax(np.abs(inverse[:3, :3] @ normal * np.linalg.norm(affine[:3, :3], axis=0)))
+            )
+            by_axis.setdefault(ax, []).append(
+                int(round((inverse[:3, :3] @ point + inverse[:3, 3])[ax]))
+            )
+        sparse = sparse_mask(mask, {a: np.array(k) for a, k in by_axis.items()})
+    return path, sparse
+
+
+def ours_contours(path: Path) -> tuple[np.ndarray, str]:
+    """slicerecon from the contour file alone: its label map on the file's grid."""
+    from slicerecon.case import reconstruct_case
+    from slicerecon.case_inputs import load_case
+    from slicerecon.reconstruct import ReconstructConfig
+
+    config = ReconstructConfig()
+    case = load_case(path, config)
+    return reconstruct_case(case, config).labels > 0, case.annotation.source
+
+
 def run_case(name: str, protocol: dict[str, Any], layouts: list[str]) -> list[dict[str, Any]]:
     """Every layout of one case: the three (or four) reconstructions and their IoUs."""
     truth = load_case(name, protocol)
     mask, affine, spacing = truth.mask, truth.affine, truth.spacing
     rows = []
+    import tempfile
+
+    scratch = Path(tempfile.mkdtemp(prefix="annotations-"))
     for layout in layouts:
+        row: dict[str, Any] = {"case": name, "layout": layout}
+        if layout in CONTOUR_LAYOUTS:
+            path, sparse = contours_sparse(truth, layout, scratch)
+            start = time.perf_counter()
+            result, reading = ours_contours(path)
+            row["ours_s"] = time.perf_counter() - start
+            row["ours"], row["reading"] = iou(result, mask), reading
+            if sparse is not None:
+                axial = _evenly(np.flatnonzero(mask.any(axis=(0, 1))), 8)
+                row["plain_sdf"] = iou(plain_sdf(sparse, spacing, axial), mask)
+                row["itk_mci"] = iou(itk_mci(sparse, spacing), mask)
+            if layout != "rt-axial8" and layout != "rt-radial8":
+                axial_path, _ = contours_sparse(truth, "rt-axial8", scratch)
+                row["ours_axial_only"] = iou(ours_contours(axial_path)[0], mask)
+            rows.append(row)
+            _say(row)
+            continue
         planes = layout_planes(mask, layout)
         sparse = sparse_mask(mask, planes)
-        row: dict[str, Any] = {"case": name, "layout": layout}
         start = time.perf_counter()
         result, reading = ours(sparse, affine)
         row["ours_s"] = time.perf_counter() - start
@@ -151,14 +343,20 @@ def run_case(name: str, protocol: dict[str, Any], layouts: list[str]) -> list[di
             axial_only, _ = ours(sparse_mask(mask, {2: planes[2]}), affine)
             row["ours_axial_only"] = iou(axial_only, mask)
         rows.append(row)
-        print(
-            f"{name:24s} {layout:12s} ours {row['ours']:.4f} plain {row['plain_sdf']:.4f} "
-            f"itk {row['itk_mci']:.4f} axial-only {row.get('ours_axial_only', float('nan')):.4f} "
-            f"| {reading}",
-            file=sys.stderr,
-            flush=True,
-        )
+        _say(row)
     return rows
+
+
+def _say(row: dict[str, Any]) -> None:
+    def fmt(key: str) -> str:
+        return f"{row[key]:.4f}" if key in row else "  –   "
+
+    print(
+        f"{row['case']:24s} {row['layout']:18s} ours {fmt('ours')} plain {fmt('plain_sdf')} "
+        f"itk {fmt('itk_mci')} axial-only {fmt('ours_axial_only')} | {row['reading']}",
+        file=sys.stderr,
+        flush=True,
+    )
 
 
 def _counts(diffs: np.ndarray) -> str:
@@ -166,6 +364,17 @@ def _counts(diffs: np.ndarray) -> str:
         f"{int(np.sum(diffs > TIE))} / {int(np.sum(np.abs(diffs) <= TIE))} / "
         f"{int(np.sum(diffs < -TIE))}"
     )
+
+
+def _column(sel: list[dict[str, Any]], key: str) -> np.ndarray | None:
+    values = [r[key] for r in sel if key in r]
+    return np.array(values) if len(values) == len(sel) else None
+
+
+def _versus(ours_v: np.ndarray, other: np.ndarray | None) -> str:
+    if other is None:
+        return "–"
+    return f"{(ours_v - other).mean():+.4f} ({_counts(ours_v - other)})"
 
 
 def report(rows: list[dict[str, Any]], halves: dict[str, str], command: str) -> str:
@@ -180,23 +389,24 @@ def report(rows: list[dict[str, Any]], halves: dict[str, str], command: str) -> 
             f"({len({r['case'] for r in own})} cases)",
             "",
             "| layout | ours | plain SDF (axial) | ITK-MCI (all axes) | ours, axial only | "
-            "ours − plain SDF (w / t / l) | ours − ITK-MCI (w / t / l) | worst vs plain SDF |",
-            "|---|---:|---:|---:|---:|---|---|---:|",
+            "ours − plain SDF (w / t / l) | ours − ITK-MCI (w / t / l) | "
+            "ours − axial only (w / t / l) | worst vs plain SDF |",
+            "|---|---:|---:|---:|---:|---|---|---|---:|",
         ]
         for layout in LAYOUTS:
             sel = [r for r in own if r["layout"] == layout]
             if not sel:
                 continue
             ours_v = np.array([r["ours"] for r in sel])
-            plain = np.array([r["plain_sdf"] for r in sel])
-            itk = np.array([r["itk_mci"] for r in sel])
-            axial = [r["ours_axial_only"] for r in sel if "ours_axial_only" in r]
-            axial_text = f"{np.mean(axial):.4f}" if axial else "–"
+            plain, itk, axial = (
+                _column(sel, k) for k in ("plain_sdf", "itk_mci", "ours_axial_only")
+            )
+            mean = lambda v: "–" if v is None else f"{v.mean():.4f}"  # noqa: E731
+            worst = "–" if plain is None else f"{(ours_v - plain).min():+.4f}"
             lines.append(
-                f"| {layout} | {ours_v.mean():.4f} | {plain.mean():.4f} | {itk.mean():.4f} | "
-                f"{axial_text} | {(ours_v - plain).mean():+.4f} ({_counts(ours_v - plain)}) | "
-                f"{(ours_v - itk).mean():+.4f} ({_counts(ours_v - itk)}) | "
-                f"{(ours_v - plain).min():+.4f} |"
+                f"| {layout} | {ours_v.mean():.4f} | {mean(plain)} | {mean(itk)} | {mean(axial)} | "
+                f"{_versus(ours_v, plain)} | {_versus(ours_v, itk)} | {_versus(ours_v, axial)} | "
+                f"{worst} |"
             )
         lines.append("")
     lines += [
@@ -206,10 +416,12 @@ def report(rows: list[dict[str, Any]], halves: dict[str, str], command: str) -> 
         "|---|---|---|---:|---:|---:|---:|---|",
     ]
     for r in rows:
-        axial = f"{r['ours_axial_only']:.4f}" if "ours_axial_only" in r else "–"
+        cells = [
+            f"{r[k]:.4f}" if k in r else "–" for k in ("plain_sdf", "itk_mci", "ours_axial_only")
+        ]
         lines.append(
             f"| {halves[r['case']]} | {r['case']} | {r['layout']} | {r['ours']:.4f} | "
-            f"{r['plain_sdf']:.4f} | {r['itk_mci']:.4f} | {axial} | {r['reading']} |"
+            f"{' | '.join(cells)} | {r['reading']} |"
         )
     lines += ["", "</details>", ""]
     return "\n".join(lines)

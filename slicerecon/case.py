@@ -422,7 +422,6 @@ def _from_views(
         structure.value,
         interpolation=options.interpolation,
         join_drift=options.join_drift,
-        slabs=case.kind.kind in ("rtstruct", "contours"),
     )
     mesh = taubin_smooth(made.mesh) if options.smooth else made.mesh
     field = made.field

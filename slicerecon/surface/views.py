@@ -15,9 +15,8 @@ weighting, Shepard 1968; ``p`` = :data:`VIEW_WEIGHT_EXPONENT`):
 * between the axial planes the axial view dominates, near a sagittal plane the
   sagittal view, and where the axial stack ends, a sagittal plane that shows
   the structure going on takes over;
-* a view of three planes or more (or the view with the most planes, when it
-  has two, or when it is the only view) is taken to cover the structure along
-  its normal: the structure ends beyond its
+* the view with the most planes (when it has two or more, or is the only
+  view) is taken to cover the structure along its normal: the structure ends beyond its
   outer planes by half a voxel (a label map's slice) or half the plane spacing
   (contours, each standing for the slab half-way to its neighbours); another
   view of one or two planes is extruded beyond them and weighs only near them.
@@ -51,13 +50,10 @@ logger = logging.getLogger(__name__)
 
 VIEW_WEIGHT_EXPONENT = 6.0
 """``p`` of the views' inverse-distance weights (chosen on the development shapes)."""
-COMPLETE_VIEW = 3
-"""A view of this many planes or more (or the view with the most planes) is taken to cover
-the structure along its normal."""
-SLAB_REACH = 0.5
-"""How far a structure goes on beyond a complete view's outer plane of contours, in plane
-spacings: each contour stands for the slab half-way to its neighbours (RTSTRUCT's convention).
-A label map's slice stands for its own voxels: half a voxel."""
+END_REACH = 0.5
+"""How far a structure goes on beyond a complete view's outer plane, in voxels of the
+reference grid: a drawn slice stands for its own voxels (a label map's slice; a contour
+on its image slice, or on the grid built on the contours' smallest gap)."""
 BEYOND_PENALTY = 2.0
 """Factor on the distance of a sample beyond the outer planes of a view of one or two
 planes, which is extruded there (chosen on the development shapes)."""
@@ -145,7 +141,6 @@ def views_field(
     *,
     interpolation: str = "pchip",
     join_drift: bool = True,
-    slabs: bool = False,
     exponent: float = VIEW_WEIGHT_EXPONENT,
 ) -> SdfField:
     """The blended signed-distance field of one structure drawn in several views.
@@ -163,10 +158,6 @@ def views_field(
     join_drift : bool
         Join regions of consecutive planes of a view that overlap nothing on
         the other plane (:mod:`slicerecon.surface.drift`).
-    slabs : bool
-        Planes of contours, each standing for the slab half-way to its
-        neighbours: a complete view reaches :data:`SLAB_REACH` of its spacing
-        beyond its outer planes. Otherwise (label-map slices) half a voxel.
     exponent : float
         ``p`` of the inverse-distance weights.
 
@@ -224,17 +215,15 @@ def views_field(
     main = max(counts, key=lambda key: counts[key])
 
     def complete(key: int) -> bool:
-        # three planes or more; or the main view of two (or the only view): a radial
-        # set of single planes has no complete view
-        many = counts[key] >= 2 or len(counts) == 1
-        return counts[key] >= COMPLETE_VIEW or (key == main and many)
+        # the main view, of two planes or more (or the only view): a radial set of
+        # single planes has no complete view, and the extra views of an axial stack
+        # do not span the structure along their normals
+        return key == main and (counts[key] >= 2 or len(counts) == 1)
 
     spacing = np.linalg.norm(annotation.affine[:3, :3], axis=0)
-    reach = {
-        axis: _reach(planes, slabs) if complete(axis) else None for axis, planes in views.items()
-    }
+    reach = {axis: END_REACH if complete(axis) else None for axis in views}
     oblique_reach = [
-        _oblique_reach(view, slabs, float(spacing.min())) if complete(-1 - n) else None
+        END_REACH * float(spacing.min()) if complete(-1 - n) else None
         for n, view in enumerate(oblique)
     ]
     pad = np.full(3, CROP_PAD, dtype=np.int64)
@@ -387,14 +376,6 @@ def _main_grid_axis(annotation: Annotation) -> int:
         return 2
 
 
-def _oblique_reach(view: _Oblique, slabs: bool, voxel_mm: float) -> float:
-    """How far (mm) a complete oblique view reaches beyond its outer planes."""
-    offsets = [offset for offset, _, _ in view.planes]
-    if slabs and len(offsets) > 1:
-        return SLAB_REACH * float(np.median(np.diff(offsets)))
-    return 0.5 * voxel_mm
-
-
 def _oblique_view(
     view: _Oblique,
     affine: NDArray[np.float64],
@@ -505,20 +486,12 @@ def _window(mask: NDArray[np.bool_], lo: NDArray[np.int64], hi: NDArray[np.int64
     return out
 
 
-def _reach(planes: list[tuple[float, NDArray]], slabs: bool) -> float:
-    """How far (index units) a complete view reaches beyond its outer planes."""
-    if slabs and len(planes) > 1:
-        return SLAB_REACH * float(np.median(np.diff([index for index, _ in planes])))
-    return 0.5
-
-
 def views_surface(
     annotation: Annotation,
     value: int,
     *,
     interpolation: str = "pchip",
     join_drift: bool = True,
-    slabs: bool = False,
     exponent: float = VIEW_WEIGHT_EXPONENT,
 ) -> ViewsSurface:
     """Mesh and occupancy of one structure drawn in several views (:func:`views_field`).
@@ -537,7 +510,6 @@ def views_surface(
         value,
         interpolation=interpolation,
         join_drift=join_drift,
-        slabs=slabs,
         exponent=exponent,
     )
     values = field.values
