@@ -48,7 +48,7 @@ from .errors import OptionError
 from .evaluation import mean_metrics
 from .inputs import axis_upsample
 from .io.projections import read_projection_files
-from .labels import LabelMap, Structure, check_label_values
+from .labels import LabelMap, Structure, StructureMasks, check_label_values
 from .metrics import evaluate
 from .metrics.inputs import place
 from .options import ReconstructOptions
@@ -180,7 +180,7 @@ class CaseReconstruction:
     labels: NDArray[np.integer]
     affine: NDArray[np.float64]
     sections: CrossSections
-    truth: LabelMap | None
+    truth: LabelMap | StructureMasks | None
     crop_lo: NDArray[np.int64]
     coordinates: str = "RAS"
     exclusive: bool = True
@@ -363,7 +363,7 @@ def reconstruct_case(
             timings["reconstruct"] = timings.get("reconstruct", 0.0) + time.perf_counter() - start
             continue
         own = annotation.cross_sections(structure.value)
-        mask = None if case.labels is None else case.labels.labels == structure.value
+        mask = None if case.labels is None else case.labels.mask(structure.value).mask
         sub, derived, offset = crop_to_structure(own, mask)
         projections = _projections(config, sub, derived, dense=case.dense, many=len(drawn) > 1)
         result = reconstruct(sub, projections, per_structure, keep_field=joint, upsample=upsample)
@@ -545,7 +545,9 @@ def score_case(
         metrics}, "mean": {...}}`` (:func:`slicerecon.metrics.evaluate`);
         each structure's metrics are also kept on its :class:`StructureResult`.
     """
-    truths: LabelMap | None = case.truth if isinstance(case.truth, LabelMap) else case.labels
+    truths: LabelMap | StructureMasks | None = (
+        case.truth if isinstance(case.truth, LabelMap | StructureMasks) else case.labels
+    )
     scored: dict[str, dict[str, Any]] = {}
     for item in result.reconstructed:
         truth: Any = case.truth

@@ -31,7 +31,7 @@ from .io.dicom import dicom_info
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.rtstruct import read_rtstruct_annotation
-from .labels import LabelMap, Structure
+from .labels import LabelMap, Structure, StructureMasks
 from .plane_detection import detect_planes, parse_annotation
 from .reconstruct import ReconstructConfig
 from .sections import CrossSections, Volume
@@ -74,7 +74,7 @@ class CaseInput:
     """
 
     annotation: Annotation
-    labels: LabelMap | None
+    labels: LabelMap | StructureMasks | None
     input_path: Path
     kind: InputKind
     output_affine: NDArray[np.float64]
@@ -200,14 +200,18 @@ def _seg_segment(kind: InputKind, selector: int | str) -> Structure:
 
 
 def case_from_label_map(
-    label_map: LabelMap, config: ReconstructConfig, *, kind: InputKind | None = None
+    label_map: LabelMap | StructureMasks,
+    config: ReconstructConfig,
+    *,
+    kind: InputKind | None = None,
 ) -> CaseInput:
     """The case of a label map: planes chosen over all its structures when it is dense.
 
     Parameters
     ----------
-    label_map : LabelMap
-        Every structure on the input's grid.
+    label_map : LabelMap or StructureMasks
+        Every structure on the input's grid: a partition (label map), or
+        structures that may overlap (SEG segments), reconstructed independently.
     config : ReconstructConfig
         ``slices`` / ``every`` / ``axis`` choose the planes of a dense label
         map; ``label`` / ``union`` choose the structures.
@@ -257,12 +261,13 @@ def case_from_label_map(
         np.linalg.solve(label_map.affine[:3, :3], grid_affine[:3, 3] - label_map.affine[:3, 3])
     ).astype(np.int64)
     region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, grid_shape, strict=True))
-    labels = label_map.labels[region]
+    exclusive = isinstance(label_map, LabelMap)
+    crops = {s.value: label_map.mask(s.value).mask[region] for s in label_map.structures}
     if sections is not None:
         planes = np.rint(sections.indices).astype(np.int64)
         own = [
             CrossSections(
-                np.moveaxis(labels == s.value, sections.axis, 0)[planes],
+                np.moveaxis(crops[s.value], sections.axis, 0)[planes],
                 sections.indices,
                 sections.axis,
                 sections.affine,
@@ -275,21 +280,25 @@ def case_from_label_map(
             own,
             shared=True,
             coordinates=label_map.coordinates,
-            exclusive=True,
+            exclusive=exclusive,
         )
     else:
-        annotation = _views_annotation(label_map, labels, grid_affine, reading.planes)
+        annotation = _views_annotation(
+            label_map, crops, grid_affine, grid_shape, reading.planes, exclusive
+        )
     dense = cropped is not None
     how = "dense mask" if dense else reading.describe(crop.spacing)
     annotation = replace(
         annotation,
         source=f"{how}; {len(label_map.structures)} structure(s): {annotation.describe()}",
     )
-    dense_labels = (
-        LabelMap(labels, grid_affine, label_map.structures, label_map.coordinates)
-        if dense
-        else None
-    )
+    dense_labels: LabelMap | StructureMasks | None = None
+    if dense and isinstance(label_map, LabelMap):
+        dense_labels = LabelMap(
+            label_map.labels[region], grid_affine, label_map.structures, label_map.coordinates
+        )
+    elif dense:
+        dense_labels = label_map.crop(region, grid_affine)
     return CaseInput(
         annotation,
         dense_labels,
@@ -302,27 +311,26 @@ def case_from_label_map(
 
 
 def _views_annotation(
-    label_map: LabelMap,
-    labels: NDArray[np.integer],
+    label_map: LabelMap | StructureMasks,
+    crops: dict[int, NDArray[np.bool_]],
     affine: NDArray[np.float64],
+    shape: tuple[int, int, int],
     planes: dict[int, NDArray[np.int64]],
+    exclusive: bool,
 ) -> Annotation:
     """A label map annotated along several axes: each annotated slice, every structure."""
     drawn = []
     for axis in sorted(planes):
         for index in planes[axis]:
-            image = np.take(labels, int(index), axis=axis)
-            masks = {s.value: image == s.value for s in label_map.structures}
-            drawn.append(
-                AnnotatedPlane(plane_pose(affine, labels.shape, axis, float(index)), masks)
-            )
+            masks = {v: np.take(m, int(index), axis=axis) for v, m in crops.items()}
+            drawn.append(AnnotatedPlane(plane_pose(affine, shape, axis, float(index)), masks))
     return Annotation(
         tuple(drawn),
         label_map.structures,
         affine,
-        labels.shape,
+        shape,
         label_map.coordinates,
-        exclusive=True,
+        exclusive=exclusive,
     )
 
 

@@ -217,6 +217,88 @@ class LabelMap:
         return LabelMap(labels, self.affine, tuple(chosen), self.coordinates)
 
 
+@dataclass(frozen=True, eq=False)
+class StructureMasks:
+    """Structures on one voxel grid that may overlap or nest (SEG segments, RTSTRUCT ROIs).
+
+    Parameters
+    ----------
+    masks : tuple of ndarray of shape (I, J, K), bool
+        One mask per structure, in the order of ``structures``.
+    affine : ndarray of shape (4, 4)
+        Voxel index → world mm.
+    structures : tuple of Structure
+    coordinates : {"RAS", "LPS"}
+        The world frame of ``affine``.
+    """
+
+    masks: tuple[NDArray[np.bool_], ...]
+    affine: NDArray[np.float64]
+    structures: tuple[Structure, ...]
+    coordinates: str = "LPS"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "affine", check_affine(self.affine))
+        object.__setattr__(self, "masks", tuple(np.asarray(m, dtype=bool) for m in self.masks))
+        if len(self.masks) != len(self.structures):
+            raise LabelError(f"{len(self.masks)} masks for {len(self.structures)} structures")
+        if len({m.shape for m in self.masks}) > 1:
+            raise LabelError("every structure's mask must lie on one grid")
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """Grid shape ``(I, J, K)``."""
+        i, j, k = self.masks[0].shape
+        return i, j, k
+
+    def mask(self, value: int) -> Volume:
+        """The voxels of one structure."""
+        for structure, mask in zip(self.structures, self.masks, strict=True):
+            if structure.value == value:
+                return Volume(mask, self.affine)
+        raise LabelError(f"no structure {value}")
+
+    def union(self) -> Volume:
+        """Every structure together."""
+        return Volume(np.logical_or.reduce(self.masks), self.affine)
+
+    @property
+    def overlap_voxels(self) -> int:
+        """Voxels held by more than one structure."""
+        counts = np.zeros(self.shape, dtype=np.uint16)
+        for mask in self.masks:
+            counts += mask
+        return int(np.count_nonzero(counts > 1))
+
+    def crop(self, region: tuple[slice, slice, slice], affine: ArrayLike) -> StructureMasks:
+        """The masks on a sub-grid (``region`` of voxel indices) whose affine is ``affine``."""
+        return StructureMasks(
+            tuple(m[region] for m in self.masks), affine, self.structures, self.coordinates
+        )
+
+    def select(self, selectors: Sequence[int | str], *, source: str | Path) -> StructureMasks:
+        """The structures named by ``selectors`` (numbers or names), in the order given.
+
+        Raises
+        ------
+        LabelError
+            A selector names no structure (the message lists them).
+        """
+        names = {s.value: s.name for s in self.structures}
+        chosen: list[int] = []
+        for selector in selectors:
+            value = choose_structure(names, parse_selector(selector), kind="label", source=source)
+            if value not in chosen:
+                chosen.append(value)
+        order = [next(n for n, s in enumerate(self.structures) if s.value == v) for v in chosen]
+        return StructureMasks(
+            tuple(self.masks[n] for n in order),
+            self.affine,
+            tuple(self.structures[n] for n in order),
+            self.coordinates,
+        )
+
+
 def _structures_of(
     labels: NDArray[np.integer],
     names: Mapping[int, str] | None = None,

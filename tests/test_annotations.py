@@ -327,3 +327,26 @@ def test_contour_file_version_2_holds_planes_of_any_orientation_and_several_stru
     }
     path.write_text(json.dumps(doc_v1))
     assert main(["run", str(path), "-o", str(tmp_path / "o1")]) == 2
+
+
+def test_overlapping_seg_segments_are_each_reconstructed_whole(tmp_path: Path) -> None:
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    shape = (40, 40, 24)
+    i, j, k = np.meshgrid(*[np.arange(n) for n in shape], indexing="ij")
+    organ = (i - 20) ** 2 + (j - 20) ** 2 + ((k - 12) * 2) ** 2 < 15**2
+    lesion = (i - 22) ** 2 + (j - 20) ** 2 + ((k - 12) * 2) ** 2 < 6**2  # inside the organ
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [0.0] * 3)
+    path = factory.write_seg(
+        tmp_path / "seg.dcm", {1: organ, 2: lesion}, affine, labels={1: "Organ", 2: "Lesion"}
+    )
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--slices", "8", "-o", str(out)]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())["structures"]
+    # each against its own whole mask: the organ keeps the lesion's voxels, and the
+    # lesion (a few of the 8 planes cross it) is not given away to the organ
+    assert metrics["1_Organ"]["volume_iou"] > 0.9 and metrics["2_Lesion"]["volume_iou"] > 0.6
+    records = json.loads((out / "structures.json").read_text())
+    assert records["overlap"]["exclusive"] is False
+    organ_mesh = trimesh.load(out / "meshes" / "1_Organ.stl")
+    assert organ_mesh.volume == pytest.approx(organ.sum() * 2.0, rel=0.1)

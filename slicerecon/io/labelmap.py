@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, LabelError
-from ..labels import LPS_TO_RAS, LabelMap, as_labels, check_label_values
+from ..labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks, as_labels, check_label_values
 from . import detect_kind
 from .atomic import atomic_path
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
@@ -33,6 +33,7 @@ from .vti import read_vti
 
 __all__ = [
     "LABEL_MAP_KINDS",
+    "read_seg_masks",
     "read_label_map",
     "write_label_map",
 ]
@@ -113,6 +114,49 @@ def _read_label_map(
     if not result.structures:
         raise EmptyMaskError(f"{kind.path} holds no structure: every voxel is background")
     return result
+
+
+def read_seg_masks(
+    path: str | os.PathLike[str], *, memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB
+) -> StructureMasks:
+    """Every segment of a DICOM SEG as its own mask, overlaps kept.
+
+    Parameters
+    ----------
+    path : path-like
+        A DICOM SEG file.
+    memory_budget_gb : float
+        As for :func:`read_label_map`.
+
+    Returns
+    -------
+    StructureMasks
+        One mask per segment with foreground (numbered by SegmentNumber, named
+        by SegmentLabel), LPS mm; segments without foreground are reported.
+
+    Raises
+    ------
+    EmptyMaskError
+        No segment has a foreground pixel.
+    """
+    with reading(path):
+        info = dicom_info(path)
+        masks, structures, affine = [], [], None
+        for segment in info["segments"]:
+            number, name = int(segment["number"]), str(segment["label"])
+            try:
+                volume = read_dicom_seg(path, segment=number, memory_budget_gb=memory_budget_gb)
+            except EmptyMaskError:
+                logger.warning("%s: segment %d (%s) has no foreground", path, number, name)
+                continue
+            if affine is not None and volume.shape != masks[0].shape:
+                raise EmptyMaskError(f"{path}: segment {number} lies on another grid")
+            affine = volume.affine if affine is None else affine
+            masks.append(volume.mask)
+            structures.append(Structure(number, name))
+        if affine is None:
+            raise EmptyMaskError(f"{path}: no segment has a foreground pixel")
+        return StructureMasks(tuple(masks), affine, tuple(structures), "LPS")
 
 
 def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
