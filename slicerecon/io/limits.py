@@ -38,6 +38,7 @@ __all__ = [
     "MIN_SPACING_MM",
     "PIPELINE_BYTES_PER_VOXEL",
     "check_budget",
+    "check_bytes",
     "check_coordinates",
     "check_geometry",
     "check_grid",
@@ -119,6 +120,33 @@ def check_grid(
             f"{what}: its grid of {grid} voxels needs about {need_gb:,.1f} GiB, over the "
             f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} "
             "if this machine has that much memory"
+        )
+
+
+def check_bytes(n_bytes: int, *, what: str, memory_budget_gb: float) -> None:
+    """Refuse a declared byte count (e.g. decompressed data to skip) over the memory budget.
+
+    Parameters
+    ----------
+    n_bytes : int
+        The bytes a header asks to be read or produced.
+    what : str
+        What asks for them, for the message.
+    memory_budget_gb : float
+        The budget, GiB.
+
+    Raises
+    ------
+    MemoryBudgetError
+        If ``n_bytes`` exceeds the budget; the message gives both.
+    """
+    budget = check_budget(memory_budget_gb)
+    need_gb = int(n_bytes) / 2**30
+    if need_gb > budget:
+        raise MemoryBudgetError(
+            f"{what} asks for {int(n_bytes):,} bytes (about {need_gb:,.1f} GiB), over the "
+            f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} if "
+            "this machine has that much memory"
         )
 
 
