@@ -62,6 +62,8 @@ from .atomic import atomic_path
 from .dicom.derived import (
     SourceSeries,
     check_label_map,
+    check_same_subject,
+    dicom_name,
     display_colour,
     labels_on_series,
     load_source_series,
@@ -188,6 +190,12 @@ def _read_reference(reference: Any) -> Any:
     return ds
 
 
+def _reference_name(reference: Any) -> str:
+    if isinstance(reference, (str, os.PathLike)):
+        return f"the reference RTSTRUCT {Path(reference)}"
+    return "the reference RTSTRUCT"
+
+
 def _reference_rois(
     ref: Any,
 ) -> tuple[dict[int, Any], dict[int, tuple[int, int, int]], dict[int, Any]]:
@@ -249,7 +257,8 @@ def write_rtstruct(
     structures : sequence of Structure
         One per label value (every non-zero value of ``labels`` needs one), in
         the order the ROIs are listed. ROINumber is the value; ROIName the
-        name (else ``"Structure <value>"``); ROIDisplayColor the colour (else
+        name (else ``"Segment_<value>"``, as in every output:
+        :func:`~slicerecon.io.dicom.derived.dicom_name`); ROIDisplayColor the colour (else
         one of :data:`~slicerecon.labels.DEFAULT_COLOURS`). A
         structure without voxels becomes an ROI without contours.
     source_images : path-like or sequence of pydicom.Dataset or path-like
@@ -261,6 +270,7 @@ def write_rtstruct(
         The RTSTRUCT the structures were read from: its patient and study
         identifiers are copied, and its ROIName, ROIDisplayColor,
         ROIDescription and RT ROI observation win for the ROINumbers it has.
+        It must be of the images' patient (PatientID) and frame of reference.
     allow_irregular : bool
         Accept an image series with uneven slice spacing (``--allow-irregular``).
     series_number : int
@@ -280,8 +290,10 @@ def write_rtstruct(
     OptionError, LabelError
         Bad labels or structures (:func:`~slicerecon.io.dicom.derived.check_label_map`).
     InputError, FormatError, GeometryError
-        The image series or the reference cannot be read, or the label map is
-        not on the series' grid.
+        The image series or the reference cannot be read, the reference is of
+        another patient or frame of reference than the images
+        (:func:`~slicerecon.io.dicom.derived.check_same_subject`), or the label
+        map is not on the series' grid.
     EmptyMaskError
         No structure holds a voxel on the series' images.
     """
@@ -293,6 +305,8 @@ def write_rtstruct(
     values, aff, chosen = check_label_map(labels, affine, structures)
     series = load_source_series(source_images, allow_irregular=allow_irregular)
     ref = None if reference is None else _read_reference(reference)
+    if ref is not None:
+        check_same_subject(ref, series, what=_reference_name(reference))
     on_grid = labels_on_series(values, aff, series)
 
     ref_rois, ref_colours, ref_observations = (
@@ -334,23 +348,10 @@ def write_rtstruct(
     ds.StructureSetDate, ds.StructureSetTime = date, time
 
     frame_uid = series.frame_of_reference_uid
+    # the Frame of Reference module (Type 1 UID, Type 2 indicator) of the RT Structure Set IOD
+    ds.FrameOfReferenceUID = frame_uid
+    ds.PositionReferenceIndicator = str(series.first.get("PositionReferenceIndicator", "") or "")
     if ref is not None:
-        ref_frames = {
-            str(item.get("FrameOfReferenceUID", ""))
-            for item in ref.get("ReferencedFrameOfReferenceSequence", [])
-        }
-        ref_frames |= {
-            str(item.get("ReferencedFrameOfReferenceUID", ""))
-            for item in ref.get("StructureSetROISequence", [])
-        }
-        ref_frames.discard("")
-        if ref_frames and frame_uid not in ref_frames:
-            logger.warning(
-                "the reference RTSTRUCT refers to frame of reference %s, the images "
-                "are in %s; the contours are written in the images' frame",
-                ", ".join(sorted(ref_frames)),
-                frame_uid,
-            )
         predecessor = Dataset()
         predecessor.ReferencedSOPClassUID = str(ref.get("SOPClassUID", RTSTRUCT_SOP_CLASS_UID))
         predecessor.ReferencedSOPInstanceUID = str(ref.get("SOPInstanceUID", ""))
@@ -377,7 +378,7 @@ def write_rtstruct(
         number = structure.value
         ref_roi = ref_rois.get(number)
         ref_name = str(ref_roi.get("ROIName", "") or "") if ref_roi is not None else ""
-        name = ref_name or structure.name.strip() or f"Structure {number}"
+        name = ref_name or dicom_name(structure)
         colour = ref_colours.get(number) or display_colour(structure, index)
 
         roi = Dataset()
