@@ -20,8 +20,11 @@ and for an RTSTRUCT input
   (:func:`slicerecon.io.rtstruct_writer.write_rtstruct`).
 
 A DICOM output that cannot be made (the series lacks the UIDs a derived object
-refers to, the label map is not on its grid) is logged as a warning and
-listed as skipped; the other outputs stand.
+refers to, mixes studies or patients, the label map is not on its grid; an
+RTSTRUCT input of another patient or frame of reference than the series beside
+it) is logged as a warning and listed as skipped; the other outputs stand. No
+DICOM object is ever written labelled with another patient, or referring to
+images in another frame of reference, than its input.
 """
 
 from __future__ import annotations
@@ -31,12 +34,16 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import SlicereconError
 from ..labels import LPS_TO_RAS, Structure
+
+if TYPE_CHECKING:
+    from .dicom.derived import SourceSeries
 
 __all__ = ["LabelOutputs", "dicom_image_series", "write_label_outputs"]
 
@@ -160,12 +167,17 @@ def write_label_outputs(
     if not chosen:
         result.skipped["seg"] = "no structure holds a voxel"
         return result
+    wanted = ["seg"] + (["rtstruct"] if rtstruct is not None else [])
+    try:
+        source = _source_series(series, rtstruct, allow_irregular)
+    except SlicereconError as exc:
+        logger.warning("%s not written: %s", " and ".join(f"{w}.dcm" for w in wanted), exc)
+        result.skipped.update(dict.fromkeys(wanted, str(exc)))
+        return result
     from .dicom.seg_writer import write_seg
 
     try:
-        result.written["seg"] = write_seg(
-            labels, lps, chosen, series, out / "seg.dcm", allow_irregular=allow_irregular
-        )
+        result.written["seg"] = write_seg(labels, lps, chosen, source, out / "seg.dcm")
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
@@ -174,15 +186,35 @@ def write_label_outputs(
 
         try:
             result.written["rtstruct"] = write_rtstruct(
-                labels,
-                lps,
-                list(structures),
-                series,
-                out / "rtstruct.dcm",
-                reference=rtstruct,
-                allow_irregular=allow_irregular,
+                labels, lps, list(structures), source, out / "rtstruct.dcm", reference=rtstruct
             )
         except SlicereconError as exc:
             logger.warning("rtstruct.dcm not written: %s", exc)
             result.skipped["rtstruct"] = str(exc)
     return result
+
+
+def _source_series(
+    series: str | os.PathLike[str],
+    rtstruct: str | os.PathLike[str] | None,
+    allow_irregular: bool,
+) -> SourceSeries:
+    """The image series the DICOM outputs refer to, checked against the input RTSTRUCT.
+
+    Raises
+    ------
+    SlicereconError
+        The series cannot be read (several studies or patients, missing UIDs,
+        ...), or the RTSTRUCT is of another patient or frame of reference
+        (:func:`~slicerecon.io.dicom.derived.check_same_subject`).
+    """
+    from .dicom.derived import check_same_subject, load_source_series
+    from .dicom.sniff import read_dicom_header
+    from .limits import reading
+
+    source = load_source_series(series, allow_irregular=allow_irregular)
+    if rtstruct is not None:
+        with reading(rtstruct):
+            reference = read_dicom_header(Path(rtstruct), stop_before_pixels=True)
+            check_same_subject(reference, source, what=f"the RTSTRUCT {Path(rtstruct)}")
+    return source

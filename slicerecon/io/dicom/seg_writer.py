@@ -14,7 +14,9 @@ Segments
   it; structures are numbered in the order of their values, so a label map
   with values 1..N keeps them as SegmentNumbers. Each segment's
   SegmentDescription records the label value (``"label value 5"``).
-* SegmentLabel: the structure's name, else ``"Structure <value>"``.
+* SegmentLabel: the structure's name, else ``"Segment_<value>"``
+  (:func:`~slicerecon.io.dicom.derived.dicom_name`: the name every output
+  gives it), in UTF-8 (SpecificCharacterSet ISO_IR 192).
 * RecommendedDisplayCIELabValue: the structure's colour (RGB converted to
   CIELab by highdicom), else one of
   :data:`~slicerecon.labels.DEFAULT_COLOURS`.
@@ -40,10 +42,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...errors import DependencyError, EmptyMaskError
+from ...errors import DependencyError, EmptyMaskError, FormatError
 from ...labels import Structure
 from ..atomic import atomic_path
-from .derived import check_label_map, display_colour, labels_on_series, load_source_series
+from .derived import (
+    check_label_map,
+    dicom_name,
+    display_colour,
+    labels_on_series,
+    load_source_series,
+)
 
 __all__ = ["SEG_ALGORITHM_NAME", "write_seg"]
 
@@ -70,7 +78,7 @@ def _segment_descriptions(structures: Sequence[Structure]) -> list[Any]:
     for number, structure in enumerate(structures, start=1):
         description = SegmentDescription(
             segment_number=number,
-            segment_label=structure.name.strip() or f"Structure {structure.value}",
+            segment_label=dicom_name(structure),
             segmented_property_category=codes.SCT.Tissue,
             segmented_property_type=codes.SCT.Tissue,
             algorithm_type="SEMIAUTOMATIC",
@@ -130,7 +138,9 @@ def write_seg(
     OptionError, LabelError
         Bad labels or structures (:func:`~slicerecon.io.dicom.derived.check_label_map`).
     InputError, FormatError, GeometryError
-        The image series cannot be read, or the label map is not on its grid.
+        The image series cannot be read (or mixes studies or patients: see
+        :func:`~slicerecon.io.dicom.derived.load_source_series`), the label map
+        is not on its grid, or highdicom refuses the images.
     EmptyMaskError
         No structure holds a voxel on the series' images.
     DependencyError
@@ -139,11 +149,8 @@ def write_seg(
     values, aff, chosen = check_label_map(labels, affine, structures)
     try:
         from highdicom.seg import Segmentation
-        from pydicom.uid import generate_uid
     except ImportError as exc:  # pragma: no cover - highdicom is a dependency
         raise DependencyError("writing a DICOM SEG needs highdicom: pip install highdicom") from exc
-
-    from ... import __version__
 
     series = load_source_series(source_images, allow_irregular=allow_irregular)
     on_grid = labels_on_series(values, aff, series)
@@ -166,7 +173,41 @@ def write_seg(
                 structure.value,
                 structure.name,
             )
-    segmentation = Segmentation(
+    try:
+        segmentation = _segmentation(
+            Segmentation, series, frames, ordered, series_number, series_description
+        )
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise FormatError(
+            f"highdicom cannot make a SEG referring to {series.name} "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())[:240]})"
+        ) from exc
+    target = Path(path)
+    with atomic_path(target) as tmp:
+        segmentation.save_as(tmp)
+    logger.info(
+        "wrote DICOM SEG %s: %d segments, %d frames, referring to %s",
+        target,
+        len(ordered),
+        int(segmentation.NumberOfFrames),
+        series.name,
+    )
+    return target
+
+
+def _segmentation(
+    segmentation_class: Any,
+    series: Any,
+    frames: Any,
+    ordered: Sequence[Structure],
+    series_number: int,
+    series_description: str,
+) -> Any:
+    from pydicom.uid import generate_uid
+
+    from ... import __version__
+
+    return segmentation_class(
         source_images=list(series.images),
         pixel_array=frames,
         segmentation_type="BINARY",
@@ -184,15 +225,5 @@ def write_seg(
         content_creator_name="slicerecon^",
         omit_empty_frames=True,
         series_description=series_description,
+        specific_character_set="ISO_IR 192",  # UTF-8: names keep their accents
     )
-    target = Path(path)
-    with atomic_path(target) as tmp:
-        segmentation.save_as(tmp)
-    logger.info(
-        "wrote DICOM SEG %s: %d segments, %d frames, referring to %s",
-        target,
-        len(ordered),
-        int(segmentation.NumberOfFrames),
-        series.name,
-    )
-    return target
