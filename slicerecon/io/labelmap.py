@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import EmptyMaskError, LabelError
+from ..errors import EmptyMaskError, LabelError, OptionError
 from ..labels import LPS_TO_RAS, LabelMap, Structure
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 
@@ -173,6 +173,7 @@ def write_label_map(
     path: str | os.PathLike[str],
     *,
     coordinates: str = "RAS",
+    xform_codes: tuple[int, int] | None = None,
 ) -> Path:
     """Write a label map as NIfTI (RAS; an LPS affine is converted), atomically.
 
@@ -186,10 +187,20 @@ def write_label_map(
         ``.nii`` or ``.nii.gz``.
     coordinates : {"RAS", "LPS"}
         The frame of ``affine``.
+    xform_codes : (int, int), optional
+        ``(sform_code, qform_code)`` to write, e.g. those of the NIfTI input the
+        labels are on (:func:`slicerecon.io.nifti.nifti_xform_codes`): an
+        MNI-coded input (4 or 2 and 0) keeps its space. Default ``(1, 1)``
+        (scanner anatomical), as for a DICOM input.
 
     Returns
     -------
     Path
+
+    Raises
+    ------
+    OptionError
+        An xform code outside 0-5 (the NIfTI-1 codes, 5 a template).
     """
     import nibabel as nib
 
@@ -201,10 +212,13 @@ def write_label_map(
     aff = np.asarray(affine, dtype=np.float64)
     if coordinates == "LPS":
         aff = LPS_TO_RAS @ aff
+    sform_code, qform_code = (1, 1) if xform_codes is None else xform_codes
+    if not all(isinstance(c, int | np.integer) and 0 <= c <= 5 for c in (sform_code, qform_code)):
+        raise OptionError(f"xform_codes must be two NIfTI codes 0-5 (got {xform_codes!r})")
     img = nib.Nifti1Image(values, aff)
     img.header.set_xyzt_units(xyz="mm")
-    img.set_sform(aff, code=1)
-    img.set_qform(aff, code=1, strip_shears=True)
+    img.set_sform(aff, code=int(sform_code))
+    img.set_qform(aff, code=int(qform_code), strip_shears=True)
     target = Path(path)
     with atomic_path(target) as tmp:
         nib.save(img, tmp)

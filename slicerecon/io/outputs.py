@@ -3,7 +3,8 @@
 Every ``slicerecon run`` writes the reconstructed label map twice, on the
 input's grid with the input's label values:
 
-* ``labels.nii.gz`` (NIfTI, RAS: :func:`slicerecon.io.labelmap.write_label_map`);
+* ``labels.nii.gz`` (NIfTI, RAS: :func:`slicerecon.io.labelmap.write_label_map`;
+  with the sform/qform codes of a NIfTI input, given as ``source``);
 * ``labels.seg.nrrd`` (a 3D Slicer segmentation with the structures' names and
   colours: :func:`slicerecon.io.nrrd_writer.write_seg_nrrd`).
 
@@ -111,6 +112,7 @@ def write_label_outputs(
     series: str | os.PathLike[str] | None = None,
     rtstruct: str | os.PathLike[str] | None = None,
     allow_irregular: bool = False,
+    source: str | os.PathLike[str] | None = None,
 ) -> LabelOutputs:
     """Write the reconstructed label map in every format the input's workflow reads.
 
@@ -134,6 +136,11 @@ def write_label_outputs(
         (needs ``series``), copying its identifiers, ROI names and colours.
     allow_irregular : bool
         Accept uneven slice spacing in ``series`` (``--allow-irregular``).
+    source : path-like, optional
+        The input file. When it is NIfTI and the labels are on its grid,
+        ``labels.nii.gz`` keeps its sform and qform codes (an MNI-coded input
+        stays in MNI space; :func:`slicerecon.io.nifti.nifti_xform_codes`);
+        otherwise both are 1 (scanner anatomical).
 
     Returns
     -------
@@ -150,8 +157,14 @@ def write_label_outputs(
 
     out = Path(outdir)
     result = LabelOutputs()
+    codes = None
+    if source is not None:
+        from .nifti import nifti_xform_codes
+
+        ras = np.asarray(affine, dtype=np.float64)
+        codes = nifti_xform_codes(source, affine=LPS_TO_RAS @ ras if coordinates == "LPS" else ras)
     result.written["labels"] = write_label_map(
-        labels, affine, out / "labels.nii.gz", coordinates=coordinates
+        labels, affine, out / "labels.nii.gz", coordinates=coordinates, xform_codes=codes
     )
     result.written["seg_nrrd"] = write_seg_nrrd(
         labels, affine, list(structures), out / "labels.seg.nrrd", coordinates=coordinates
