@@ -181,8 +181,11 @@ def write_label_outputs(
         result.skipped["seg"] = "no structure holds a voxel"
         return result
     wanted = ["seg"] + (["rtstruct"] if rtstruct is not None else [])
+    from .limits import reading, writing
+
     try:
-        source = _source_series(series, rtstruct, allow_irregular)
+        with reading(series):
+            source = _source_series(series, rtstruct, allow_irregular)
     except SlicereconError as exc:
         logger.warning("%s not written: %s", " and ".join(f"{w}.dcm" for w in wanted), exc)
         result.skipped.update(dict.fromkeys(wanted, str(exc)))
@@ -190,7 +193,8 @@ def write_label_outputs(
     from .dicom.seg_writer import write_seg
 
     try:
-        result.written["seg"] = write_seg(labels, lps, chosen, source, out / "seg.dcm")
+        with writing(out / "seg.dcm"):
+            result.written["seg"] = write_seg(labels, lps, chosen, source, out / "seg.dcm")
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
@@ -198,9 +202,15 @@ def write_label_outputs(
         from .rtstruct_writer import write_rtstruct
 
         try:
-            result.written["rtstruct"] = write_rtstruct(
-                labels, lps, list(structures), source, out / "rtstruct.dcm", reference=rtstruct
-            )
+            with writing(out / "rtstruct.dcm"):
+                result.written["rtstruct"] = write_rtstruct(
+                    labels,
+                    lps,
+                    list(structures),
+                    source,
+                    out / "rtstruct.dcm",
+                    reference=rtstruct,
+                )
         except SlicereconError as exc:
             logger.warning("rtstruct.dcm not written: %s", exc)
             result.skipped["rtstruct"] = str(exc)

@@ -224,8 +224,15 @@ def _reference_rois(
 
 def _copy_identifiers(ds: Any, source: Any) -> None:
     for keyword in (*_PATIENT, *_STUDY):
-        if keyword in source and source[keyword].value not in (None, ""):
-            setattr(ds, keyword, source[keyword].value)
+        try:
+            value = source[keyword].value if keyword in source else None
+        except PARSE_ERRORS as exc:
+            raise FormatError(
+                f"{keyword} of {getattr(source, 'filename', None) or 'the source'} cannot be "
+                f"read ({type(exc).__name__}: {exc})"
+            ) from exc
+        if value not in (None, ""):
+            setattr(ds, keyword, value)
         elif keyword in _TYPE2:
             setattr(ds, keyword, "")
 

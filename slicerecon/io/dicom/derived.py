@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -65,6 +66,10 @@ LO_MAX_CHARS = 64
 
 GRID_TOLERANCE_PX = 0.01
 """How far, in pixels, a label map's in-plane pixels may lie from the series' pixels."""
+
+_UID = re.compile(r"(?=.{1,64}$)[0-9]+(\.[0-9]+)*")
+"""A DICOM UID: dot-separated numbers, at most 64 characters (PS3.5 9.1; a leading zero in
+a component, which some scanners write, is let through)."""
 
 _REQUIRED_UIDS = (
     "SOPClassUID",
@@ -220,11 +225,25 @@ def load_source_series(
     images = tuple(item.dataset for item in own)
     positions = np.array([item.position for item in own], dtype=np.float64)
     for image, k in zip(images, planes, strict=True):
-        missing = [key for key in _REQUIRED_UIDS if not str(image.get(key, "") or "")]
+        try:
+            uids = {key: str(image.get(key, "") or "") for key in _REQUIRED_UIDS}
+        except PARSE_ERRORS as exc:
+            raise FormatError(
+                f"{name}: the UIDs of the image of plane {int(k)} cannot be read "
+                f"({type(exc).__name__}: {exc}); a SEG or RTSTRUCT cannot refer to it"
+            ) from exc
+        missing = [key for key, uid in uids.items() if not uid]
         if missing:
             raise FormatError(
                 f"{name}: the image of plane {int(k)} lacks {', '.join(missing)}; a SEG or "
                 "RTSTRUCT cannot refer to it"
+            )
+        invalid = [f"{key} {uid!r}" for key, uid in uids.items() if not _UID.fullmatch(uid)]
+        if invalid:
+            raise FormatError(
+                f"{name}: the image of plane {int(k)} has an invalid {', '.join(invalid)} "
+                "(a UID is digits and dots, at most 64 characters); a SEG or RTSTRUCT cannot "
+                "refer to it"
             )
     frames = {str(image.FrameOfReferenceUID) for image in images}
     if len(frames) > 1:
