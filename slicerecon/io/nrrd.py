@@ -30,13 +30,14 @@ declares, so a small file cannot expand past the memory budget.
 from __future__ import annotations
 
 import bz2
+import io
 import logging
 import math
 import os
 import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -80,7 +81,7 @@ _CHUNK = 1 << 22
 """Bytes read, or produced by the decompressor, at once."""
 
 
-def _skip_lines(p: Path, fh: IO[bytes], count: int) -> None:
+def _skip_lines(p: Path, fh: io.BufferedIOBase, count: int) -> None:
     """Move ``fh`` past ``count`` more lines (``line skip``), scanning the file once."""
     if count < 0:
         raise FormatError(f"{p}: 'line skip' must be 0 or more (got {count})")
@@ -101,7 +102,7 @@ def _skip_lines(p: Path, fh: IO[bytes], count: int) -> None:
             fh.seek(start + end + 1)
 
 
-def _inflate(p: Path, fh: IO[bytes], method: str, skip: int, need: int) -> bytearray:
+def _inflate(p: Path, fh: io.BufferedIOBase, method: str, skip: int, need: int) -> bytearray:
     """The ``need`` bytes that follow the first ``skip`` bytes of a gzip / bzip2 stream.
 
     Memory is bounded by ``need`` and what the header declares: skipped bytes are
@@ -152,7 +153,7 @@ def _inflate(p: Path, fh: IO[bytes], method: str, skip: int, need: int) -> bytea
     return out
 
 
-def _raw(fh: IO[bytes], skip: int, need: int) -> bytearray:
+def _raw(fh: io.BufferedIOBase, skip: int, need: int) -> bytearray:
     """The ``need`` bytes after ``skip`` more bytes (-1: the last ``need`` bytes of the file)."""
     size = os.fstat(fh.fileno()).st_size
     if skip < 0:
@@ -169,7 +170,11 @@ def _raw(fh: IO[bytes], skip: int, need: int) -> bytearray:
 
 
 def _voxels(
-    p: Path, header: Mapping[str, Any], info: NrrdInfo, fh: IO[bytes], memory_budget_gb: float
+    p: Path,
+    header: Mapping[str, Any],
+    info: NrrdInfo,
+    fh: io.BufferedIOBase,
+    memory_budget_gb: float,
 ) -> NDArray[Any]:
     """Every voxel value, shape ``(layers, I, J, K)``.
 

@@ -185,7 +185,7 @@ def write_label_outputs(
 
     try:
         with reading(series):
-            source = _source_series(series, rtstruct, allow_irregular)
+            images = _source_series(series, rtstruct, allow_irregular)
     except SlicereconError as exc:
         logger.warning("%s not written: %s", " and ".join(f"{w}.dcm" for w in wanted), exc)
         result.skipped.update(dict.fromkeys(wanted, str(exc)))
@@ -194,7 +194,7 @@ def write_label_outputs(
 
     try:
         with writing(out / "seg.dcm"):
-            result.written["seg"] = write_seg(labels, lps, chosen, source, out / "seg.dcm")
+            result.written["seg"] = write_seg(labels, lps, chosen, images, out / "seg.dcm")
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
@@ -207,7 +207,7 @@ def write_label_outputs(
                     labels,
                     lps,
                     list(structures),
-                    source,
+                    images,
                     out / "rtstruct.dcm",
                     reference=rtstruct,
                 )

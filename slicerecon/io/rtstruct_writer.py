@@ -241,7 +241,7 @@ def write_rtstruct(
     labels: ArrayLike,
     affine: ArrayLike,
     structures: Sequence[Structure],
-    source_images: str | os.PathLike[str] | Sequence[Any],
+    source_images: str | os.PathLike[str] | Sequence[Any] | SourceSeries,
     path: str | os.PathLike[str],
     *,
     reference: Any = None,
@@ -268,9 +268,10 @@ def write_rtstruct(
         :func:`~slicerecon.io.dicom.derived.dicom_name`); ROIDisplayColor the colour (else
         one of :data:`~slicerecon.labels.DEFAULT_COLOURS`). A
         structure without voxels becomes an ROI without contours.
-    source_images : path-like or sequence of pydicom.Dataset or path-like
+    source_images : path-like, sequence of pydicom.Dataset or path-like, or SourceSeries
         The image series: its directory, or its images (datasets, headers
-        suffice, or file paths) in any order.
+        suffice, or file paths) in any order, or the series already loaded
+        (:func:`~slicerecon.io.dicom.derived.load_source_series`).
     path : path-like
         Output file, written atomically (temporary file, then rename).
     reference : pydicom.Dataset or path-like, optional

@@ -179,7 +179,7 @@ def _slices_from_items(items: Sequence[Any]) -> list[_Slice]:
 
 
 def load_source_series(
-    source_images: str | os.PathLike[str] | Sequence[Any],
+    source_images: str | os.PathLike[str] | Sequence[Any] | SourceSeries,
     *,
     allow_irregular: bool = False,
 ) -> SourceSeries:

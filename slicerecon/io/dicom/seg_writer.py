@@ -46,6 +46,7 @@ from ...errors import DependencyError, EmptyMaskError, FormatError
 from ...labels import Structure
 from ..atomic import atomic_path
 from .derived import (
+    SourceSeries,
     check_label_map,
     dicom_name,
     display_colour,
@@ -94,7 +95,7 @@ def write_seg(
     labels: ArrayLike,
     affine: ArrayLike,
     structures: Sequence[Structure],
-    source_images: str | os.PathLike[str] | Sequence[Any],
+    source_images: str | os.PathLike[str] | Sequence[Any] | SourceSeries,
     path: str | os.PathLike[str],
     *,
     allow_irregular: bool = False,
@@ -115,9 +116,10 @@ def write_seg(
     structures : sequence of Structure
         One per label value (every non-zero value of ``labels`` needs one); a
         structure without voxels becomes a segment without frames.
-    source_images : path-like or sequence of pydicom.Dataset or path-like
+    source_images : path-like, sequence of pydicom.Dataset or path-like, or SourceSeries
         The image series: its directory, or its images (datasets, headers
-        suffice, or file paths) in any order.
+        suffice, or file paths) in any order, or the series already loaded
+        (:func:`~slicerecon.io.dicom.derived.load_source_series`).
     path : path-like
         Output file, written atomically (temporary file, then rename).
     allow_irregular : bool
