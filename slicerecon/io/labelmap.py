@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, LabelError, OptionError
 from ..labels import LPS_TO_RAS, LabelMap, Structure
-from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_label_values, reading
 
 __all__ = [
     "LABEL_MAP_KINDS",
@@ -52,9 +52,16 @@ def _structures(
     )
 
 
-def _as_labels(values: NDArray[Any]) -> NDArray[np.integer]:
-    """Integer labels in the smallest signed or unsigned type that holds them."""
+def _as_labels(values: NDArray[Any], what: str = "the label map") -> NDArray[np.integer]:
+    """Integer labels in the smallest signed or unsigned type that holds them.
+
+    Raises
+    ------
+    LabelError
+        Values beyond 32-bit integers (:func:`~slicerecon.io.limits.check_label_values`).
+    """
     data = np.asarray(values)
+    check_label_values(data, what=what)
     if data.dtype.kind in "iu":
         return data
     lo, hi = (int(data.min()), int(data.max())) if data.size else (0, 0)
@@ -103,7 +110,7 @@ def _read_label_map(
         from .nifti import read_label_values
 
         values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
-        labels, frame = _as_labels(values), "RAS"
+        labels, frame = _as_labels(values, str(kind.path)), "RAS"
         result = LabelMap(labels, affine, _structures(labels), frame)
     elif kind.kind == "nrrd":
         from .nrrd import read_nrrd_label_map
@@ -113,7 +120,7 @@ def _read_label_map(
         from .vti import read_vti
 
         image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
-        labels = _as_labels(np.asarray(image.values))
+        labels = _as_labels(np.asarray(image.values), str(kind.path))
         result = LabelMap(labels, image.affine, _structures(labels), "RAS")
     elif kind.kind == "dicom-series":
         from .dicom import read_dicom_series_values
@@ -123,7 +130,7 @@ def _read_label_map(
         )
         if np.any(values != np.round(values)):
             raise LabelError(f"{kind.path} is not a label map: its pixel values are not integers")
-        labels = _as_labels(np.round(values))
+        labels = _as_labels(np.round(values), str(kind.path))
         result = LabelMap(labels, affine, _structures(labels), "LPS")
     else:
         result = _read_seg_segments(kind.path, memory_budget_gb)

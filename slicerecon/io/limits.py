@@ -31,12 +31,21 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import FormatError, GeometryError, MemoryBudgetError, OptionError, SlicereconError
+from ..errors import (
+    FormatError,
+    GeometryError,
+    LabelError,
+    MemoryBudgetError,
+    OptionError,
+    SlicereconError,
+)
 
 __all__ = [
     "DEFAULT_MEMORY_BUDGET_GB",
     "MAX_COORDINATE_MM",
+    "MAX_LABEL_VALUE",
     "MAX_SPACING_MM",
+    "MIN_LABEL_VALUE",
     "MIN_SPACING_MM",
     "PIPELINE_BYTES_PER_VOXEL",
     "check_budget",
@@ -44,6 +53,7 @@ __all__ = [
     "check_coordinates",
     "check_geometry",
     "check_grid",
+    "check_label_values",
     "reading",
     "writing",
 ]
@@ -152,6 +162,39 @@ def check_bytes(n_bytes: int, *, what: str, memory_budget_gb: float) -> None:
             f"{what} asks for {int(n_bytes):,} bytes (about {need_gb:,.1f} GiB), over the "
             f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} if "
             "this machine has that much memory"
+        )
+
+
+MIN_LABEL_VALUE = -(2**31)
+"""Smallest label value accepted (32-bit signed)."""
+MAX_LABEL_VALUE = 2**32 - 1
+"""Largest label value accepted (32-bit unsigned): a larger one is not a label of a map."""
+
+
+def check_label_values(values: ArrayLike, *, what: str) -> None:
+    """Refuse a label map whose values do not fit 32-bit integers.
+
+    Parameters
+    ----------
+    values : array_like
+        The voxel values (after any scaling the file declares).
+    what : str
+        The source, for the message.
+
+    Raises
+    ------
+    LabelError
+        A value below :data:`MIN_LABEL_VALUE` or above :data:`MAX_LABEL_VALUE`
+        (a scale factor of 3e38 makes every voxel such a value).
+    """
+    data = np.asarray(values)
+    if data.size == 0 or data.dtype.kind not in "iuf":
+        return
+    lo, hi = float(data.min()), float(data.max())
+    if lo < MIN_LABEL_VALUE or hi > MAX_LABEL_VALUE:
+        raise LabelError(
+            f"{what} is not a label map: its values reach {lo:.4g} to {hi:.4g}, beyond the "
+            "32-bit integers label values are (check its scale factor, or pass a segmentation)"
         )
 
 

@@ -31,7 +31,13 @@ from ..errors import (
 from ..sections import Volume
 from ..selection import parse_selector
 from .atomic import atomic_path
-from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid, reading
+from .limits import (
+    DEFAULT_MEMORY_BUDGET_GB,
+    check_geometry,
+    check_grid,
+    check_label_values,
+    reading,
+)
 
 __all__ = ["NiftiInfo", "nifti_labels", "nifti_xform_codes", "read_nifti", "write_nifti"]
 
@@ -164,6 +170,7 @@ def _read_labels(
             )
     elif kind not in "biu":
         raise LabelError(f"{p} is not a label map: its voxels have data type {data.dtype}")
+    check_label_values(data, what=str(p))
     return data
 
 

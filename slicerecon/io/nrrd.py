@@ -51,7 +51,13 @@ from ..errors import (
 from ..labels import LabelMap, Structure
 from ..sections import Volume
 from ..selection import choose_structure, parse_selector
-from .limits import DEFAULT_MEMORY_BUDGET_GB, check_bytes, check_grid, reading
+from .limits import (
+    DEFAULT_MEMORY_BUDGET_GB,
+    check_bytes,
+    check_grid,
+    check_label_values,
+    reading,
+)
 from .nrrd_header import (
     COMPRESSED,
     NrrdInfo,
@@ -219,8 +225,9 @@ def _voxels(
 
 
 def _integer_values(p: Path, data: NDArray[Any]) -> NDArray[np.integer]:
-    """The voxels as integers: float data must hold whole, finite numbers."""
+    """The voxels as integers: float data must hold whole, finite numbers within 32 bits."""
     if data.dtype.kind in "iu":
+        check_label_values(data, what=str(p))
         return data.astype(data.dtype.newbyteorder("="), copy=False)
     if not np.all(np.isfinite(data)):
         raise LabelError(f"{p} is not a label map: it holds NaN or infinite values")
@@ -230,6 +237,7 @@ def _integer_values(p: Path, data: NDArray[Any]) -> NDArray[np.integer]:
             f"{p} is not a label map: it holds non-integer values (e.g. "
             f"{float(data[fractional].flat[0]):g}); pass an integer label map"
         )
+    check_label_values(data, what=str(p))
     lo, hi = (int(data.min()), int(data.max())) if data.size else (0, 0)
     return data.astype(np.result_type(np.min_scalar_type(lo), np.min_scalar_type(hi)))
 

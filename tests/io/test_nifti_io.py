@@ -222,3 +222,20 @@ def test_labels_keep_the_xform_codes_of_a_nifti_input(tmp_path, codes):
     for name in ("none", "other"):
         header = nib.load(tmp_path / name / "labels.nii.gz").header
         assert (int(header["sform_code"]), int(header["qform_code"])) == (1, 1)
+
+
+def test_label_values_beyond_32_bits_are_refused(tmp_path, capsys):
+    """A scale factor of 3.4e38 made every label value overflow deep in the pipeline."""
+    from slicerecon.cli import main
+
+    mask = np.zeros((6, 6, 4), np.uint8)
+    mask[1:5, 1:5, 1:3] = 1
+    image = nib.Nifti1Image(mask, np.eye(4))
+    image.header.set_slope_inter(3.4e38, 0.0)
+    path = tmp_path / "scaled.nii"
+    nib.save(image, path)
+    with pytest.raises(LabelError, match="beyond the 32-bit integers"):
+        read_nifti(path)
+    assert main(["run", str(path), "-o", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "32-bit integers" in err[0]
