@@ -1,7 +1,9 @@
 """NRRD label maps and 3D Slicer segmentations (``.nrrd``, ``.seg.nrrd``).
 
-Headers are parsed, and files written, by pynrrd (``import nrrd``). Two kinds
-of file are read:
+Header fields are parsed by pynrrd (``import nrrd``) from lines read here in
+UTF-8, as 3D Slicer writes them (pynrrd alone would drop every non-ASCII
+character of a segment name); :mod:`slicerecon.io.nrrd_writer` writes them.
+Two kinds of file are read:
 
 * **plain NRRD label maps**: a 3-D image of integer label values (as ITK,
   ITK-SNAP or Slicer's "labelmap volume" export write them); every non-zero
@@ -24,7 +26,17 @@ along the array axes and its ``axis mins`` (default 0) as origin.
 Every check that needs only the header (dimensions, data type, geometry, the
 memory budget) runs before a voxel is read. Compressed voxel data (gzip,
 bzip2) is decompressed here with a bound: never more bytes than the header
-declares, so a small file cannot expand past the memory budget.
+declares (its data and its ``byte skip``, which count against the memory
+budget; with ``byte skip: -1``, at most twice the data), so a small file
+cannot expand past the memory budget. ``line skip`` is counted in one pass
+over the file, and a skip past its end is refused at once.
+
+Segments are never dropped silently: a segment with label value 0 or without a
+voxel, and voxels outside a segment's ``Extent`` (left out, as Slicer leaves
+them out), are reported in one warning line each; two segments claiming one
+value of one layer, or a segment whose value is absent from its layer while
+another value there belongs to no segment, are refused (its ``LabelValue`` or
+``Layer`` is wrong).
 """
 
 from __future__ import annotations
@@ -443,11 +455,15 @@ def read_nrrd_label_map(
     InputError
         What :func:`nrrd_info` raises; a plain 4-D image of several volumes.
     FormatError
-        Truncated or corrupt voxel data, more data than declared.
+        Truncated or corrupt voxel data, more data than declared, a ``line
+        skip`` or ``byte skip`` past the data; segments that cannot match the
+        voxels (two claiming one value of a layer; a value absent from its
+        layer while another value there belongs to no segment).
     LabelError
-        Non-integer or non-finite voxel values.
+        Non-integer or non-finite voxel values, values beyond 32-bit integers.
     MemoryBudgetError
-        The declared grid exceeds ``memory_budget_gb``.
+        The declared grid, or the decompressed bytes a ``byte skip`` asks
+        for, exceed ``memory_budget_gb``.
     """
     p = open_nrrd(path)
     with reading(p), open(p, "rb") as fh:
