@@ -245,8 +245,10 @@ def main(argv: list[str] | None = None) -> int:
     ):
         if getattr(args, name) != parser.get_default(name):
             options.append(f"--{name.replace('_', '-')} {getattr(args, name):g}")
+    if args.timeout != (2 * args.command_timeout + 10 if args.mode == "cli" else 10.0):
+        options.append(f"--timeout {args.timeout:g}")
     limits = (
-        f"each command {args.command_timeout:g} s"
+        f"each command {args.command_timeout:g} s (worker killed at {args.timeout:g} s)"
         if args.mode == "cli"
         else f"{args.timeout:g} s per case"
     )
