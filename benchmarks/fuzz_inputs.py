@@ -1,4 +1,4 @@
-"""The long fuzz run: thousands of mutated inputs through load_input → prepare_inputs → reconstruct.
+"""The long fuzz run: thousands of mutated inputs through the pipeline or the command line.
 
 Same engine as ``tests/test_fuzz.py`` (``tests/io/fuzz_seeds.py``,
 ``fuzz_mutations.py``, ``fuzz_runner.py``; this script puts ``tests/io`` on
@@ -8,6 +8,15 @@ rebuilt with ``--only INDEX``::
 
     python benchmarks/fuzz_inputs.py --n 5000 --seed 0 --save-failures /tmp/fuzz-failures
     python benchmarks/fuzz_inputs.py --seed 0 --only 1234 --save-failures /tmp/one
+
+``--mode pipeline`` (default) runs ``load_input → prepare_inputs → reconstruct``
+in-process; ``--mode cli`` runs every mutant through ``slicerecon run`` and
+``slicerecon info`` as a user does (``--max-memory`` = ``--budget-gib``, each
+command limited to ``--command-timeout`` seconds, the worker's address space to
+``--memory-gib``), so tracebacks, stray Python warnings lines and untidy stderr
+count as failures too::
+
+    python benchmarks/fuzz_inputs.py --mode cli --n 10000 --budget-gib 0.5 --memory-gib 2
 
 It prints a table of outcomes per format (``ok``, ``error`` = a SlicereconError,
 ``escape`` = any other exception, ``memory``, ``timeout``, ``crash``), every
@@ -118,7 +127,25 @@ def main(argv: list[str] | None = None) -> int:
         "(the rest: method='sdf', planner='none', carve=False)",
     )
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--timeout", type=float, default=10.0, help="seconds per case")
+    parser.add_argument(
+        "--mode",
+        choices=fuzz_runner.MODES,
+        default="pipeline",
+        help="the library pipeline, or `slicerecon run` and `slicerecon info` (cli)",
+    )
+    parser.add_argument(
+        "--command-timeout",
+        type=float,
+        default=20.0,
+        help="--mode cli: seconds one command may take (default 20)",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        help="seconds per case before the worker is killed (default 10; "
+        "--mode cli: twice --command-timeout plus 10)",
+    )
     parser.add_argument(
         "--memory-gib",
         type=float,
@@ -140,6 +167,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workdir", type=Path, help="where mutants are written (default: temp)")
     parser.add_argument("--markdown", type=Path, help="also write the markdown snippet here")
     args = parser.parse_args(argv)
+    if args.timeout is None:
+        args.timeout = 2 * args.command_timeout + 10 if args.mode == "cli" else 10.0
 
     workdir = args.workdir or Path(tempfile.mkdtemp(prefix="slicerecon-fuzz-"))
     seeds = fuzz_seeds.write_seeds(workdir / "seeds")
@@ -166,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
         memory=int(args.memory_gib * 2**30),
         budget_gb=args.budget_gib,
         log_dir=workdir / "logs",
+        mode=args.mode,
+        command_timeout=args.command_timeout,
     ):
         if outcome.mutant.index < 0:
             if outcome.kind != "ok":
@@ -180,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
             _save(outcome, args.save_failures)
         if not outcome.failed or args.save_failures is not None:
             shutil.rmtree(outcome.mutant.path.parent, ignore_errors=True)
-        if len(outcomes) % 500 == 0:
+        if len(outcomes) % (100 if args.mode == "cli" else 500) == 0:
             failed = sum(o.failed for o in outcomes)
             print(
                 f"{len(outcomes)} cases, {failed} failures, {time.perf_counter() - start:.0f} s",
@@ -203,15 +234,37 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     options = [f"--n {len(outcomes)}", f"--seed {args.seed}"]
-    for name in ("edge_fraction", "default_method_fraction", "timeout", "memory_gib", "budget_gib"):
+    if args.mode != "pipeline":
+        options.append(f"--mode {args.mode}")
+    for name in (
+        "edge_fraction",
+        "default_method_fraction",
+        "command_timeout",
+        "memory_gib",
+        "budget_gib",
+    ):
         if getattr(args, name) != parser.get_default(name):
             options.append(f"--{name.replace('_', '-')} {getattr(args, name):g}")
+    if args.timeout != (2 * args.command_timeout + 10 if args.mode == "cli" else 10.0):
+        options.append(f"--timeout {args.timeout:g}")
+    limits = (
+        f"each command {args.command_timeout:g} s (worker killed at {args.timeout:g} s)"
+        if args.mode == "cli"
+        else f"{args.timeout:g} s per case"
+    )
+    through = (
+        "through `slicerecon run` and `slicerecon info`"
+        if args.mode == "cli"
+        else "through the library pipeline"
+    )
     title = (
         f"`python benchmarks/fuzz_inputs.py {' '.join(options)}` on slicerecon {_revision()}: "
-        f"{len(outcomes)} mutated inputs, {args.workers} workers, {args.timeout:g} s and "
-        f"{args.memory_gib:g} GiB (RLIMIT_AS) per worker, memory budget {args.budget_gib:g} GiB; "
-        f"{wall:.0f} s on {platform.platform(terse=True)}, Python "
-        f"{platform.python_version()}, {os.cpu_count()} CPUs."
+        f"{len(outcomes)} mutated inputs "
+        f"({through}), "
+        f"{args.workers} workers, {limits}, {args.memory_gib:g} GiB (RLIMIT_AS) per worker, "
+        f"memory budget {args.budget_gib:g} GiB; {wall:.0f} s "
+        f"({len(outcomes) / max(wall, 1e-9):.2f} mutants/s) on {platform.platform(terse=True)}, "
+        f"Python {platform.python_version()}, {os.cpu_count()} CPUs."
     )
     snippet = fuzz_runner.markdown_summary(outcomes, fuzz_seeds.FORMATS, title=title)
     print("\n" + snippet)

@@ -10,6 +10,7 @@ these types and writers consume them; this module knows no file format.
 
 from __future__ import annotations
 
+import unicodedata
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,7 @@ __all__ = [
     "GRADUAL_MIN_VALUES",
     "LPS_TO_RAS",
     "MAX_STRUCTURES",
+    "MAX_LABEL_NAME_CHARS",
     "LabelMap",
     "LabelValues",
     "Structure",
@@ -35,7 +37,12 @@ __all__ = [
     "check_label_values",
     "label_values",
     "structure_colour",
+    "structure_name",
 ]
+
+MAX_LABEL_NAME_CHARS = 48
+"""Characters of a structure's name kept in its file names (:attr:`Structure.label`): at
+most 4 bytes each in UTF-8, so a file name stays under the 255 bytes file systems allow."""
 
 LPS_TO_RAS = np.diag([-1.0, -1.0, 1.0, 1.0])
 """DICOM patient LPS → RAS (x and y negated); its own inverse."""
@@ -62,6 +69,25 @@ DEFAULT_COLOURS: tuple[tuple[int, int, int], ...] = (
 """Display colours (RGB 0-255) of structures that have none, in turn (Trubetskoy's
 16 distinct colours without black, white and greys): the one palette of every
 written segmentation (``labels.seg.nrrd``, ``seg.dcm``, ``rtstruct.dcm``)."""
+
+
+def structure_name(structure: Structure) -> str:
+    """A structure's name in every written output: its own, else ``Segment_<value>``.
+
+    One rule for ``labels.seg.nrrd``, ``seg.dcm`` and ``rtstruct.dcm``: an
+    unnamed structure is called as 3D Slicer calls an unnamed segment.
+
+    Parameters
+    ----------
+    structure : Structure
+
+    Returns
+    -------
+    str
+        The name without leading or trailing white space (accents and any
+        script kept), or ``Segment_<value>``.
+    """
+    return structure.name.strip() or f"Segment_{structure.value}"
 
 
 def structure_colour(structure: Structure, index: int) -> tuple[int, int, int]:
@@ -104,8 +130,16 @@ class Structure:
 
     @property
     def label(self) -> str:
-        """``"<value>_<name>"`` (or the value alone), safe as a file name."""
-        safe = "".join(c if c.isalnum() or c in "-." else "_" for c in self.name.strip())
+        """``"<value>_<name>"`` (or the value alone), safe as a file name.
+
+        Letters and digits of any script are kept, accents included (``Tête
+        fémorale`` → ``1_Tête_fémorale``), in Unicode NFC form so that one name
+        gives one file name on every system; any other character becomes ``_``.
+        The name part is cut to :data:`MAX_LABEL_NAME_CHARS` characters, so the
+        file name stays within what file systems allow.
+        """
+        name = unicodedata.normalize("NFC", self.name.strip())[:MAX_LABEL_NAME_CHARS]
+        safe = "".join(c if c.isalnum() or c in "-." else "_" for c in name)
         return f"{self.value}_{safe}" if safe else str(self.value)
 
     def to_dict(self) -> dict[str, Any]:

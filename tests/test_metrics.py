@@ -311,3 +311,62 @@ def test_shapes_in_different_coordinates_are_rejected():
     far = box.copy().apply_translation((1e6, 0.0, 0.0))  # 1 km: a 2e6-voxel-long grid
     with pytest.raises(OptionError, match="same world coordinates"):
         volume_iou(far, _ball(3.0, [0.5, 0.5, 0.5], half=4.0))
+
+
+# -- the memory budget ----------------------------------------------------------------------
+
+
+def _slab(z_spacing: float) -> Volume:
+    mask = np.zeros((40, 40, 6), bool)
+    mask[10:30, 10:30, 1:5] = True
+    return Volume(mask, np.diag([0.8, 0.8, z_spacing, 1.0]))
+
+
+def test_an_evaluation_grid_over_the_budget_is_refused_before_allocating() -> None:
+    """0.8 x 0.8 x 2000 mm voxels: the default shell tolerance (2000 mm) widens the grid by
+    2500 voxels in-plane; evaluate took 5 minutes and 23 GB whatever --max-memory said."""
+    import time
+
+    from slicerecon.errors import MemoryBudgetError
+
+    start = time.perf_counter()
+    with pytest.raises(MemoryBudgetError, match=r"evaluation grid.*5024 x 5024 x 10"):
+        evaluate(_slab(2000.0), _slab(2000.0), n_points=1000, memory_budget_gb=0.5)
+    with pytest.raises(MemoryBudgetError, match="memory budget of 0.5 GiB"):
+        surface_iou(_slab(2000.0), _slab(2000.0), memory_budget_gb=0.5)
+    assert time.perf_counter() - start < 1.0
+    # the same shapes on 2 mm slices fit: the budget does not refuse ordinary grids
+    assert evaluate(_slab(2.0), _slab(2.0), n_points=1000, memory_budget_gb=0.5).dice == 1.0
+    with pytest.raises(OptionError, match="max-memory"):
+        evaluate(_slab(2.0), _slab(2.0), memory_budget_gb=-1)
+
+
+def test_memory_the_machine_refuses_is_one_clear_error(monkeypatch) -> None:
+    from slicerecon.errors import MemoryBudgetError
+    from slicerecon.metrics import volume
+
+    def refuse(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(volume, "place", refuse)
+    with pytest.raises(MemoryBudgetError, match="ran out of memory"):
+        evaluate(_slab(2.0), _slab(2.0), n_points=1000)
+
+
+def test_run_refuses_the_metrics_grid_in_one_line(tmp_path, capsys) -> None:
+    """A 12 kB NRRD of such voxels, through ``slicerecon run``."""
+    nrrd = pytest.importorskip("nrrd")
+    from slicerecon.cli import main
+
+    path = tmp_path / "aniso.nrrd"
+    header = {
+        "space": "left-posterior-superior",
+        "space directions": np.diag([0.8, 0.8, 2000.0]),
+        "space origin": [0.0, 0.0, 0.0],
+        "kinds": ["domain"] * 3,
+        "encoding": "gzip",
+    }
+    nrrd.write(str(path), _slab(2000.0).mask.astype(np.uint8), header, index_order="F")
+    assert main(["run", str(path), "-o", str(tmp_path / "out"), "--max-memory", "0.5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "evaluation grid" in err[0]

@@ -46,6 +46,7 @@ def test_rtstruct_beside_its_series_writes_seg_and_rtstruct_that_read_back(tmp_p
             (3, "Left"): _rings(12.0, (-14.0, 0.0), 30.0),
             (7, "Right"): _rings(9.0, (15.0, 0.0), 27.0),
         },
+        on_series=tmp_path / "ct",
     )
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "ct"), "-o", str(out), "-q"]) == 0
@@ -116,3 +117,85 @@ def test_a_nifti_label_map_gets_a_slicer_segmentation_and_no_dicom(tmp_path: Pat
         else seg_nrrd.affine
     )
     np.testing.assert_allclose(ras, written_affine, atol=1e-5)
+
+
+def test_non_ascii_names_survive_every_output_of_a_run(tmp_path: Path) -> None:
+    """'Tête fémorale' crashed labels.seg.nrrd after the whole computation."""
+    _ct(tmp_path / "ct")
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {
+            (3, "Tête fémorale"): _rings(12.0, (-14.0, 0.0), 30.0),
+            (7, "GTV"): _rings(9.0, (15.0, 0.0), 27.0),
+        },
+        on_series=tmp_path / "ct",
+    )
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out), "-q"]) == 0
+    record = json.loads((out / "structures.json").read_text(encoding="utf-8"))
+    assert record["outputs"]["skipped"] == {}
+    assert {s["name"] for s in record["structures"]} == {"Tête fémorale", "GTV"}
+    assert (out / "meshes" / "3_Tête_fémorale.stl").is_file()
+    assert {s.name for s in read_nrrd_label_map(out / "labels.seg.nrrd").structures} == {
+        "Tête fémorale",
+        "GTV",
+    }
+    import pydicom
+
+    seg = pydicom.dcmread(out / "seg.dcm")
+    assert {str(s.SegmentLabel) for s in seg.SegmentSequence} == {"Tête fémorale", "GTV"}
+    rt = pydicom.dcmread(out / "rtstruct.dcm")
+    assert {str(r.ROIName) for r in rt.StructureSetROISequence} == {"Tête fémorale", "GTV"}
+
+
+@pytest.mark.parametrize(
+    ("rtstruct", "reason"),
+    [
+        ({"on_series": True, "patient_id": "ANOTHER-PATIENT"}, "of patient 'ANOTHER-PATIENT'"),
+        ({"on_series": False}, "frame of reference"),  # same patient, its own frame
+    ],
+    ids=["another-patient", "another-frame"],
+)
+def test_an_rtstruct_beside_another_subjects_series_gets_no_dicom_output(
+    tmp_path: Path, rtstruct: dict, reason: str
+) -> None:
+    """seg.dcm was written labelled with the series' patient; the frame was never compared.
+    The reconstruction stands; no DICOM object refers to images it does not belong to."""
+    _ct(tmp_path / "ct")
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {(3, "Left"): _rings(12.0, (-14.0, 0.0), 30.0)},
+        on_series=tmp_path / "ct" if rtstruct["on_series"] else None,
+        patient_id=rtstruct.get("patient_id"),
+    )
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out), "-q"]) == 0
+    assert not (out / "seg.dcm").exists() and not (out / "rtstruct.dcm").exists()
+    assert (out / "labels.nii.gz").is_file() and (out / "labels.seg.nrrd").is_file()
+    skipped = json.loads((out / "structures.json").read_text())["outputs"]["skipped"]
+    assert set(skipped) == {"seg", "rtstruct"}
+    assert all(reason in why for why in skipped.values())
+
+
+def test_a_series_with_a_slice_of_another_study_is_refused_naming_both(
+    tmp_path: Path, capsys
+) -> None:
+    """highdicom raised ValueError when writing seg.dcm (exit 1, a traceback)."""
+    import pydicom
+
+    _ct(tmp_path / "ct")
+    stray = sorted((tmp_path / "ct").glob("slice_*.dcm"))[4]
+    ds = pydicom.dcmread(stray)
+    ds.StudyInstanceUID = pydicom.uid.generate_uid()
+    ds.SeriesDescription = "Head 5mm"
+    ds.save_as(stray)
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {(3, "Left"): _rings(12.0, (-14.0, 0.0), 30.0)},
+        on_series=tmp_path / "ct",
+    )
+    assert main(["run", str(tmp_path / "ct"), "-o", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:")
+    assert "2 studies" in err[0] and "CT 'Head 5mm'" in err[0] and stray.name in err[0]
+    assert "20 images of CT (no SeriesDescription)" in err[0]

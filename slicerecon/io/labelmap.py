@@ -22,12 +22,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import EmptyMaskError, LabelError
+from ..errors import EmptyMaskError, LabelError, OptionError
 from ..labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks, as_labels, check_label_values
 from . import detect_kind
 from .atomic import atomic_path
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
-from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_label_range, reading
 from .nrrd import read_nrrd_label_map
 from .vti import read_vti
 
@@ -92,6 +92,7 @@ def _read_label_map(
         from .nifti import read_label_values
 
         values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
+        check_label_range(values, what=str(kind.path))
         check_label_values(values, source=kind.path, chosen=chosen)
         result = LabelMap.from_array(values, affine)
     elif kind.kind == "nrrd":
@@ -99,6 +100,7 @@ def _read_label_map(
         check_label_values(result.labels, source=kind.path, chosen=chosen)
     elif kind.kind == "vti":
         image = read_vti(kind.path, memory_budget_gb=memory_budget_gb)
+        check_label_range(image.values, what=str(kind.path))
         check_label_values(image.values, source=kind.path, chosen=chosen)
         result = LabelMap.from_array(np.asarray(image.values), image.affine)
     elif kind.kind == "dicom-series":
@@ -108,6 +110,7 @@ def _read_label_map(
         check_label_values(values, source=kind.path, chosen=chosen)
         if np.any(values != np.round(values)):
             raise LabelError(f"{kind.path} is not a label map: its pixel values are not integers")
+        check_label_range(values, what=str(kind.path))
         result = LabelMap.from_array(np.round(values), affine, coordinates="LPS")
     else:
         result = _read_seg_segments(kind.path, memory_budget_gb)
@@ -199,6 +202,7 @@ def write_label_map(
     path: str | os.PathLike[str],
     *,
     coordinates: str = "RAS",
+    xform_codes: tuple[int, int] | None = None,
 ) -> Path:
     """Write a label map as NIfTI (RAS; an LPS affine is converted), atomically.
 
@@ -212,10 +216,20 @@ def write_label_map(
         ``.nii`` or ``.nii.gz``.
     coordinates : {"RAS", "LPS"}
         The frame of ``affine``.
+    xform_codes : (int, int), optional
+        ``(sform_code, qform_code)`` to write, e.g. those of the NIfTI input the
+        labels are on (:func:`slicerecon.io.nifti.nifti_xform_codes`): an
+        MNI-coded input (4 or 2 and 0) keeps its space. Default ``(1, 1)``
+        (scanner anatomical), as for a DICOM input.
 
     Returns
     -------
     Path
+
+    Raises
+    ------
+    OptionError
+        An xform code outside 0-5 (the NIfTI-1 codes, 5 a template).
     """
     import nibabel as nib
 
@@ -225,10 +239,13 @@ def write_label_map(
     aff = np.asarray(affine, dtype=np.float64)
     if coordinates == "LPS":
         aff = LPS_TO_RAS @ aff
+    sform_code, qform_code = (1, 1) if xform_codes is None else xform_codes
+    if not all(isinstance(c, int | np.integer) and 0 <= c <= 5 for c in (sform_code, qform_code)):
+        raise OptionError(f"xform_codes must be two NIfTI codes 0-5 (got {xform_codes!r})")
     img = nib.Nifti1Image(values, aff)
     img.header.set_xyzt_units(xyz="mm")
-    img.set_sform(aff, code=1)
-    img.set_qform(aff, code=1, strip_shears=True)
+    img.set_sform(aff, code=int(sform_code))
+    img.set_qform(aff, code=int(qform_code), strip_shears=True)
     target = Path(path)
     with atomic_path(target) as tmp:
         nib.save(img, tmp)

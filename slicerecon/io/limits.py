@@ -20,8 +20,10 @@ Three rules every reader follows, kept here so that they are written once:
 
 from __future__ import annotations
 
+import logging
 import math
 import os
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -29,19 +31,31 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import FormatError, GeometryError, MemoryBudgetError, OptionError, SlicereconError
+from ..errors import (
+    FormatError,
+    GeometryError,
+    LabelError,
+    MemoryBudgetError,
+    OptionError,
+    SlicereconError,
+)
 
 __all__ = [
     "DEFAULT_MEMORY_BUDGET_GB",
     "MAX_COORDINATE_MM",
+    "MAX_LABEL_VALUE",
     "MAX_SPACING_MM",
+    "MIN_LABEL_VALUE",
     "MIN_SPACING_MM",
     "PIPELINE_BYTES_PER_VOXEL",
     "check_budget",
+    "check_bytes",
     "check_coordinates",
     "check_geometry",
     "check_grid",
+    "check_label_range",
     "reading",
+    "writing",
 ]
 
 DEFAULT_MEMORY_BUDGET_GB = 8.0
@@ -60,6 +74,8 @@ MAX_COORDINATE_MM = 1e6
 """Largest distance of any grid corner or contour vertex from the origin, mm (1 km)."""
 
 _MESSAGE_CHARS = 240
+
+logger = logging.getLogger(__name__)
 
 
 def check_budget(memory_budget_gb: float) -> float:
@@ -119,6 +135,66 @@ def check_grid(
             f"{what}: its grid of {grid} voxels needs about {need_gb:,.1f} GiB, over the "
             f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} "
             "if this machine has that much memory"
+        )
+
+
+def check_bytes(n_bytes: int, *, what: str, memory_budget_gb: float) -> None:
+    """Refuse a declared byte count (e.g. decompressed data to skip) over the memory budget.
+
+    Parameters
+    ----------
+    n_bytes : int
+        The bytes a header asks to be read or produced.
+    what : str
+        What asks for them, for the message.
+    memory_budget_gb : float
+        The budget, GiB.
+
+    Raises
+    ------
+    MemoryBudgetError
+        If ``n_bytes`` exceeds the budget; the message gives both.
+    """
+    budget = check_budget(memory_budget_gb)
+    need_gb = int(n_bytes) / 2**30
+    if need_gb > budget:
+        raise MemoryBudgetError(
+            f"{what} asks for {int(n_bytes):,} bytes (about {need_gb:,.1f} GiB), over the "
+            f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} if "
+            "this machine has that much memory"
+        )
+
+
+MIN_LABEL_VALUE = -(2**31)
+"""Smallest label value accepted (32-bit signed)."""
+MAX_LABEL_VALUE = 2**32 - 1
+"""Largest label value accepted (32-bit unsigned): a larger one is not a label of a map."""
+
+
+def check_label_range(values: ArrayLike, *, what: str) -> None:
+    """Refuse a label map whose values do not fit 32-bit integers.
+
+    Parameters
+    ----------
+    values : array_like
+        The voxel values (after any scaling the file declares).
+    what : str
+        The source, for the message.
+
+    Raises
+    ------
+    LabelError
+        A value below :data:`MIN_LABEL_VALUE` or above :data:`MAX_LABEL_VALUE`
+        (a scale factor of 3e38 makes every voxel such a value).
+    """
+    data = np.asarray(values)
+    if data.size == 0 or data.dtype.kind not in "iuf":
+        return
+    lo, hi = float(data.min()), float(data.max())
+    if lo < MIN_LABEL_VALUE or hi > MAX_LABEL_VALUE:
+        raise LabelError(
+            f"{what} is not a label map: its values reach {lo:.4g} to {hi:.4g}, beyond the "
+            "32-bit integers label values are (check its scale factor, or pass a segmentation)"
         )
 
 
@@ -203,6 +279,96 @@ def _short(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
+_CHATTY_LOGGERS = ("nibabel.global",)
+"""Third-party loggers that print to stderr by themselves (nibabel adds its own handler)."""
+
+
+class _Collect(logging.Handler):
+    """Keeps the WARNING (and worse) records of other packages' loggers while a file is read."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if not record.name.startswith("slicerecon"):
+            self.records.append(record)
+
+
+@contextmanager
+def _collecting_logs() -> Iterator[_Collect]:
+    """Hold back what other packages log (as :class:`_Collect` records) instead of printing it.
+
+    A handler on the root logger takes their records (so Python's last-resort
+    handler does not print them on stderr), and loggers with their own stream
+    handler (:data:`_CHATTY_LOGGERS`) lose it for the while.
+    """
+    collect = _Collect()
+    root = logging.getLogger()
+    saved = {name: logging.getLogger(name).handlers[:] for name in _CHATTY_LOGGERS}
+    for name in _CHATTY_LOGGERS:
+        logging.getLogger(name).handlers = []
+    root.addHandler(collect)
+    try:
+        yield collect
+    finally:
+        root.removeHandler(collect)
+        for name, handlers in saved.items():
+            logging.getLogger(name).handlers = handlers
+
+
+_NOISE = (DeprecationWarning, PendingDeprecationWarning, FutureWarning, ResourceWarning)
+"""Warning categories that speak to developers, not to whoever gave the file."""
+_MAX_WARNINGS = 3
+"""Distinct warnings logged per file read; more are counted."""
+
+
+def _log_warnings(
+    path: Path,
+    caught: list[warnings.WarningMessage],
+    *,
+    failed: bool,
+    records: Sequence[logging.LogRecord] = (),
+) -> None:
+    """Log what parsers warned about while reading ``path``, as log records, not stderr lines.
+
+    After a failed read the error says what is wrong: every warning is a debug
+    record. After a successful one, a parser's remarks on the file (pydicom's
+    invalid values, nibabel's header fixes, ...) are warnings naming the file;
+    deprecations and numpy's floating-point remarks are debug records. What
+    other packages logged (``records``) counts as their warnings.
+    """
+    seen: set[tuple[type[Warning], str]] = set()
+    shown = 0
+    messages = [(item.category, item.message) for item in caught] + [
+        (UserWarning, record.getMessage()) for record in records
+    ]
+    for category, message in messages:
+        text = " ".join(str(message).split())
+        if len(text) > _MESSAGE_CHARS:
+            text = text[: _MESSAGE_CHARS - 3] + "..."
+        key = (category, text)
+        if key in seen:
+            continue
+        seen.add(key)
+        noise = failed or issubclass(category, (*_NOISE, RuntimeWarning))
+        if noise or shown >= _MAX_WARNINGS:
+            logger.debug("%s: %s: %s", path, category.__name__, text)
+            continue
+        shown += 1
+        logger.warning("%s: %s", path, text)
+    hidden = (
+        sum(
+            1
+            for category, _ in seen
+            if not (failed or issubclass(category, (*_NOISE, RuntimeWarning)))
+        )
+        - shown
+    )
+    if hidden > 0:
+        logger.warning("%s: %d more warnings while reading it (see --debug)", path, hidden)
+
+
 @contextmanager
 def reading(path: str | os.PathLike[str]) -> Iterator[None]:
     """Turn any failure of a third-party parser while reading ``path`` into a FormatError.
@@ -212,26 +378,77 @@ def reading(path: str | os.PathLike[str]) -> Iterator[None]:
     ``MemoryError`` becomes a :class:`~slicerecon.errors.MemoryBudgetError`
     (the declared sizes passed :func:`check_grid`, yet the machine ran out).
 
+    Python ``warnings`` the parsers emit meanwhile (pydicom, nibabel, numpy,
+    pynrrd), and what other packages log (nibabel prints its header fixes on
+    stderr itself), never reach stderr as ``file:line: UserWarning`` or bare
+    lines: they become log records of this module naming the file
+    (:func:`_log_warnings`): debug records when the read fails (the error line
+    says what is wrong) or for deprecations; warnings otherwise, at most three
+    per file. Like :func:`warnings.catch_warnings`, which it uses, it is meant
+    for the main thread.
+
     Raises
     ------
     FormatError
         Naming the file, the parser's exception type and its message.
     """
+    p = Path(path)
+    with _boundary(p), _quiet(p):
+        yield
+
+
+@contextmanager
+def _quiet(p: Path) -> Iterator[None]:
+    """Python warnings and other packages' log records while reading ``p``, as our records."""
+    caught: list[warnings.WarningMessage] = []
+    with _collecting_logs() as logs:
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                yield
+        except BaseException:
+            _log_warnings(p, caught, failed=True, records=logs.records)
+            raise
+    _log_warnings(p, caught, failed=False, records=logs.records)
+
+
+@contextmanager
+def writing(path: str | os.PathLike[str]) -> Iterator[None]:
+    """The boundary of a writer that copies values of its inputs (a SEG, an RTSTRUCT).
+
+    As :func:`reading`, for the values a writer reads from its inputs' headers
+    (pydicom parses them lazily) and the libraries it calls (highdicom): their
+    warnings become log records, and their exceptions one
+    :class:`~slicerecon.errors.FormatError` naming the output, so the caller
+    can skip that output with a warning.
+    """
+    p = Path(path)
+    with _boundary(p, verb="write"), _quiet(p):
+        yield
+
+
+@contextmanager
+def _boundary(p: Path, *, verb: str = "read") -> Iterator[None]:
+    """The exceptions of :func:`reading`: project errors pass, every other becomes one."""
     try:
         yield
     except SlicereconError:
         raise
     except MemoryError as exc:
         raise MemoryBudgetError(
-            f"reading {Path(path)} ran out of memory: this machine has less free memory than "
+            f"{'writing' if verb == 'write' else 'reading'} {p} ran out of memory: this "
+            "machine has less free memory than "
             "the budget (--max-memory) allows; free memory or use a larger machine"
         ) from exc
     except RecursionError as exc:
         raise FormatError(
-            f"cannot read {Path(path)}: it is nested too deeply to parse ({_short(exc)})"
+            f"cannot read {p}: it is nested too deeply to parse ({_short(exc)})"
         ) from exc
     except Exception as exc:  # noqa: BLE001 - the boundary: every parser failure
-        p = Path(path)
+        if verb == "write":
+            raise FormatError(
+                f"cannot write {p}: a value of its input cannot be written ({_short(exc)})"
+            ) from exc
         what = "a file in it is corrupt" if p.is_dir() else "the file is corrupt"
         raise FormatError(
             f"cannot read {p}: {what} or not what its name says ({_short(exc)})"

@@ -20,13 +20,26 @@ import nibabel as nib
 import numpy as np
 from numpy.typing import DTypeLike, NDArray
 
-from ..errors import EmptyMaskError, FormatError, InputError, LabelError, OptionError
+from ..errors import (
+    EmptyMaskError,
+    FormatError,
+    InputError,
+    LabelError,
+    OptionError,
+    SlicereconError,
+)
 from ..sections import Volume
 from ..selection import parse_selector
 from .atomic import atomic_path
-from .limits import DEFAULT_MEMORY_BUDGET_GB, check_geometry, check_grid
+from .limits import (
+    DEFAULT_MEMORY_BUDGET_GB,
+    check_geometry,
+    check_grid,
+    check_label_range,
+    reading,
+)
 
-__all__ = ["NiftiInfo", "nifti_labels", "read_nifti", "write_nifti"]
+__all__ = ["NiftiInfo", "nifti_labels", "nifti_xform_codes", "read_nifti", "write_nifti"]
 
 logger = logging.getLogger(__name__)
 
@@ -157,6 +170,7 @@ def _read_labels(
             )
     elif kind not in "biu":
         raise LabelError(f"{p} is not a label map: its voxels have data type {data.dtype}")
+    check_label_range(data, what=str(p))
     return data
 
 
@@ -340,6 +354,41 @@ def nifti_labels(path: str | os.PathLike[str]) -> NiftiInfo:
         dtype=str(data.dtype),
         labels=_label_counts(data),
     )
+
+
+def nifti_xform_codes(
+    path: str | os.PathLike[str], *, affine: NDArray[np.float64] | None = None
+) -> tuple[int, int] | None:
+    """The sform and qform codes of a NIfTI file, to write an output in the same space.
+
+    Parameters
+    ----------
+    path : path-like
+        Any input; only a ``.nii`` / ``.nii.gz`` file gives codes.
+    affine : ndarray of shape (4, 4), optional
+        The output's affine (RAS): codes are given only when it is the file's
+        own affine (to 1e-4 mm), i.e. the output lies on the input's grid.
+
+    Returns
+    -------
+    tuple of (int, int) or None
+        ``(sform_code, qform_code)`` (e.g. ``(4, 0)`` for an MNI-coded
+        template, ``(1, 1)`` for scanner space), or None for another kind of
+        file, an unreadable one, or another grid.
+    """
+    p = Path(path)
+    if not p.name.lower().endswith((".nii", ".nii.gz")) or not p.is_file():
+        return None
+    try:
+        with reading(p):
+            _, img = _load(p)
+            codes = int(img.header["sform_code"]), int(img.header["qform_code"])
+            own = np.asarray(img.affine, dtype=np.float64)
+    except SlicereconError:
+        return None
+    if affine is not None and not np.allclose(own, affine, rtol=0, atol=1e-4):
+        return None
+    return codes
 
 
 def write_nifti(

@@ -1,7 +1,9 @@
 """NRRD label maps and 3D Slicer segmentations (``.nrrd``, ``.seg.nrrd``).
 
-Headers are parsed, and files written, by pynrrd (``import nrrd``). Two kinds
-of file are read:
+Header fields are parsed by pynrrd (``import nrrd``) from lines read here in
+UTF-8, as 3D Slicer writes them (pynrrd alone would drop every non-ASCII
+character of a segment name); :mod:`slicerecon.io.nrrd_writer` writes them.
+Two kinds of file are read:
 
 * **plain NRRD label maps**: a 3-D image of integer label values (as ITK,
   ITK-SNAP or Slicer's "labelmap volume" export write them); every non-zero
@@ -24,19 +26,30 @@ along the array axes and its ``axis mins`` (default 0) as origin.
 Every check that needs only the header (dimensions, data type, geometry, the
 memory budget) runs before a voxel is read. Compressed voxel data (gzip,
 bzip2) is decompressed here with a bound: never more bytes than the header
-declares, so a small file cannot expand past the memory budget.
+declares (its data and its ``byte skip``, which count against the memory
+budget; with ``byte skip: -1``, at most twice the data), so a small file
+cannot expand past the memory budget. ``line skip`` is counted in one pass
+over the file, and a skip past its end is refused at once.
+
+Segments are never dropped silently: a segment with label value 0 or without a
+voxel, and voxels outside a segment's ``Extent`` (left out, as Slicer leaves
+them out), are reported in one warning line each; two segments claiming one
+value of one layer, or a segment whose value is absent from its layer while
+another value there belongs to no segment, are refused (its ``LabelValue`` or
+``Layer`` is wrong).
 """
 
 from __future__ import annotations
 
 import bz2
+import io
 import logging
 import math
 import os
 import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,7 +63,13 @@ from ..errors import (
 from ..labels import LabelMap, Structure
 from ..sections import Volume
 from ..selection import choose_structure, parse_selector
-from .limits import DEFAULT_MEMORY_BUDGET_GB, check_grid, reading
+from .limits import (
+    DEFAULT_MEMORY_BUDGET_GB,
+    check_bytes,
+    check_grid,
+    check_label_range,
+    reading,
+)
 from .nrrd_header import (
     COMPRESSED,
     NrrdInfo,
@@ -76,57 +95,141 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 
-def _decompress(p: Path, fh: IO[bytes], method: str, limit: int) -> bytearray:
-    """At most ``limit`` bytes of a gzip / bzip2 stream; more is a FormatError."""
+_CHUNK = 1 << 22
+"""Bytes read, or produced by the decompressor, at once."""
+
+
+def _skip_lines(p: Path, fh: io.BufferedIOBase, count: int) -> None:
+    """Move ``fh`` past ``count`` more lines (``line skip``), scanning the file once."""
+    if count < 0:
+        raise FormatError(f"{p}: 'line skip' must be 0 or more (got {count})")
+    left = count
+    while left:
+        start = fh.tell()
+        chunk = fh.read(_CHUNK)
+        if not chunk:
+            raise FormatError(
+                f"{p}: 'line skip: {count}' asks to skip more lines than the file holds after "
+                "its header; the header is corrupt"
+            )
+        end = -1
+        for _ in range(min(left, chunk.count(b"\n"))):
+            end = chunk.index(b"\n", end + 1)
+            left -= 1
+        if not left:
+            fh.seek(start + end + 1)
+
+
+def _inflate(p: Path, fh: io.BufferedIOBase, method: str, skip: int, need: int) -> bytearray:
+    """The ``need`` bytes that follow the first ``skip`` bytes of a gzip / bzip2 stream.
+
+    Memory is bounded by ``need`` and what the header declares: skipped bytes are
+    discarded as they come, and a stream holding more than ``skip + need`` bytes
+    is refused without being expanded. With ``skip == -1`` (``byte skip: -1``:
+    the data are the last ``need`` bytes) the stream may hold at most ``2 *
+    need`` bytes.
+    """
     decoder: Any = (
         zlib.decompressobj(zlib.MAX_WBITS | 32) if method == "gzip" else bz2.BZ2Decompressor()
     )
+    limit = 2 * need if skip < 0 else skip + need
     out = bytearray()
+    produced = 0
 
-    def more(data: bytes) -> None:
-        out.extend(decoder.decompress(data, limit + 1 - len(out)))
-        if len(out) > limit:
+    def take(piece: bytes) -> None:
+        nonlocal produced
+        start = produced
+        produced += len(piece)
+        if produced > limit:
             raise FormatError(
-                f"{p} holds more voxel data than its header declares ({limit} bytes); "
-                "the file is corrupt"
+                f"{p} holds more voxel data than its header declares ({need} bytes"
+                f"{f' after {skip} skipped' if skip > 0 else ''}"
+                f"{', at most as much again before them with byte skip -1' if skip < 0 else ''}"
+                "); the file is corrupt"
             )
+        if skip < 0:
+            out.extend(piece)
+            if len(out) > 2 * need:
+                del out[: len(out) - need]
+        elif produced > skip:
+            out.extend(piece[max(skip - start, 0) :])
 
-    def pending() -> bool:  # output held back by the bound, to be drained
+    def pending() -> bool:  # output held back by max_length, to be drained
         if method == "gzip":
             return bool(decoder.unconsumed_tail)
         return not decoder.needs_input
 
     while not decoder.eof:
-        chunk = fh.read(1 << 22)
+        chunk = fh.read(_CHUNK)
         if not chunk:
             break
-        more(chunk)
+        take(decoder.decompress(chunk, _CHUNK))
         while not decoder.eof and pending():
-            more(decoder.unconsumed_tail if method == "gzip" else b"")
+            take(decoder.decompress(decoder.unconsumed_tail if method == "gzip" else b"", _CHUNK))
+    if skip < 0:
+        del out[: max(len(out) - need, 0)]
     return out
 
 
-def _voxels(p: Path, header: Mapping[str, Any], info: NrrdInfo, fh: IO[bytes]) -> NDArray[Any]:
-    """Every voxel value, shape ``(layers, I, J, K)``."""
+def _raw(fh: io.BufferedIOBase, skip: int, need: int) -> bytearray:
+    """The ``need`` bytes after ``skip`` more bytes (-1: the last ``need`` bytes of the file)."""
+    size = os.fstat(fh.fileno()).st_size
+    if skip < 0:
+        if size < need:
+            return bytearray()
+        fh.seek(size - need)
+    elif skip > size - fh.tell():  # a skip past the end (or too large to seek to)
+        return bytearray()
+    else:
+        fh.seek(skip, os.SEEK_CUR)
+    out = bytearray(need)
+    got = fh.readinto(out)
+    return out[:got] if got < need else out
+
+
+def _voxels(
+    p: Path,
+    header: Mapping[str, Any],
+    info: NrrdInfo,
+    fh: io.BufferedIOBase,
+    memory_budget_gb: float,
+) -> NDArray[Any]:
+    """Every voxel value, shape ``(layers, I, J, K)``.
+
+    ``line skip`` and ``byte skip`` are bounded before anything is read: lines
+    are counted in one pass over the file, a raw file's skip cannot pass its
+    end, and the decompressed bytes a compressed file's skip asks for count
+    against ``memory_budget_gb`` as its data do.
+    """
     sizes = [int(s) for s in header["sizes"]]
     count = math.prod(sizes)
+    need = count * info.dtype.itemsize
     encoding = str(header["encoding"]).lower()
     line_skip = int(header.get("line skip", header.get("lineskip", 0)))
     byte_skip = int(header.get("byte skip", header.get("byteskip", 0)))
-    if encoding in COMPRESSED and line_skip >= 0 and byte_skip >= 0:
-        for _ in range(line_skip):
-            fh.readline()
-        need = count * info.dtype.itemsize
-        raw = _decompress(p, fh, COMPRESSED[encoding], need + byte_skip)
-        if len(raw) - byte_skip < need:
-            held = max(len(raw) - byte_skip, 0) // info.dtype.itemsize
+    if byte_skip < -1:
+        raise FormatError(f"{p}: 'byte skip' must be -1 or more (got {byte_skip})")
+    _skip_lines(p, fh, line_skip)
+    if encoding not in COMPRESSED and encoding != "raw":  # text: pynrrd parses it
+        plain = {k: v for k, v in header.items() if k not in ("line skip", "lineskip")}
+        flat = pynrrd_module().read_data(plain, fh, str(p), index_order="C").ravel()
+    else:
+        if encoding in COMPRESSED:
+            check_bytes(
+                need + max(byte_skip, 0),
+                what=f"{p} (byte skip {byte_skip} and {need} bytes of voxels, decompressed)",
+                memory_budget_gb=memory_budget_gb,
+            )
+            raw = _inflate(p, fh, COMPRESSED[encoding], byte_skip, need)
+        else:
+            raw = _raw(fh, byte_skip, need)
+        if len(raw) < need:
+            held = len(raw) // info.dtype.itemsize
             raise FormatError(
                 f"{p} is truncated: its voxel data holds {held} of the {count} values "
                 "the header declares"
             )
-        flat = np.frombuffer(raw, dtype=info.dtype, count=count, offset=byte_skip)
-    else:
-        flat = pynrrd_module().read_data(dict(header), fh, str(p), index_order="C").ravel()
+        flat = np.frombuffer(raw, dtype=info.dtype, count=count)
     data = flat.reshape(sizes[::-1]).T  # NRRD's first axis varies fastest
     if info.layer_axis is None:
         return data[np.newaxis]
@@ -134,8 +237,9 @@ def _voxels(p: Path, header: Mapping[str, Any], info: NrrdInfo, fh: IO[bytes]) -
 
 
 def _integer_values(p: Path, data: NDArray[Any]) -> NDArray[np.integer]:
-    """The voxels as integers: float data must hold whole, finite numbers."""
+    """The voxels as integers: float data must hold whole, finite numbers within 32 bits."""
     if data.dtype.kind in "iu":
+        check_label_range(data, what=str(p))
         return data.astype(data.dtype.newbyteorder("="), copy=False)
     if not np.all(np.isfinite(data)):
         raise LabelError(f"{p} is not a label map: it holds NaN or infinite values")
@@ -145,6 +249,7 @@ def _integer_values(p: Path, data: NDArray[Any]) -> NDArray[np.integer]:
             f"{p} is not a label map: it holds non-integer values (e.g. "
             f"{float(data[fractional].flat[0]):g}); pass an integer label map"
         )
+    check_label_range(data, what=str(p))
     lo, hi = (int(data.min()), int(data.max())) if data.size else (0, 0)
     return data.astype(np.result_type(np.min_scalar_type(lo), np.min_scalar_type(hi)))
 
@@ -166,7 +271,14 @@ def label_values(layer: NDArray[np.integer]) -> set[int]:
 
 
 def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
-    """One label map from the segments of every layer; later layers win on overlap."""
+    """One label map from the segments of every layer; later layers win on overlap.
+
+    Nothing is dropped silently: a segment with label value 0, one without a
+    voxel, and voxels a segment's ``Extent`` leaves out are each reported in one
+    warning line; a header whose segments cannot match the voxels (two segments
+    claiming one value of one layer, a segment whose value is absent from its
+    layer while another value there belongs to no segment) is refused.
+    """
     kept: list[NrrdSegment] = []
     for segment in info.segments:
         if segment.label_value == 0:
@@ -178,11 +290,80 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
             )
             continue
         kept.append(segment)
-    values = [s.label_value for s in kept]
+    owner: dict[tuple[int, int], NrrdSegment] = {}
+    for segment in kept:
+        key = (segment.layer, segment.label_value)
+        if key in owner:
+            first = owner[key]
+            raise FormatError(
+                f"{p}: segments {first.index} ({first.name}) and {segment.index} "
+                f"({segment.name}) both claim label value {segment.label_value} of layer "
+                f"{segment.layer}{_defaulted(info, segment)}; one segment's LabelValue or Layer "
+                "is wrong: fix the header"
+            )
+        owner[key] = segment
+    unclaimed = {}
+    for layer in range(info.layers):
+        claimed = {s.label_value for s in info.segments if s.layer == layer}
+        stray = sorted(label_values(data[layer]) - claimed - {0})
+        if stray:
+            unclaimed[layer] = stray
+    masks: dict[int, NDArray[np.bool_]] = {}
+    for segment in kept:
+        mask = data[segment.layer] == segment.label_value
+        total = int(np.count_nonzero(mask))
+        if total == 0:
+            declared_empty = segment.extent is not None and _extent_is_empty(segment.extent)
+            if unclaimed and not declared_empty:
+                shown = "; ".join(
+                    f"layer {layer}: {', '.join(map(str, values[:10]))}"
+                    for layer, values in unclaimed.items()
+                )
+                raise FormatError(
+                    f"{p}: segment {segment.index} ({segment.name}) claims label value "
+                    f"{segment.label_value} of layer {segment.layer}"
+                    f"{_defaulted(info, segment)}, which holds no such voxel, while voxels "
+                    f"of values no segment claims are there ({shown}); its LabelValue or "
+                    "Layer is wrong: fix the header"
+                )
+            logger.warning(
+                "%s: segment %d (%s) holds no voxel; it is skipped", p, segment.index, segment.name
+            )
+            continue
+        if segment.extent is not None:
+            mask &= _inside(segment.extent, info.shape)
+            inside = int(np.count_nonzero(mask))
+            if inside < total:
+                logger.warning(
+                    "%s: %s of the %d voxels of segment %d (%s) lie outside its extent "
+                    "(Segment%d_Extent %s) and are left out, as 3D Slicer leaves them out%s; "
+                    "fix the Extent to keep them",
+                    p,
+                    "all" if inside == 0 else str(total - inside),
+                    total,
+                    segment.index,
+                    segment.name,
+                    segment.index,
+                    " ".join(map(str, segment.extent)),
+                    ": the segment is skipped" if inside == 0 else "",
+                )
+                if inside == 0:
+                    continue
+        masks[segment.index] = mask
+    for layer, stray in unclaimed.items():
+        logger.warning(
+            "%s: layer %d holds values no segment claims (%s%s); they are ignored",
+            p,
+            layer,
+            ", ".join(str(v) for v in stray[:10]),
+            ", ..." if len(stray) > 10 else "",
+        )
+    drawn = [s for s in kept if s.index in masks]
+    values = [s.label_value for s in drawn]
     if len(set(values)) == len(values):
-        out_value = {s.index: s.label_value for s in kept}
+        out_value = {s.index: s.label_value for s in drawn}
     else:
-        out_value = {s.index: n for n, s in enumerate(kept, start=1)}
+        out_value = {s.index: n for n, s in enumerate(drawn, start=1)}
         logger.warning(
             "%s: segments of different layers share label values; they are numbered in file "
             "order: %s",
@@ -190,30 +371,15 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
             ", ".join(
                 f"{s.name or s.index} (layer {s.layer}, value {s.label_value}) -> "
                 f"{out_value[s.index]}"
-                for s in kept
+                for s in drawn
             ),
         )
     labels = np.zeros(info.shape, dtype=labels_dtype(list(out_value.values())))
     overlap = 0
-    for layer in range(info.layers):
-        own = [s for s in kept if s.layer == layer]
-        claimed = {s.label_value for s in info.segments if s.layer == layer}
-        stray = sorted(label_values(data[layer]) - claimed - {0})
-        if stray:
-            listed = ", ".join(str(v) for v in stray[:10])
-            logger.warning(
-                "%s: layer %d holds values no segment claims (%s%s); they are ignored",
-                p,
-                layer,
-                listed,
-                ", ..." if len(stray) > 10 else "",
-            )
-        for segment in sorted(own, key=lambda s: s.index):
-            mask = data[layer] == segment.label_value
-            if segment.extent is not None:
-                mask &= _inside(segment.extent, info.shape)
-            overlap += int(np.count_nonzero(labels[mask]))
-            labels[mask] = out_value[segment.index]
+    for segment in sorted(drawn, key=lambda s: (s.layer, s.index)):
+        mask = masks[segment.index]
+        overlap += int(np.count_nonzero(labels[mask]))
+        labels[mask] = out_value[segment.index]
     if overlap:
         logger.warning(
             "%s: segments of different layers overlap on %d voxels; each goes to "
@@ -223,15 +389,27 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
         )
     present = label_values(labels)
     structures = []
-    for segment in sorted(kept, key=lambda s: out_value[s.index]):
+    for segment in sorted(drawn, key=lambda s: out_value[s.index]):
         value = out_value[segment.index]
-        if value not in present:
+        if value not in present:  # every voxel taken by a later layer
             logger.warning(
-                "%s: segment %d (%s) holds no voxel; it is skipped", p, segment.index, segment.name
+                "%s: segment %d (%s) lies entirely under segments of later layers; it is skipped",
+                p,
+                segment.index,
+                segment.name,
             )
             continue
         structures.append(Structure(value, segment.name, segment.colour))
     return LabelMap(labels, info.affine, tuple(structures), info.coordinates)
+
+
+def _defaulted(info: NrrdInfo, segment: NrrdSegment) -> str:
+    """`` (its LabelValue is missing: 1 assumed)`` when the header did not give it."""
+    return "" if segment.label_value_given else " (its LabelValue is missing: 1 is assumed)"
+
+
+def _extent_is_empty(extent: Sequence[int]) -> bool:
+    return any(extent[2 * a] > extent[2 * a + 1] for a in range(3))
 
 
 def _inside(extent: Sequence[int], shape: Sequence[int]) -> NDArray[np.bool_]:
@@ -277,11 +455,15 @@ def read_nrrd_label_map(
     InputError
         What :func:`nrrd_info` raises; a plain 4-D image of several volumes.
     FormatError
-        Truncated or corrupt voxel data, more data than declared.
+        Truncated or corrupt voxel data, more data than declared, a ``line
+        skip`` or ``byte skip`` past the data; segments that cannot match the
+        voxels (two claiming one value of a layer; a value absent from its
+        layer while another value there belongs to no segment).
     LabelError
-        Non-integer or non-finite voxel values.
+        Non-integer or non-finite voxel values, values beyond 32-bit integers.
     MemoryBudgetError
-        The declared grid exceeds ``memory_budget_gb``.
+        The declared grid, or the decompressed bytes a ``byte skip`` asks
+        for, exceed ``memory_budget_gb``.
     """
     p = open_nrrd(path)
     with reading(p), open(p, "rb") as fh:
@@ -298,15 +480,15 @@ def read_nrrd_label_map(
             memory_budget_gb=memory_budget_gb,
             bytes_per_voxel=2 * info.layers * info.dtype.itemsize + 5,
         )
-        data = _integer_values(p, _voxels(p, header, info, fh))
-    if info.is_segmentation:
-        result = _flatten(p, info, data)
-    else:
-        labels = data[0]
-        values = sorted(label_values(labels) - {0})
-        result = LabelMap(
-            labels, info.affine, tuple(Structure(v) for v in values), info.coordinates
-        )
+        data = _integer_values(p, _voxels(p, header, info, fh, memory_budget_gb))
+        if info.is_segmentation:
+            result = _flatten(p, info, data)
+        else:
+            labels = data[0]
+            values = sorted(label_values(labels) - {0})
+            result = LabelMap(
+                labels, info.affine, tuple(Structure(v) for v in values), info.coordinates
+            )
     logger.info(
         "read %s: %s, %d structure(s), %s",
         p,

@@ -26,6 +26,7 @@ from .limits import check_geometry, reading
 
 __all__ = [
     "COMPRESSED",
+    "MAX_HEADER_BYTES",
     "NrrdInfo",
     "NrrdSegment",
     "header_info",
@@ -33,6 +34,8 @@ __all__ = [
     "open_nrrd",
     "pynrrd_module",
     "read_header",
+    "escape",
+    "unescape",
 ]
 
 logger = logging.getLogger(__name__)
@@ -103,6 +106,21 @@ _LAS_TO_RAS = np.diag([-1.0, 1.0, 1.0, 1.0])
 
 COMPRESSED = {"gzip": "gzip", "gz": "gzip", "bzip2": "bzip2", "bz2": "bzip2"}
 
+MAX_HEADER_BYTES = 16 * 2**20
+"""Longest NRRD header read, bytes (3D Slicer writes about 1 kB per segment)."""
+
+
+def unescape(value: str) -> str:
+    """A key/value pair's value as written: ``\\n`` is a newline, ``\\\\`` a backslash."""
+    if "\\" not in value:
+        return value
+    return re.sub(r"\\(.)", lambda m: "\n" if m.group(1) == "n" else m.group(1), value)
+
+
+def escape(value: str) -> str:
+    """The inverse of :func:`unescape`: what a NRRD key/value pair may hold on one line."""
+    return value.replace("\\", "\\\\").replace("\n", "\\n")
+
 
 def pynrrd_module() -> Any:
     try:
@@ -137,6 +155,8 @@ class NrrdSegment:
     extent : tuple of 6 int or None
         ``Segment<N>_Extent``: ``(i0, i1, j0, j1, k0, k1)``, inclusive file
         indices outside which the segment has no voxel; ``i0 > i1`` means empty.
+    label_value_given : bool
+        False when the header has no ``Segment<N>_LabelValue`` (1 is assumed).
     """
 
     index: int
@@ -146,6 +166,7 @@ class NrrdSegment:
     label_value: int
     layer: int
     extent: tuple[int, int, int, int, int, int] | None
+    label_value_given: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
@@ -223,12 +244,46 @@ def open_nrrd(path: str | os.PathLike[str]) -> Path:
     return p
 
 
+def _header_lines(p: Path, fh: IO[bytes]) -> list[str]:
+    """The header's lines, up to the blank line that ends it; ``fh`` is left just after it.
+
+    Lines are decoded as UTF-8 (what 3D Slicer writes; Latin-1 for files that are
+    not UTF-8), so segment names keep their accents (pynrrd would drop them).
+    """
+    lines: list[str] = []
+    size = 0
+    while True:
+        line = fh.readline(MAX_HEADER_BYTES + 1 - size)
+        size += len(line)
+        if size > MAX_HEADER_BYTES:
+            raise FormatError(
+                f"{p}: its header runs past {MAX_HEADER_BYTES // 2**20} MiB without the blank "
+                "line that ends a NRRD header; the file is corrupt"
+            )
+        if not line:
+            return lines  # a header without data
+        text = line.rstrip(b"\r\n")
+        try:
+            lines.append(text.decode("utf-8"))
+        except UnicodeDecodeError:
+            lines.append(text.decode("latin-1"))
+        if lines[-1].strip() == "" and len(lines) > 1:
+            return lines
+
+
 def read_header(p: Path, fh: IO[bytes]) -> dict[str, Any]:
+    """Parse the header of an open NRRD file; ``fh`` is left at the first byte after it.
+
+    Raises
+    ------
+    FormatError
+        Not a NRRD file, a header over :data:`MAX_HEADER_BYTES`, detached data.
+    """
     magic = fh.read(len(_MAGIC))
     if magic != _MAGIC:
         raise FormatError(f"{p} is not a NRRD file: it does not start with 'NRRD000'")
     fh.seek(0)
-    header: dict[str, Any] = dict(pynrrd_module().read_header(fh))
+    header: dict[str, Any] = dict(pynrrd_module().read_header(_header_lines(p, fh)))
     if header.get("data file", header.get("datafile")) is not None:
         raise FormatError(
             f"{p} keeps its voxels in a separate file (data file: "
@@ -275,7 +330,7 @@ def _axes(p: Path, header: Mapping[str, Any]) -> tuple[list[int], int | None]:
         )
     directions = header.get("space directions")
     if directions is not None:
-        rows = np.asarray(directions, dtype=np.float64)
+        rows = _direction_rows(p, directions, dimension)
         listed = [a for a in range(4) if not np.all(np.isfinite(rows[a]))]
     else:
         kinds = [str(k).lower() for k in header.get("kinds", [])]
@@ -344,9 +399,7 @@ def _geometry(
             raise GeometryError(f"{p}: space dimension {dimension} is not 3")
     if directions is None:
         raise GeometryError(f"{p}: 'space' is given without 'space directions'")
-    rows = np.asarray(directions, dtype=np.float64)
-    if rows.ndim != 2 or rows.shape[1] != 3:
-        raise GeometryError(f"{p}: 'space directions' must hold 3-D vectors")
+    rows = _direction_rows(p, directions, int(header["dimension"]))
     affine[:3, :3] = rows[list(spatial)].T
     given = header.get("space origin")
     if given is not None:
@@ -368,6 +421,19 @@ def _geometry(
     return affine, frame
 
 
+def _direction_rows(p: Path, directions: Any, dimension: int) -> NDArray[np.float64]:
+    """``space directions`` as one 3-D row per axis (NaN for ``none``)."""
+    rows = np.asarray(directions, dtype=np.float64)
+    if rows.ndim != 2 or rows.shape[1] != 3:
+        raise GeometryError(f"{p}: 'space directions' must hold 3-D vectors (x,y,z)")
+    if rows.shape[0] != dimension:
+        raise GeometryError(
+            f"{p}: 'space directions' lists {rows.shape[0]} vectors for a {dimension}-D image; "
+            "it needs one per axis ('none' for a list axis)"
+        )
+    return rows
+
+
 def _per_axis(values: Any, spatial: Sequence[int], default: float) -> NDArray[np.float64]:
     out = np.full(3, default)
     if values is None:
@@ -386,7 +452,9 @@ def _segments(
     for key, value in header.items():
         match = _SEGMENT_KEY.match(str(key))
         if match:
-            fields.setdefault(int(match.group(1)), {})[match.group(2)] = str(value).strip()
+            fields.setdefault(int(match.group(1)), {})[match.group(2)] = unescape(
+                str(value).strip()
+            )
     out = []
     for index in sorted(fields):
         own = fields[index]
@@ -402,6 +470,12 @@ def _segments(
                     f"{p}: Segment{index}_{field} must be an integer (got {text!r})"
                 ) from None
 
+        label_value = number("LabelValue", 1)
+        if not 0 <= label_value < 2**31:
+            raise FormatError(
+                f"{p}: Segment{index}_LabelValue must be a voxel value from 0 to 2^31 - 1 "
+                f"(got {label_value})"
+            )
         layer = number("Layer", index if four_d else 0)
         if not 0 <= layer < layers:
             raise FormatError(
@@ -415,9 +489,10 @@ def _segments(
                 id=seg_id,
                 name=own.get("Name") or seg_id,
                 colour=_colour(p, index, own.get("Color", own.get("DefaultColor"))),
-                label_value=number("LabelValue", 1),
+                label_value=label_value,
                 layer=layer,
                 extent=_extent(p, index, own.get("Extent")),
+                label_value_given=bool(own.get("LabelValue")),
             )
         )
     return tuple(out)

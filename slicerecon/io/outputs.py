@@ -3,7 +3,8 @@
 Every ``slicerecon run`` writes the reconstructed label map twice, on the
 input's grid with the input's label values:
 
-* ``labels.nii.gz`` (NIfTI, RAS: :func:`slicerecon.io.labelmap.write_label_map`);
+* ``labels.nii.gz`` (NIfTI, RAS: :func:`slicerecon.io.labelmap.write_label_map`;
+  with the sform/qform codes of a NIfTI input, given as ``source``);
 * ``labels.seg.nrrd`` (a 3D Slicer segmentation with the structures' names and
   colours: :func:`slicerecon.io.nrrd_writer.write_seg_nrrd`).
 
@@ -20,8 +21,11 @@ and for an RTSTRUCT input
   (:func:`slicerecon.io.rtstruct_writer.write_rtstruct`).
 
 A DICOM output that cannot be made (the series lacks the UIDs a derived object
-refers to, the label map is not on its grid) is logged as a warning and
-listed as skipped; the other outputs stand.
+refers to, mixes studies or patients, the label map is not on its grid; an
+RTSTRUCT input of another patient or frame of reference than the series beside
+it) is logged as a warning and listed as skipped; the other outputs stand. No
+DICOM object is ever written labelled with another patient, or referring to
+images in another frame of reference, than its input.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,8 +44,12 @@ from ..errors import SlicereconError
 from ..labels import LPS_TO_RAS, Structure
 from .dicom.seg_writer import write_seg
 from .labelmap import write_label_map
+from .limits import reading, writing
 from .nrrd_writer import write_seg_nrrd
 from .rtstruct_writer import write_rtstruct
+
+if TYPE_CHECKING:
+    from .dicom.derived import SourceSeries
 
 __all__ = ["LabelOutputs", "dicom_image_series", "write_label_outputs"]
 
@@ -108,6 +117,7 @@ def write_label_outputs(
     series: str | os.PathLike[str] | None = None,
     rtstruct: str | os.PathLike[str] | None = None,
     allow_irregular: bool = False,
+    source: str | os.PathLike[str] | None = None,
 ) -> LabelOutputs:
     """Write the reconstructed label map in every format the input's workflow reads.
 
@@ -131,6 +141,11 @@ def write_label_outputs(
         (needs ``series``), copying its identifiers, ROI names and colours.
     allow_irregular : bool
         Accept uneven slice spacing in ``series`` (``--allow-irregular``).
+    source : path-like, optional
+        The input file. When it is NIfTI and the labels are on its grid,
+        ``labels.nii.gz`` keeps its sform and qform codes (an MNI-coded input
+        stays in MNI space; :func:`slicerecon.io.nifti.nifti_xform_codes`);
+        otherwise both are 1 (scanner anatomical).
 
     Returns
     -------
@@ -145,8 +160,14 @@ def write_label_outputs(
 
     out = Path(outdir)
     result = LabelOutputs()
+    codes = None
+    if source is not None:
+        from .nifti import nifti_xform_codes
+
+        ras = np.asarray(affine, dtype=np.float64)
+        codes = nifti_xform_codes(source, affine=LPS_TO_RAS @ ras if coordinates == "LPS" else ras)
     result.written["labels"] = write_label_map(
-        labels, affine, out / "labels.nii.gz", coordinates=coordinates
+        labels, affine, out / "labels.nii.gz", coordinates=coordinates, xform_codes=codes
     )
     result.written["seg_nrrd"] = write_seg_nrrd(
         labels, affine, list(structures), out / "labels.seg.nrrd", coordinates=coordinates
@@ -162,26 +183,59 @@ def write_label_outputs(
     if not chosen:
         result.skipped["seg"] = "no structure holds a voxel"
         return result
+    wanted = ["seg"] + (["rtstruct"] if rtstruct is not None else [])
+    try:
+        with reading(series):
+            images = _source_series(series, rtstruct, allow_irregular)
+    except SlicereconError as exc:
+        logger.warning("%s not written: %s", " and ".join(f"{w}.dcm" for w in wanted), exc)
+        result.skipped.update(dict.fromkeys(wanted, str(exc)))
+        return result
 
     try:
-        result.written["seg"] = write_seg(
-            labels, lps, chosen, series, out / "seg.dcm", allow_irregular=allow_irregular
-        )
+        with writing(out / "seg.dcm"):
+            result.written["seg"] = write_seg(labels, lps, chosen, images, out / "seg.dcm")
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
     if rtstruct is not None:
         try:
-            result.written["rtstruct"] = write_rtstruct(
-                labels,
-                lps,
-                list(structures),
-                series,
-                out / "rtstruct.dcm",
-                reference=rtstruct,
-                allow_irregular=allow_irregular,
-            )
+            with writing(out / "rtstruct.dcm"):
+                result.written["rtstruct"] = write_rtstruct(
+                    labels,
+                    lps,
+                    list(structures),
+                    images,
+                    out / "rtstruct.dcm",
+                    reference=rtstruct,
+                )
         except SlicereconError as exc:
             logger.warning("rtstruct.dcm not written: %s", exc)
             result.skipped["rtstruct"] = str(exc)
     return result
+
+
+def _source_series(
+    series: str | os.PathLike[str],
+    rtstruct: str | os.PathLike[str] | None,
+    allow_irregular: bool,
+) -> SourceSeries:
+    """The image series the DICOM outputs refer to, checked against the input RTSTRUCT.
+
+    Raises
+    ------
+    SlicereconError
+        The series cannot be read (several studies or patients, missing UIDs,
+        ...), or the RTSTRUCT is of another patient or frame of reference
+        (:func:`~slicerecon.io.dicom.derived.check_same_subject`).
+    """
+    from .dicom.derived import check_same_subject, load_source_series
+    from .dicom.sniff import read_dicom_header
+    from .limits import reading
+
+    source = load_source_series(series, allow_irregular=allow_irregular)
+    if rtstruct is not None:
+        with reading(rtstruct):
+            reference = read_dicom_header(Path(rtstruct), stop_before_pixels=True)
+            check_same_subject(reference, source, what=f"the RTSTRUCT {Path(rtstruct)}")
+    return source

@@ -63,6 +63,8 @@ from .atomic import atomic_path
 from .dicom.derived import (
     SourceSeries,
     check_label_map,
+    check_same_subject,
+    dicom_name,
     display_colour,
     labels_on_series,
     load_source_series,
@@ -189,6 +191,12 @@ def _read_reference(reference: Any) -> Any:
     return ds
 
 
+def _reference_name(reference: Any) -> str:
+    if isinstance(reference, (str, os.PathLike)):
+        return f"the reference RTSTRUCT {Path(reference)}"
+    return "the reference RTSTRUCT"
+
+
 def _reference_rois(
     ref: Any,
 ) -> tuple[dict[int, Any], dict[int, tuple[int, int, int]], dict[int, Any]]:
@@ -217,8 +225,15 @@ def _reference_rois(
 
 def _copy_identifiers(ds: Any, source: Any) -> None:
     for keyword in (*_PATIENT, *_STUDY):
-        if keyword in source and source[keyword].value not in (None, ""):
-            setattr(ds, keyword, source[keyword].value)
+        try:
+            value = source[keyword].value if keyword in source else None
+        except PARSE_ERRORS as exc:
+            raise FormatError(
+                f"{keyword} of {getattr(source, 'filename', None) or 'the source'} cannot be "
+                f"read ({type(exc).__name__}: {exc})"
+            ) from exc
+        if value not in (None, ""):
+            setattr(ds, keyword, value)
         elif keyword in _TYPE2:
             setattr(ds, keyword, "")
 
@@ -227,7 +242,7 @@ def write_rtstruct(
     labels: ArrayLike,
     affine: ArrayLike,
     structures: Sequence[Structure],
-    source_images: str | os.PathLike[str] | Sequence[Any],
+    source_images: str | os.PathLike[str] | Sequence[Any] | SourceSeries,
     path: str | os.PathLike[str],
     *,
     reference: Any = None,
@@ -250,18 +265,21 @@ def write_rtstruct(
     structures : sequence of Structure
         One per label value (every non-zero value of ``labels`` needs one), in
         the order the ROIs are listed. ROINumber is the value; ROIName the
-        name (else ``"Structure <value>"``); ROIDisplayColor the colour (else
+        name (else ``"Segment_<value>"``, as in every output:
+        :func:`~slicerecon.io.dicom.derived.dicom_name`); ROIDisplayColor the colour (else
         one of :data:`~slicerecon.labels.DEFAULT_COLOURS`). A
         structure without voxels becomes an ROI without contours.
-    source_images : path-like or sequence of pydicom.Dataset or path-like
+    source_images : path-like, sequence of pydicom.Dataset or path-like, or SourceSeries
         The image series: its directory, or its images (datasets, headers
-        suffice, or file paths) in any order.
+        suffice, or file paths) in any order, or the series already loaded
+        (:func:`~slicerecon.io.dicom.derived.load_source_series`).
     path : path-like
         Output file, written atomically (temporary file, then rename).
     reference : pydicom.Dataset or path-like, optional
         The RTSTRUCT the structures were read from: its patient and study
         identifiers are copied, and its ROIName, ROIDisplayColor,
         ROIDescription and RT ROI observation win for the ROINumbers it has.
+        It must be of the images' patient (PatientID) and frame of reference.
     allow_irregular : bool
         Accept an image series with uneven slice spacing (``--allow-irregular``).
     series_number : int
@@ -281,8 +299,10 @@ def write_rtstruct(
     OptionError, LabelError
         Bad labels or structures (:func:`~slicerecon.io.dicom.derived.check_label_map`).
     InputError, FormatError, GeometryError
-        The image series or the reference cannot be read, or the label map is
-        not on the series' grid.
+        The image series or the reference cannot be read, the reference is of
+        another patient or frame of reference than the images
+        (:func:`~slicerecon.io.dicom.derived.check_same_subject`), or the label
+        map is not on the series' grid.
     EmptyMaskError
         No structure holds a voxel on the series' images.
     """
@@ -292,6 +312,8 @@ def write_rtstruct(
     values, aff, chosen = check_label_map(labels, affine, structures)
     series = load_source_series(source_images, allow_irregular=allow_irregular)
     ref = None if reference is None else _read_reference(reference)
+    if ref is not None:
+        check_same_subject(ref, series, what=_reference_name(reference))
     on_grid = labels_on_series(values, aff, series)
 
     ref_rois, ref_colours, ref_observations = (
@@ -333,23 +355,10 @@ def write_rtstruct(
     ds.StructureSetDate, ds.StructureSetTime = date, time
 
     frame_uid = series.frame_of_reference_uid
+    # the Frame of Reference module (Type 1 UID, Type 2 indicator) of the RT Structure Set IOD
+    ds.FrameOfReferenceUID = frame_uid
+    ds.PositionReferenceIndicator = str(series.first.get("PositionReferenceIndicator", "") or "")
     if ref is not None:
-        ref_frames = {
-            str(item.get("FrameOfReferenceUID", ""))
-            for item in ref.get("ReferencedFrameOfReferenceSequence", [])
-        }
-        ref_frames |= {
-            str(item.get("ReferencedFrameOfReferenceUID", ""))
-            for item in ref.get("StructureSetROISequence", [])
-        }
-        ref_frames.discard("")
-        if ref_frames and frame_uid not in ref_frames:
-            logger.warning(
-                "the reference RTSTRUCT refers to frame of reference %s, the images "
-                "are in %s; the contours are written in the images' frame",
-                ", ".join(sorted(ref_frames)),
-                frame_uid,
-            )
         predecessor = Dataset()
         predecessor.ReferencedSOPClassUID = str(ref.get("SOPClassUID", RTSTRUCT_SOP_CLASS_UID))
         predecessor.ReferencedSOPInstanceUID = str(ref.get("SOPInstanceUID", ""))
@@ -376,7 +385,7 @@ def write_rtstruct(
         number = structure.value
         ref_roi = ref_rois.get(number)
         ref_name = str(ref_roi.get("ROIName", "") or "") if ref_roi is not None else ""
-        name = ref_name or structure.name.strip() or f"Structure {number}"
+        name = ref_name or dicom_name(structure)
         colour = ref_colours.get(number) or display_colour(structure, index)
 
         roi = Dataset()

@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import MemoryBudgetError
+from ..io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget
 from ..sections import Volume
 from .inputs import (
     DEFAULT_N_POINTS,
@@ -99,6 +101,7 @@ def evaluate(
     resolution: int = DEFAULT_RESOLUTION,
     voxel_size: float | None = None,
     pred_occupancy: Volume | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> Metrics:
     """Every metric of ``pred`` against ``gt`` from one grid and one set of samples.
 
@@ -124,6 +127,12 @@ def evaluate(
         (:attr:`slicerecon.reconstruct.Reconstruction.occupancy`). It is used
         instead of rasterizing ``pred`` (the same voxels, without the cost);
         ignored when the lattices differ.
+    memory_budget_gb : float, optional
+        Refuse an evaluation grid whose arrays (masks, surface shells, distance
+        transforms) would not fit this budget, GiB, before allocating them;
+        ``--max-memory`` (:func:`slicerecon.io.limits.check_grid`). An
+        allocation the machine refuses within the budget is a
+        :class:`~slicerecon.errors.MemoryBudgetError` too.
 
     Returns
     -------
@@ -135,7 +144,43 @@ def evaluate(
         If a shape is of the wrong type, empty or not a closed mesh.
     OptionError
         If an option is out of range.
+    MemoryBudgetError
+        If the evaluation grid exceeds ``memory_budget_gb``, or the machine
+        runs out of memory.
     """
+    try:
+        return _evaluate(
+            pred,
+            gt,
+            n_points=n_points,
+            seed=seed,
+            tau=tau,
+            surface_tolerance_mm=surface_tolerance_mm,
+            resolution=resolution,
+            voxel_size=voxel_size,
+            pred_occupancy=pred_occupancy,
+            memory_budget_gb=check_budget(memory_budget_gb),
+        )
+    except MemoryError as exc:
+        raise MemoryBudgetError(
+            "computing the metrics ran out of memory: this machine has less free memory than "
+            "the budget (--max-memory) allows; lower --max-memory, or free memory"
+        ) from exc
+
+
+def _evaluate(
+    pred: Shape,
+    gt: Shape,
+    *,
+    n_points: int,
+    seed: int | np.random.Generator,
+    tau: float,
+    surface_tolerance_mm: float | None,
+    resolution: int,
+    voxel_size: float | None,
+    pred_occupancy: Volume | None,
+    memory_budget_gb: float,
+) -> Metrics:
     n = check_n_points(n_points)
     tau = check_tau(tau)
     tol = check_positive(surface_tolerance_mm, "surface_tolerance_mm")
@@ -145,7 +190,14 @@ def evaluate(
     p, g = metric_inputs(pred, gt)
 
     occ = occupancy_grid(
-        p, g, resolution=res, voxel_size=size, margin_mm=tol or 0.0, pred_occupancy=pred_occupancy
+        p,
+        g,
+        resolution=res,
+        voxel_size=size,
+        margin_mm=tol or 0.0,
+        pred_occupancy=pred_occupancy,
+        memory_budget_gb=memory_budget_gb,
+        shell_tolerance_mm=tol or 0.0,
     )
     tol_mm = tol if tol is not None else float(occ.spacing.max())
     dist = distances_between(p, g, n_points=n, seed=seed)

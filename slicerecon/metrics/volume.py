@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import OptionError
+from ..io.limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid
 from ..sections import Volume
 from .inputs import (
     CUBE_CORNERS,
@@ -35,6 +36,7 @@ def occupancy(
     resolution: int = DEFAULT_RESOLUTION,
     voxel_size: float | None = None,
     margin_mm: float = 0.0,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> Occupancy:
     """Rasterize a prediction and a ground truth on one common evaluation grid.
 
@@ -51,6 +53,9 @@ def occupancy(
     margin_mm : float, optional
         Background kept around both shapes, mm. At least one voxel plus one
         largest voxel side is always kept.
+    memory_budget_gb : float, optional
+        Refuse a grid whose masks would not fit this budget, GiB, before
+        allocating them (:func:`slicerecon.io.limits.check_grid`).
 
     Returns
     -------
@@ -67,6 +72,8 @@ def occupancy(
     OptionError
         If an option is out of range, or the grid would be unreasonably large
         (e.g. shapes in different world coordinates).
+    MemoryBudgetError
+        If the grid exceeds ``memory_budget_gb``.
     """
     p, g = metric_inputs(pred, gt)
     return occupancy_grid(
@@ -75,6 +82,7 @@ def occupancy(
         resolution=check_resolution(resolution),
         voxel_size=check_positive(voxel_size, "voxel_size"),
         margin_mm=_check_margin(margin_mm),
+        memory_budget_gb=check_budget(memory_budget_gb),
     )
 
 
@@ -86,6 +94,51 @@ def _check_margin(margin_mm: float) -> float:
     return value
 
 
+OCCUPANCY_BYTES_PER_VOXEL = 8
+"""Bytes per voxel of the evaluation grid for occupancy alone (both masks, resampling)."""
+SHELL_BYTES_PER_VOXEL = 32
+"""Bytes per voxel of :func:`evaluate` when the surface shells are shifted views
+(measured with tracemalloc: 22-24 B, rounded up)."""
+SHELL_EDT_BYTES_PER_VOXEL = 96
+"""Bytes per voxel of :func:`evaluate` when the surface shells need distance
+transforms (a tolerance spanning many voxels; measured 67 B, rounded up)."""
+
+
+def _shell_needs_edt(spacing: NDArray[np.float64], tol: float) -> bool:
+    """True when :func:`_shell` uses distance transforms (more than 125 offsets)."""
+    reach = np.floor(tol * (1.0 + 1e-9) / np.asarray(spacing, dtype=np.float64))
+    if float(np.prod(2 * reach + 1)) > 1e6:
+        return True
+    offsets = np.stack(
+        np.meshgrid(*(np.arange(-r, r + 1) for r in reach.astype(np.int64)), indexing="ij"),
+        axis=-1,
+    )
+    inside = np.sqrt(((offsets * spacing) ** 2).sum(axis=-1)) <= tol * (1.0 + 1e-9)
+    return int(inside.sum()) > 125
+
+
+def _check_budget(
+    shape: tuple[int, int, int],
+    affine: NDArray[np.float64],
+    shell_tolerance_mm: float | None,
+    memory_budget_gb: float,
+) -> None:
+    """Refuse an evaluation grid whose arrays would not fit the memory budget."""
+    per_voxel = float(OCCUPANCY_BYTES_PER_VOXEL)
+    if shell_tolerance_mm is not None:
+        spacing = np.linalg.norm(affine[:3, :3], axis=0)
+        tol = shell_tolerance_mm or float(spacing.max())
+        edt = _shell_needs_edt(spacing, tol)
+        per_voxel = SHELL_EDT_BYTES_PER_VOXEL if edt else SHELL_BYTES_PER_VOXEL
+    check_grid(
+        shape,
+        what="the evaluation grid of the metrics (the ground truth's voxels, with a margin of "
+        "the surface tolerance around both shapes)",
+        memory_budget_gb=memory_budget_gb,
+        bytes_per_voxel=per_voxel,
+    )
+
+
 def occupancy_grid(
     pred: MetricInput,
     gt: MetricInput,
@@ -94,7 +147,20 @@ def occupancy_grid(
     voxel_size: float | None,
     margin_mm: float,
     pred_occupancy: Volume | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+    shell_tolerance_mm: float | None = None,
 ) -> Occupancy:
+    """Both shapes on one evaluation grid, the grid checked against the memory budget first.
+
+    ``shell_tolerance_mm``: the tolerance the surface shells will be computed
+    with (0 for the default, the largest voxel side; None when no shell is
+    computed): it decides the memory per voxel of the check.
+
+    Raises
+    ------
+    MemoryBudgetError
+        The grid's arrays would exceed ``memory_budget_gb``.
+    """
     if np.any(pred.bounds_mm[0] > gt.bounds_mm[1]) or np.any(gt.bounds_mm[0] > pred.bounds_mm[1]):
         logger.warning(
             "the bounding boxes of prediction and ground truth do not overlap; "
@@ -102,11 +168,13 @@ def occupancy_grid(
         )
     if isinstance(gt.shape, Volume):
         affine, shape, offset = _lattice_grid(gt.shape, pred.bounds_mm, margin_mm)
+        _check_budget(shape, affine, shell_tolerance_mm, memory_budget_gb)
         gt_mask = place(gt.shape.mask, offset, shape)
     else:
         affine, shape = _isotropic_grid(
             np.concatenate([pred.bounds_mm, gt.bounds_mm]), resolution, voxel_size, margin_mm
         )
+        _check_budget(shape, affine, shell_tolerance_mm, memory_budget_gb)
         gt_mask = gt.rasterize(affine, shape)
     known = _on_lattice(pred_occupancy, affine)
     if known is not None and isinstance(gt.shape, Volume):
@@ -348,6 +416,7 @@ def surface_iou(
     tolerance_mm: float | None = None,
     resolution: int = DEFAULT_RESOLUTION,
     voxel_size: float | None = None,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
 ) -> float:
     """Intersection over union of the two surface shells on the evaluation grid.
 
@@ -366,12 +435,19 @@ def surface_iou(
         the boundary, on either side, is in the shell).
     resolution, voxel_size
         Evaluation grid when ``gt`` is a mesh; see :func:`occupancy`.
+    memory_budget_gb : float, optional
+        Refuse a grid whose shells would not fit this budget, GiB.
 
     Returns
     -------
     float
         In [0, 1]; 1 for identical occupancies, 0 when the surfaces are more
         than about ``2 * tolerance_mm`` apart everywhere.
+
+    Raises
+    ------
+    MemoryBudgetError
+        If the evaluation grid exceeds ``memory_budget_gb``.
     """
     tol = check_positive(tolerance_mm, "tolerance_mm")
     p, g = metric_inputs(pred, gt)
@@ -382,5 +458,7 @@ def surface_iou(
         resolution=check_resolution(resolution),
         voxel_size=check_positive(voxel_size, "voxel_size"),
         margin_mm=margin,
+        memory_budget_gb=check_budget(memory_budget_gb),
+        shell_tolerance_mm=margin,
     )
     return occupancy_surface_iou(occ, tol if tol is not None else float(occ.spacing.max()))

@@ -134,9 +134,11 @@ def _file_meta(sop_class: str, sop_instance: str) -> FileMetaDataset:
     return meta
 
 
-def _patient_study(ds: Dataset, study_uid: str, frame_of_reference_uid: str) -> None:
+def _patient_study(
+    ds: Dataset, study_uid: str, frame_of_reference_uid: str, patient_id: str = "SLICERECON-TEST"
+) -> None:
     ds.PatientName = "Synthetic^Phantom"
-    ds.PatientID = "SLICERECON-TEST"
+    ds.PatientID = patient_id
     ds.PatientBirthDate = ""
     ds.PatientSex = "O"
     ds.StudyInstanceUID = study_uid
@@ -175,6 +177,8 @@ def write_series(
     series_uid: str | None = None,
     study_uid: str | None = None,
     frame_of_reference_uid: str | None = None,
+    series_description: str | None = None,
+    patient_id: str = "SLICERECON-TEST",
 ) -> list[Path]:
     """Write ``mask`` as a single-frame image series, one file per slice.
 
@@ -206,6 +210,10 @@ def write_series(
     series_uid, study_uid, frame_of_reference_uid : str, optional
         UIDs to use (default: fresh ones). Give the same ``study_uid`` and
         ``frame_of_reference_uid`` to put two series in one study.
+    series_description : str, optional
+        SeriesDescription (default: none written).
+    patient_id : str
+        PatientID.
 
     Returns
     -------
@@ -262,8 +270,10 @@ def write_series(
         ds.SOPClassUID = sop_class
         ds.SOPInstanceUID = sop_uid
         ds.Modality = modality
-        _patient_study(ds, study_uid, frame_of_reference_uid)
+        _patient_study(ds, study_uid, frame_of_reference_uid, patient_id)
         ds.SeriesInstanceUID = series_uid
+        if series_description is not None:
+            ds.SeriesDescription = series_description
         ds.SeriesNumber = 1
         ds.InstanceNumber = int(numbers[k])
         ds.ImageType = ["DERIVED", "PRIMARY"]
@@ -496,22 +506,45 @@ def write_rtstruct(
     *,
     modality: str = "RTSTRUCT",
     preamble: bool = True,
+    on_series: str | Path | None = None,
+    patient_id: str | None = None,
 ) -> Path:
     """Write an RTSTRUCT; ``rois`` maps (ROINumber, ROIName) to contour items, or None
     for an ROI without a ContourSequence. ``preamble=False`` writes a bare dataset
-    without the 128-byte preamble and file meta, as older systems do."""
+    without the 128-byte preamble and file meta, as older systems do.
+
+    ``on_series`` (a directory written by :func:`write_series`): take its patient,
+    study and FrameOfReferenceUID, as an RTSTRUCT drawn on that series has; otherwise
+    they are fresh. ``patient_id`` overrides the PatientID. Names that are not ASCII
+    are written in UTF-8 (SpecificCharacterSet ISO_IR 192)."""
     sop_uid = generate_uid()
     ds = Dataset()
     ds.file_meta = _file_meta(RTSTRUCT_STORAGE, sop_uid)
+    if any(not name.isascii() for _, name in rois):
+        ds.SpecificCharacterSet = "ISO_IR 192"
     ds.SOPClassUID = RTSTRUCT_STORAGE
     ds.SOPInstanceUID = sop_uid
     ds.Modality = modality
     ds.PatientName = "Synthetic^Phantom"
     ds.PatientID = "SLICERECON-TEST"
     ds.StudyInstanceUID = generate_uid()
+    frame_uid = generate_uid()
+    if on_series is not None:
+        image = next(
+            ds
+            for ds in (
+                pydicom.dcmread(f, stop_before_pixels=True)
+                for f in sorted(Path(on_series).glob("*.dcm"))
+            )
+            if "ImagePositionPatient" in ds
+        )
+        ds.PatientName, ds.PatientID = image.PatientName, image.PatientID
+        ds.StudyInstanceUID = image.StudyInstanceUID
+        frame_uid = image.FrameOfReferenceUID
+    if patient_id is not None:
+        ds.PatientID = patient_id
     ds.SeriesInstanceUID = generate_uid()
     ds.StructureSetLabel = "test"
-    frame_uid = generate_uid()
     roi_items, contour_items = [], []
     for (number, name), contours in rois.items():
         roi = Dataset()

@@ -11,7 +11,9 @@ truncation, runs of 0x00 / 0xFF, interesting integers), structure-aware
 fields, sequences, transfer syntax and the files of a series; JSON nodes: deep
 nesting, huge integers, NaN/Infinity, 1e308 coordinates, wrong types, missing
 keys; CSV cells, columns and lines; VTI attributes and array payloads: text in
-numbers, absurd spacing / extent / origin, broken base64 and zlib headers), and
+numbers, absurd spacing / extent / origin, broken base64 and zlib headers; NRRD
+header fields (type, sizes, encoding, space directions, line and byte skips,
+3D Slicer ``Segment<N>_*`` fields) and the voxel data after the header), and
 valid-but-awkward replacements (``fuzz_seeds.write_edge_case``).
 """
 
@@ -1208,6 +1210,114 @@ def _vti_mutation(rng: np.random.Generator, path: Path) -> str:
     return detail
 
 
+# ----------------------------------------------------------------------------- NRRD
+_NRRD_VALUES: dict[str, tuple[str, ...]] = {
+    "type": ("uchar", "short", "ushort", "int", "uint", "int64", "float", "double", "block", "?"),
+    "dimension": ("0", "1", "2", "3", "4", "5", "-3", "99999999999"),
+    "encoding": ("raw", "gzip", "gz", "bzip2", "bz2", "ascii", "hex", "txt", "zip", ""),
+    "endian": ("little", "big", "middle", ""),
+    "sizes": ("1 1 1", "0 4 4", "-4 4 4", "4 4", "4 4 4 4", "65536 65536 65536", "1 1 99999999999"),
+    "space": (
+        "left-posterior-superior",
+        "right-anterior-superior",
+        "left-anterior-superior",
+        "scanner-xyz",
+        "3D-right-handed",
+        "right-anterior-superior-time",
+        "nowhere",
+    ),
+    "space directions": (
+        "(1,0,0) (0,1,0)",
+        "(1,0,0) (0,1,0) (0,0,1) (1,1,1)",
+        "none (1,0,0) (0,1,0)",
+        "(0,0,0) (0,1,0) (0,0,1)",
+        "(nan,0,0) (0,1,0) (0,0,1)",
+        "(1e300,0,0) (0,1,0) (0,0,1)",
+        "(1,0) (0,1) (0,0)",
+        "(1,0,0) (1,0,0) (0,0,1)",
+        "none none none",
+    ),
+    "space origin": ("(0,0,0)", "(nan,0,0)", "(1e308,0,0)", "(0,0)", "none"),
+    "kinds": ("domain domain domain", "list domain domain domain", "space space", "???"),
+    "space units": ('"mm" "mm" "mm"', '"cm" "cm" "cm"', '"furlong" "mm" "mm"', '"mm"'),
+    "spacings": ("1 1 1", "0 1 1", "nan 1 1", "1e300 1 1", "1 1"),
+    "line skip": ("0", "1", "3", "-1", "1000000000", "1" * 31),
+    "byte skip": ("0", "-1", "5", "-2", "1000000000", "9" * 25),
+}
+"""Interesting values per NRRD field (any field may also get one of :data:`_NRRD_ANY`)."""
+_NRRD_ANY = ("", "0", "-1", "nan", "1e308", "1" * 31, "abc", "Tête", "\\", "(1,2,3)")
+_SEGMENT_FIELDS: dict[str, tuple[str, ...]] = {
+    "LabelValue": ("0", "1", "2", "5", "255", "256", "-1", "99999999999", "one", ""),
+    "Layer": ("0", "1", "2", "-1", "7", ""),
+    "Extent": ("0 -1 0 -1 0 -1", "0 0 0 0 0 0", "1 3 1 3 1 3", "0 1", "-5 99 -5 99 -5 99", ""),
+    "Name": ("", "Tête fémorale", "a\\nb", "x" * 300, "\\\\"),
+    "Color": ("1 0 0", "nan 0 0", "2 -1 0", "", "1 0"),
+    "ID": ("", "Segment_1", "dup"),
+}
+
+
+def _nrrd_parts(data: bytes) -> tuple[list[str], bytes]:
+    head, sep, body = data.partition(b"\n\n")
+    return head.decode("utf-8", "replace").split("\n"), body if sep else b""
+
+
+def _nrrd_header_mutation(rng: np.random.Generator, lines: list[str]) -> tuple[list[str], str]:
+    fields = [
+        i for i, line in enumerate(lines) if i > 0 and not line.startswith("#") and ":" in line
+    ]
+    r = rng.random()
+    if r < 0.12 and fields:
+        i = int(rng.choice(fields))
+        return lines[:i] + lines[i + 1 :], f"delete {lines[i].split(':')[0]!r}"
+    if r < 0.2 and fields:
+        i = int(rng.choice(fields))
+        return lines[: i + 1] + lines[i:], f"duplicate {lines[i].split(':')[0]!r}"
+    if r < 0.35:
+        key = str(rng.choice(["line skip", "byte skip", "space units", "data file", "endian"]))
+        values = _NRRD_VALUES.get(key, ("x.raw", "/etc/hostname"))
+        line = f"{key}: {rng.choice(values)}"
+        at = int(rng.integers(1, len(lines) + 1))
+        return lines[:at] + [line] + lines[at:], f"add {line!r}"
+    if r < 0.45:
+        n, field = int(rng.integers(0, 5)), str(rng.choice(list(_SEGMENT_FIELDS)))
+        line = f"Segment{n}_{field}:={rng.choice(_SEGMENT_FIELDS[field])}"
+        return lines + [line], f"add {line!r}"
+    if not fields:
+        return lines, "no field"
+    i = int(rng.choice(fields))
+    key, sep, _ = lines[i].partition(":=" if ":=" in lines[i] else ":")
+    segment = re.match(r"Segment\d+_(\w+)$", key)
+    if segment and segment.group(1) in _SEGMENT_FIELDS and rng.random() < 0.8:
+        value = str(rng.choice(_SEGMENT_FIELDS[segment.group(1)]))
+    elif key in _NRRD_VALUES and rng.random() < 0.8:
+        value = str(rng.choice(_NRRD_VALUES[key]))
+    else:
+        value = str(rng.choice(_NRRD_ANY))
+    sep = sep + ("" if sep == ":=" else " ")
+    lines = [*lines[:i], f"{key}{sep}{value}", *lines[i + 1 :]]
+    return lines, f"{key} = {value!r}"[:120]
+
+
+def _nrrd_mutation(rng: np.random.Generator, path: Path) -> str:
+    data = path.read_bytes()
+    lines, body = _nrrd_parts(data)
+    r = rng.random()
+    if r < 0.6:
+        lines, detail = _nrrd_header_mutation(rng, lines)
+        detail = f"nrrd.header:{detail}"
+    elif r < 0.85 and body:
+        name = str(rng.choice(list(BYTE_OPS)))
+        body, detail = BYTE_OPS[name](rng, body)
+        detail = f"nrrd.data.{name}:{detail}"
+    else:
+        name = str(rng.choice(list(BYTE_OPS)))
+        data, detail = BYTE_OPS[name](rng, data)
+        path.write_bytes(data)
+        return f"bytes.{name}:{detail}"
+    path.write_bytes(("\n".join(lines) + "\n\n").encode("utf-8") + body)
+    return detail
+
+
 # ----------------------------------------------------------------------------- mutants
 def _mutate(rng: np.random.Generator, seed: Seed, path: Path) -> str:
     fmt = seed.format
@@ -1223,6 +1333,8 @@ def _mutate(rng: np.random.Generator, seed: Seed, path: Path) -> str:
         return _json_mutation(rng, path)
     if fmt == "csv":
         return _csv_mutation(rng, path)
+    if fmt in ("nrrd", "seg-nrrd"):
+        return _nrrd_mutation(rng, path)
     return _vti_mutation(rng, path)
 
 

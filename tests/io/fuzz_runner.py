@@ -23,7 +23,19 @@ dies or hangs. Per case, the outcome is one of :data:`KINDS`:
 ``crash``
     the worker died (a signal, e.g. SIGSEGV, or an exit).
 
-The last four are failures. Used by ``tests/test_fuzz.py`` and
+Through the command line (``mode="cli"``: each mutant goes through ``slicerecon
+run`` and ``slicerecon info`` in the worker, as the console script runs them,
+stdout and stderr captured down to the file descriptors), two more:
+
+``warning``
+    a Python ``warnings`` line (``file:line: UserWarning: ...``) reached stderr;
+``unclean``
+    an exit code other than 0 and 2, a refusal (exit 2) that is not exactly one
+    ``error:`` line, or stray lines on stderr after a success.
+
+``escape`` is then a traceback (an exception out of ``main``), and ``timeout``
+also a command that took longer than its limit (20 s by default). Every kind
+but ``ok`` and ``error`` is a failure. Used by ``tests/test_fuzz.py`` and
 ``benchmarks/fuzz_inputs.py``.
 """
 
@@ -32,6 +44,7 @@ from __future__ import annotations
 import json
 import os
 import queue
+import re
 import selectors
 import signal
 import subprocess
@@ -46,6 +59,7 @@ from typing import Any, NamedTuple
 __all__ = [
     "FAILURES",
     "KINDS",
+    "MODES",
     "Outcome",
     "failure_groups",
     "failure_report",
@@ -54,10 +68,16 @@ __all__ = [
     "table",
 ]
 
-KINDS = ("ok", "error", "escape", "memory", "timeout", "crash")
-"""Outcome kinds, in table order."""
-FAILURES = ("escape", "memory", "timeout", "crash")
+KINDS = ("ok", "error", "escape", "memory", "timeout", "crash", "warning", "unclean")
+"""Outcome kinds, in table order (the last two only through the command line)."""
+FAILURES = ("escape", "memory", "timeout", "crash", "warning", "unclean")
 """The outcome kinds that are failures."""
+MODES = ("pipeline", "cli")
+"""What a worker runs: the library pipeline, or ``slicerecon run`` and ``slicerecon info``."""
+_SEVERITY = ("ok", "error", "unclean", "warning", "escape", "memory", "timeout", "crash")
+"""Outcome kinds from the mildest: a mutant's outcome is the worst of its commands'."""
+_WARNING_LINE = re.compile(r"^(?P<where>\S.*?:\d+): (?P<category>[A-Za-z_]*Warning): (?P<text>.*)$")
+"""A line Python's ``warnings`` module prints on stderr (``file:line: Category: message``)."""
 _STARTUP_TIMEOUT = 120.0
 _THREAD_VARIABLES = (
     "OMP_NUM_THREADS",
@@ -146,10 +166,17 @@ def _describe(exc: BaseException) -> dict[str, str]:
 
 def _pipeline(path: str, method: str, pixel_spacing: float | None, budget_gb: float) -> None:
     from slicerecon.io import load_input
+    from slicerecon.io.labelmap import read_label_map
     from slicerecon.reconstruct import prepare_inputs, reconstruct
     from slicerecon.sections import Volume
 
-    data = load_input(path, pixel_spacing=pixel_spacing, memory_budget_gb=budget_gb)
+    # every structure of a label map (a SEG of overlapping segments, a .seg.nrrd of
+    # layers), their union reconstructed; contours through load_input
+    label_map = read_label_map(path, memory_budget_gb=budget_gb)
+    if label_map is not None:
+        data: Any = label_map.union()
+    else:
+        data = load_input(path, pixel_spacing=pixel_spacing, memory_budget_gb=budget_gb)
     if isinstance(data, Volume):
         sections, projections, _ = prepare_inputs(data, slices=6, memory_budget_gb=budget_gb)
     else:
@@ -160,9 +187,102 @@ def _pipeline(path: str, method: str, pixel_spacing: float | None, budget_gb: fl
         reconstruct(sections, projections)
 
 
+def _cli_command(args: list[str], command_timeout: float) -> dict[str, Any]:
+    """Run one ``slicerecon`` command as the console script would; classify what it did."""
+    import contextlib
+    import io
+    import tempfile
+
+    from slicerecon.cli import main
+
+    captured = io.StringIO()
+    start = time.perf_counter()
+    result: dict[str, Any] = {}
+    with tempfile.TemporaryFile() as raw:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(raw.fileno(), 2)  # C-level writes (ITK, libpng, ...) too
+        try:
+            with contextlib.redirect_stderr(captured), contextlib.redirect_stdout(io.StringIO()):
+                code: Any = main(args)
+        except SystemExit as exc:
+            code = exc.code
+        except MemoryError as exc:
+            result = {"kind": "memory", **_describe(exc)}
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # noqa: BLE001 - a traceback is what we look for
+            result = {"kind": "escape", **_describe(exc)}
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        raw.seek(0)
+        text = captured.getvalue() + raw.read().decode("utf-8", "replace")
+    seconds = time.perf_counter() - start
+    lines = [line for line in text.splitlines() if line.strip()]
+    if result:
+        pass
+    elif seconds > command_timeout:
+        result = {"kind": "timeout", "message": f"took {seconds:.1f} s (limit {command_timeout:g})"}
+    elif any(_WARNING_LINE.match(line) for line in lines):
+        found = next(m for m in map(_WARNING_LINE.match, lines) if m)
+        result = {
+            "kind": "warning",
+            "error": found.group("category"),
+            "message": found.group("text")[:400],
+            "where": found.group("where"),
+        }
+    elif code == 0 and not lines:
+        result = {"kind": "ok"}
+    elif code == 2 and len(lines) == 1 and lines[0].startswith("error: "):
+        result = {"kind": "error", "message": lines[0][len("error: ") :][:400]}
+    else:
+        result = {
+            "kind": "unclean",
+            "error": f"exit {code}",
+            "message": " | ".join(lines[:4])[:400],
+        }
+    result["seconds"] = seconds
+    return result
+
+
+def _run_cli(request: dict[str, Any]) -> dict[str, Any]:
+    """``slicerecon run`` then ``slicerecon info`` on one input; the worse outcome of the two."""
+    import shutil
+    import tempfile
+
+    budget = f"{request['budget_gb']:g}"
+    options = ["--planner", "none", "--no-carve"] if request["method"] == "sdf" else []
+    outdir = tempfile.mkdtemp(prefix="slicerecon-fuzz-out-")
+    try:
+        results = {
+            "run": _cli_command(
+                ["run", request["path"], "-o", outdir, "-q", "--max-memory", budget, *options],
+                request["command_timeout"],
+            ),
+            "info": _cli_command(
+                ["info", request["path"], "--max-memory", budget], request["command_timeout"]
+            ),
+        }
+    finally:
+        shutil.rmtree(outdir, ignore_errors=True)
+    command, worst = max(results.items(), key=lambda kv: _SEVERITY.index(kv[1]["kind"]))
+    out = dict(worst)
+    if out["kind"] not in ("ok", "error"):
+        out["error"] = f"{command}: {out.get('error') or out['kind']}"
+    out["message"] = "; ".join(
+        f"{name} {r['kind']}{': ' + r['message'][:180] if r.get('message') else ''}"
+        for name, r in results.items()
+    )
+    out["seconds"] = sum(r["seconds"] for r in results.values())
+    return out
+
+
 def _run_one(request: dict[str, Any]) -> dict[str, Any]:
     from slicerecon.errors import SlicereconError
 
+    if request.get("mode") == "cli":
+        return _run_cli(request)
     start = time.perf_counter()
     result: dict[str, Any] = {"kind": "ok"}
     try:
@@ -201,11 +321,38 @@ def _warm_up() -> None:
     reconstruct(sections, projections)
 
 
-def _worker_main(memory: int) -> None:
+def _warm_up_cli() -> None:
+    """Run both commands once on a tiny NIfTI and import the writers' libraries."""
+    import contextlib
+    import io
+    import shutil
+    import tempfile
+
+    import highdicom  # noqa: F401 - imported on first use by the DICOM outputs
+    import nibabel as nib
+    import numpy as np
+
+    from slicerecon.cli import main
+
+    folder = Path(tempfile.mkdtemp(prefix="slicerecon-fuzz-warm-"))
+    try:
+        grid = np.indices((12, 12, 10)) - np.array([5.5, 5.5, 4.5])[:, None, None, None]
+        mask = ((grid**2).sum(axis=0) < 16).astype(np.uint8)
+        nib.save(nib.Nifti1Image(mask, np.diag([1.0, 1.0, 2.0, 1.0])), folder / "ball.nii.gz")
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            main(["run", str(folder / "ball.nii.gz"), "-o", str(folder / "out"), "-q"])
+            main(["info", str(folder / "ball.nii.gz")])
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _worker_main(memory: int, mode: str = "pipeline") -> None:
     protocol = os.fdopen(os.dup(1), "w", buffering=1, encoding="utf-8")
     os.dup2(2, 1)
     sys.stdout = sys.stderr
     _warm_up()
+    if mode == "cli":
+        _warm_up_cli()
     if memory > 0:
         import resource
 
@@ -222,7 +369,16 @@ def _worker_main(memory: int) -> None:
 class _Worker:
     """One child process and the case it is working on."""
 
-    def __init__(self, number: int, *, memory: int, budget_gb: float, log_dir: Path) -> None:
+    def __init__(
+        self,
+        number: int,
+        *,
+        memory: int,
+        budget_gb: float,
+        log_dir: Path,
+        mode: str = "pipeline",
+        command_timeout: float = 20.0,
+    ) -> None:
         env = dict(os.environ)
         env.update({name: "1" for name in _THREAD_VARIABLES})
         env["PYTHONHASHSEED"] = "0"
@@ -235,7 +391,7 @@ class _Worker:
         )
         self.log = open(log_dir / f"worker-{number}.log", "ab")  # noqa: SIM115
         self.proc = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), "--worker", str(memory)],
+            [sys.executable, str(Path(__file__).resolve()), "--worker", str(memory), mode],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=self.log,
@@ -243,6 +399,8 @@ class _Worker:
         )
         self.buffer = b""
         self.budget_gb = budget_gb
+        self.mode = mode
+        self.command_timeout = command_timeout
         self.ready = False
         self.case: Any = None
         self.since = time.monotonic()
@@ -261,6 +419,8 @@ class _Worker:
             "method": mutant.method,
             "pixel_spacing": mutant.pixel_spacing,
             "budget_gb": self.budget_gb,
+            "mode": self.mode,
+            "command_timeout": self.command_timeout,
         }
         self.proc.stdin.write((json.dumps(request) + "\n").encode())
         self.proc.stdin.flush()
@@ -349,6 +509,8 @@ def run_mutants(
     memory: int = 2 << 30,
     budget_gb: float = 0.5,
     log_dir: str | os.PathLike[str],
+    mode: str = "pipeline",
+    command_timeout: float = 20.0,
 ) -> Iterator[Outcome]:
     """Run each mutant through the pipeline in worker processes; yield outcomes as they end.
 
@@ -368,6 +530,12 @@ def run_mutants(
         of memory is a finding; one over it must be refused.
     log_dir : path-like
         Where each worker's stderr is written (``worker-N.log``).
+    mode : {"pipeline", "cli"}
+        ``"pipeline"``: ``load_input → prepare_inputs → reconstruct``. ``"cli"``:
+        ``slicerecon run`` (``--max-memory budget_gb``) then ``slicerecon info``,
+        each with ``command_timeout`` seconds; ``timeout`` then bounds the pair.
+    command_timeout : float
+        Limit of one command in ``"cli"`` mode, s (a slower one is a ``timeout``).
 
     Yields
     ------
@@ -385,7 +553,14 @@ def run_mutants(
 
     def start() -> None:
         nonlocal started
-        worker = _Worker(started, memory=memory, budget_gb=budget_gb, log_dir=log_path)
+        worker = _Worker(
+            started,
+            memory=memory,
+            budget_gb=budget_gb,
+            log_dir=log_path,
+            mode=mode,
+            command_timeout=command_timeout,
+        )
         started += 1
         pool[worker.fd] = worker
         selector.register(worker.fd, selectors.EVENT_READ)
@@ -555,9 +730,11 @@ def markdown_summary(outcomes: list[Outcome], formats: Iterable[str], *, title: 
     """A markdown snippet: the count table and the distinct failures."""
     rows = table(outcomes, formats)
     legend = (
-        "ok: reconstructed; error: refused with a SlicereconError; escape: any other "
-        "exception; memory: MemoryError under the address-space limit; timeout: no "
-        "answer in time (worker killed); crash: the worker died."
+        "ok: reconstructed; error: refused with a SlicereconError (through the command "
+        "line: exit 2 and one `error:` line); escape: any other exception (a traceback); "
+        "memory: MemoryError under the address-space limit; timeout: no answer in time "
+        "(worker killed), or a command over its limit; crash: the worker died; warning: a "
+        "Python warnings line on stderr; unclean: another exit code, or stray stderr lines."
     )
     out = [
         title,
@@ -585,7 +762,7 @@ def markdown_summary(outcomes: list[Outcome], formats: Iterable[str], *, title: 
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 3 and sys.argv[1] == "--worker":
-        _worker_main(int(sys.argv[2]))
+    if len(sys.argv) in (3, 4) and sys.argv[1] == "--worker":
+        _worker_main(int(sys.argv[2]), *sys.argv[3:])
     else:
-        sys.exit("usage: fuzz_runner.py --worker MEMORY_BYTES (started by run_mutants)")
+        sys.exit("usage: fuzz_runner.py --worker MEMORY_BYTES [MODE] (started by run_mutants)")

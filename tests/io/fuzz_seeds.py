@@ -17,6 +17,8 @@ Use from a test module: ``tests/io`` is on pytest's ``pythonpath``, so
 from __future__ import annotations
 
 import base64
+import bz2
+import gzip
 import json
 import lzma
 import zlib
@@ -39,6 +41,8 @@ FORMATS: tuple[str, ...] = (
     "json",
     "csv",
     "vti",
+    "nrrd",
+    "seg-nrrd",
 )
 """Input formats, in the order mutant indices cycle through them."""
 
@@ -151,13 +155,32 @@ def _dicom_seeds(root: Path) -> list[Seed]:
                 omit_empty_frames=False,
             ),
         ),
+        Seed(
+            "dicom-seg",
+            "overlapping",
+            factory.write_seg(
+                root / "seg-overlapping.dcm",
+                {
+                    1: mask > 0,
+                    2: _ball(mask.shape, (2.0, 2.0, 2.5)),
+                    3: _ball(mask.shape, (4.5, 1.0, 1.0)),
+                },
+                oblique,
+                labels={1: "Ball", 2: "Kern", 3: "Tête"},
+            ),
+        ),
     ]
     return seeds
 
 
-def _rtstruct(path: Path, contours: list, *, preamble: bool = True) -> Path:
-    """An RTSTRUCT holding one ROI, "Ball", with the given contour items."""
-    return factory.write_rtstruct(path, {(1, "Ball"): contours}, preamble=preamble)
+def _rtstruct(
+    path: Path, contours: list, *, preamble: bool = True, on_series: Path | None = None
+) -> Path:
+    """An RTSTRUCT holding one ROI, "Ball", with the given contour items (drawn on
+    ``on_series``: its patient, study and frame of reference)."""
+    return factory.write_rtstruct(
+        path, {(1, "Ball"): contours}, preamble=preamble, on_series=on_series
+    )
 
 
 def _ring(centre: np.ndarray, radius: float, z: float, n: int = 10) -> np.ndarray:
@@ -177,7 +200,7 @@ def _rtstruct_seeds(root: Path) -> list[Seed]:
         factory.contour_item(_ring(centre, 5.0 - abs(k - 3.5), 2.0 * k), image_uid=uids[k])
         for k in range(1, 7)
     ]
-    _rtstruct(series / "rtstruct.dcm", on_grid)
+    _rtstruct(series / "rtstruct.dcm", on_grid, on_series=series)
     free = [
         factory.contour_item(_ring(centre + 1.5, 6.0 - abs(z - 7.0) / 2, z, n=12))
         for z in (1.5, 4.0, 6.5, 9.0, 11.5)
@@ -253,6 +276,18 @@ def _contour_seeds(root: Path) -> list[Seed]:
     path = root / "hand.csv"
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     seeds.append(Seed("csv", "hand", path, gridless=True))
+    # planes of other orientations: sagittal, coronal and oblique (one orientation per file)
+    rings = [(z, [_circle(4.0 - abs(z - 3.0) / 2, 10)]) for z in (0.0, 1.5, 3.0, 4.5, 6.0)]
+    frames = {
+        "sagittal": np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]),
+        "coronal": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+        "oblique": _rotation(np.array([0.4, -0.7, 0.6]), 0.9),
+    }
+    for name, frame in frames.items():
+        json_path = write_contour_file(root / f"{name}.json", rings, frame)
+        seeds.append(Seed("json", name, json_path, gridless=True))
+        csv_path = write_contour_file(root / f"{name}.csv", rings, frame)
+        seeds.append(Seed("csv", name, csv_path, gridless=True))
     return seeds
 
 
@@ -352,6 +387,162 @@ def _vti_seeds(root: Path) -> list[Seed]:
     return [Seed("vti", name, write_vti(root / f"{name}.vti", values, **kw)) for name, kw in specs]
 
 
+_NRRD_TYPES = {"u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "f4": "float"}
+
+
+def write_nrrd(
+    path: Path,
+    data: np.ndarray,
+    fields: list[str],
+    *,
+    encoding: str = "gzip",
+    big_endian: bool = False,
+) -> Path:
+    """Write ``data`` (NRRD axis order: the first axis varies fastest) with header ``fields``.
+
+    ``fields`` are the lines after ``type``, ``dimension``, ``sizes``, ``endian`` and
+    ``encoding``, which are written from ``data`` (byte for byte what the tests need).
+    """
+    code = data.dtype.str[1:]
+    dtype = data.dtype.newbyteorder(">" if big_endian else "<")
+    raw = np.asarray(data, dtype=dtype).tobytes(order="F")
+    lines = [
+        "NRRD0004",
+        "# written by slicerecon's fuzz seeds",
+        f"type: {_NRRD_TYPES[code]}",
+        f"dimension: {data.ndim}",
+        "sizes: " + " ".join(str(n) for n in data.shape),
+        *([f"endian: {'big' if big_endian else 'little'}"] if data.dtype.itemsize > 1 else []),
+        f"encoding: {encoding}",
+        *fields,
+    ]
+    if encoding == "gzip":
+        body = gzip.compress(raw)
+    elif encoding == "bzip2":
+        body = bz2.compress(raw)
+    elif encoding == "ascii":
+        body = (" ".join(str(v) for v in np.asarray(data).ravel(order="F")) + "\n").encode()
+    else:
+        body = raw
+    path.write_bytes(("\n".join(lines) + "\n\n").encode("utf-8") + body)
+    return path
+
+
+def _nrrd_space(affine: np.ndarray, *, list_axis: bool = False) -> list[str]:
+    vectors = " ".join("(" + ",".join(f"{v:.17g}" for v in affine[:3, a]) + ")" for a in range(3))
+    origin = "(" + ",".join(f"{v:.17g}" for v in affine[:3, 3]) + ")"
+    return [
+        "space: left-posterior-superior",
+        f"space directions: {'none ' if list_axis else ''}{vectors}",
+        f"kinds: {'list ' if list_axis else ''}domain domain domain",
+        f"space origin: {origin}",
+    ]
+
+
+def _segment_fields(segments: list[tuple[str, int, int, str]]) -> list[str]:
+    """``Segment<N>_*`` lines of (name, label value, layer, extent) as Slicer writes them."""
+    lines = [
+        "Segmentation_MasterRepresentation:=Binary labelmap",
+        "Segmentation_ContainedRepresentationNames:=Binary labelmap|",
+        "Segmentation_ReferenceImageExtentOffset:=0 0 0",
+    ]
+    for n, (name, value, layer, extent) in enumerate(segments):
+        lines += [
+            f"Segment{n}_ID:=Segment_{n + 1}",
+            f"Segment{n}_Name:={name}",
+            f"Segment{n}_Color:=0.{n + 2} 0.5 0.{9 - n}",
+            f"Segment{n}_LabelValue:={value}",
+            f"Segment{n}_Layer:={layer}",
+            f"Segment{n}_Extent:={extent}",
+            f"Segment{n}_Tags:=",
+        ]
+    return lines
+
+
+def _extent(mask: np.ndarray) -> str:
+    hits = np.argwhere(mask)
+    lo, hi = hits.min(axis=0), hits.max(axis=0)
+    return " ".join(f"{a} {b}" for a, b in zip(lo.tolist(), hi.tolist(), strict=True))
+
+
+def _nrrd_seeds(root: Path) -> list[Seed]:
+    shape = (11, 10, 8)
+    ball = _ball(shape, (4.5, 4.0, 3.0))
+    core = _ball(shape, (2.0, 2.0, 1.5))
+    labels = ball.astype(np.uint8) + core
+    c, s = np.cos(0.4), np.sin(0.4)
+    oblique = np.array(
+        [
+            [0.9 * c, -0.9 * s, 0, -20.0],
+            [0.9 * s, 0.9 * c, 0, 15.5],
+            [0, 0, 2.5, 40.0],
+            [0, 0, 0, 1],
+        ]
+    )
+    seeds = [
+        Seed(
+            "nrrd",
+            "raw-lps",
+            write_nrrd(root / "raw.nrrd", labels, _nrrd_space(oblique), encoding="raw"),
+        ),
+        Seed(
+            "nrrd",
+            "gzip-int16-be",
+            write_nrrd(
+                root / "gzip.nrrd",
+                labels.astype(np.int16) * 300,
+                _nrrd_space(np.diag([0.8, 0.8, 2.0, 1.0])),
+                big_endian=True,
+            ),
+        ),
+        Seed(
+            "nrrd",
+            "bzip2-spacings",
+            write_nrrd(
+                root / "bzip2.nrrd",
+                labels,
+                ["spacings: 0.7 0.7 3", "axis mins: -5 -5 10"],
+                encoding="bzip2",
+            ),
+        ),
+        Seed(
+            "nrrd",
+            "ascii",
+            write_nrrd(root / "ascii.nrrd", labels, _nrrd_space(np.eye(4)), encoding="ascii"),
+        ),
+    ]
+    # 3D Slicer segmentations: one layer, and two overlapping layers
+    three_d = _segment_fields(
+        [("Ball", 1, 0, _extent(labels == 1)), ("Tête", 2, 0, _extent(labels == 2))]
+    )
+    tumour = _ball(shape, (2.5, 3.0, 2.0)) & ~core
+    layers = np.stack([labels, tumour.astype(np.uint8) * 1])  # list axis first
+    four_d = _segment_fields(
+        [
+            ("Ball", 1, 0, _extent(labels == 1)),
+            ("Core", 2, 0, _extent(labels == 2)),
+            ("Tumour", 1, 1, _extent(tumour)),
+        ]
+    )
+    seeds += [
+        Seed(
+            "seg-nrrd",
+            "slicer-3d",
+            write_nrrd(root / "three.seg.nrrd", labels, _nrrd_space(oblique) + three_d),
+        ),
+        Seed(
+            "seg-nrrd",
+            "slicer-layers",
+            write_nrrd(
+                root / "layers.seg.nrrd",
+                layers,
+                _nrrd_space(oblique, list_axis=True) + four_d,
+            ),
+        ),
+    ]
+    return seeds
+
+
 def write_seeds(directory: str | Path) -> list[Seed]:
     """Write the seed inputs of every format into ``directory``.
 
@@ -368,6 +559,7 @@ def write_seeds(directory: str | Path) -> list[Seed]:
         + _rtstruct_seeds(root)
         + _contour_seeds(root)
         + _vti_seeds(root)
+        + _nrrd_seeds(root)
     )
     assert {s.format for s in seeds} == set(FORMATS)
     return seeds
@@ -542,6 +734,15 @@ def _write_edge_volume(rng: np.random.Generator, seed: Seed, path: Path) -> str:
             fractional=bool(rng.random() < 0.3),
             omit_empty_frames=bool(mask.any() and rng.random() < 0.7),
         )
+    elif seed.format in ("nrrd", "seg-nrrd"):
+        values = np.minimum(mask, 255).astype(np.uint8)
+        fields = _nrrd_space(affine)
+        if seed.format == "seg-nrrd":
+            present = [int(v) for v in np.unique(values) if v]
+            fields += _segment_fields([(f"S{v}", v, 0, _extent(values == v)) for v in present[:12]])
+        encoding = str(rng.choice(["raw", "gzip", "bzip2"]))
+        write_nrrd(path, values, fields, encoding=encoding)
+        aname += f"+{encoding}"
     else:
         fmt = str(rng.choice(["ascii", "binary", "appended"]))
         geometry = _vti_geometry(affine)
@@ -657,7 +858,7 @@ def _write_edge_contours(rng: np.random.Generator, seed: Seed, path: Path) -> st
         for p in polys
     ]
     target = path / (seed.target or "rtstruct.dcm") if path.is_dir() else path
-    _rtstruct(target, items)
+    _rtstruct(target, items, on_series=path if path.is_dir() else None)
     return f"edge.{kind}:{fname}"
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pydicom
 import pytest
 
-from slicerecon.errors import EmptyMaskError, GeometryError, InputError, LabelError
+from slicerecon.errors import EmptyMaskError, FormatError, GeometryError, InputError, LabelError
 from slicerecon.io import load_input
 from slicerecon.io.dicom import dicom_info, read_dicom_seg
 
@@ -140,6 +140,37 @@ def test_fractional_segmentation_is_thresholded_at_half(tmp_path):
     )
 
     np.testing.assert_array_equal(read_dicom_seg(path).mask, prob >= 0.5)
+
+
+def _as_16_bit(path, *, bits=16, maximum=65535):
+    """The fractional SEG at ``path`` rewritten with 16-bit values (0..255 -> 0..65535)."""
+    ds = pydicom.dcmread(path)
+    values = ds.pixel_array.astype(np.uint16) * 257
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit = bits, bits, bits - 1
+    ds.MaximumFractionalValue = maximum
+    ds.PixelData = values.tobytes()
+    ds.save_as(path)
+    return path
+
+
+def test_a_16_bit_fractional_segmentation_is_read_as_16_bit(tmp_path, caplog):
+    """highdicom cut its values to 8 bits: refused as "no foreground pixel"."""
+    prob = np.zeros((6, 6, 3))
+    prob[1:5, 1:5, :] = 0.3
+    prob[2:4, 2:4, :] = 0.7
+    path = factory.write_seg(
+        tmp_path / "frac.dcm", {1: prob}, _oblique_affine(), labels={1: "P"}, fractional=True
+    )
+    _as_16_bit(path)
+    with caplog.at_level("WARNING"):
+        np.testing.assert_array_equal(read_dicom_seg(path).mask, prob >= 0.5)
+    assert "16-bit values is not standard" in caplog.text
+    _as_16_bit(path, maximum=0)
+    with pytest.raises(FormatError, match="MaximumFractionalValue 0 is not"):
+        read_dicom_seg(path)
+    _as_16_bit(path, bits=32)
+    with pytest.raises(FormatError, match="stores 8-bit values"):
+        read_dicom_seg(path)
 
 
 def test_empty_segment_raises_empty_mask_error(tmp_path):

@@ -205,13 +205,17 @@ def test_duplicate_positions_are_refused(tmp_path):
 
 
 def test_differing_image_sizes_are_refused(tmp_path):
-    uid = pydicom.uid.generate_uid()
+    uids = {
+        "series_uid": pydicom.uid.generate_uid(),
+        "study_uid": pydicom.uid.generate_uid(),
+        "frame_of_reference_uid": pydicom.uid.generate_uid(),
+    }
     affine = _oblique_affine()
-    factory.write_series(tmp_path, _blob(shape=(7, 9, 3)), affine, series_uid=uid)
+    factory.write_series(tmp_path, _blob(shape=(7, 9, 3)), affine, **uids)
     shifted = affine.copy()
     shifted[:3, 3] += 3 * affine[:3, 2]
     factory.write_series(
-        tmp_path, _blob(shape=(7, 8, 2)), shifted, series_uid=uid, file_names=["b0.dcm", "b1.dcm"]
+        tmp_path, _blob(shape=(7, 8, 2)), shifted, file_names=["b0.dcm", "b1.dcm"], **uids
     )
     with pytest.raises(GeometryError, match="differ in size"):
         read_dicom_series(tmp_path)

@@ -191,3 +191,51 @@ def test_non_integer_floats_are_not_a_label_map(tmp_path):
     path = _save(image, tmp_path / "nan.nii.gz")
     with pytest.raises(LabelError, match="NaN"):
         nifti_labels(path)
+
+
+@pytest.mark.parametrize("codes", [(4, 0), (2, 0), (0, 1), (1, 1)])
+def test_labels_keep_the_xform_codes_of_a_nifti_input(tmp_path, codes):
+    """labels.nii.gz rewrote an MNI-coded input's codes (4/0 or 2/0) as scanner space (1/1)."""
+    from slicerecon.io.outputs import write_label_outputs
+    from slicerecon.labels import Structure
+
+    labels = np.zeros((8, 7, 6), np.uint8)
+    labels[2:6, 2:5, 1:5] = 3
+    affine = np.array([[-1.5, 0, 0, 90.0], [0, 1.5, 0, -126.0], [0, 0, 1.5, -72.0], [0, 0, 0, 1]])
+    image = nib.Nifti1Image(labels, affine)
+    image.set_sform(affine, code=codes[0])
+    image.set_qform(affine, code=codes[1])
+    source = tmp_path / "template.nii.gz"
+    nib.save(image, source)
+    structures = [Structure(3, "GM")]
+
+    write_label_outputs(tmp_path / "same", labels, affine, structures, source=source)
+    back = nib.load(tmp_path / "same" / "labels.nii.gz")
+    assert (int(back.header["sform_code"]), int(back.header["qform_code"])) == codes
+    np.testing.assert_allclose(back.affine, nib.load(source).affine, atol=1e-5)
+
+    # no NIfTI input, or labels on another grid: scanner anatomical, 1 and 1
+    write_label_outputs(tmp_path / "none", labels, affine, structures)
+    shifted = affine.copy()
+    shifted[:3, 3] += 10.0
+    write_label_outputs(tmp_path / "other", labels, shifted, structures, source=source)
+    for name in ("none", "other"):
+        header = nib.load(tmp_path / name / "labels.nii.gz").header
+        assert (int(header["sform_code"]), int(header["qform_code"])) == (1, 1)
+
+
+def test_label_values_beyond_32_bits_are_refused(tmp_path, capsys):
+    """A scale factor of 3.4e38 made every label value overflow deep in the pipeline."""
+    from slicerecon.cli import main
+
+    mask = np.zeros((6, 6, 4), np.uint8)
+    mask[1:5, 1:5, 1:3] = 1
+    image = nib.Nifti1Image(mask, np.eye(4))
+    image.header.set_slope_inter(3.4e38, 0.0)
+    path = tmp_path / "scaled.nii"
+    nib.save(image, path)
+    with pytest.raises(LabelError, match="beyond the 32-bit integers"):
+        read_nifti(path)
+    assert main(["run", str(path), "-o", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "32-bit integers" in err[0]

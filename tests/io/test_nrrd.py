@@ -266,10 +266,53 @@ def test_zero_and_empty_segments_are_skipped_with_a_warning(tmp_path: Path, capl
     assert [s.name for s in label_map.structures] == ["liver", "spleen", "tumour"]
 
 
-def test_voxels_outside_a_segments_extent_are_not_its_own(tmp_path: Path) -> None:
+def test_voxels_outside_a_segments_extent_are_left_out_with_a_warning(
+    tmp_path: Path, caplog
+) -> None:
+    """As 3D Slicer does, but never silently: the warning says how many voxels."""
     path = _segmentation(tmp_path, four_d=False, extra={"Segment0_Extent": "1 2 1 4 1 3"})
-    label_map = read_nrrd_label_map(path)
+    with caplog.at_level(logging.WARNING, logger="slicerecon.io.nrrd"):
+        label_map = read_nrrd_label_map(path)
     assert int(np.count_nonzero(label_map.labels == 1)) == 2 * 4 * 3
+    assert "24 of the 48 voxels of segment 0 (liver) lie outside its extent" in caplog.text
+
+
+def test_a_segment_its_extent_excludes_is_reported(tmp_path: Path, caplog) -> None:
+    path = _segmentation(tmp_path, four_d=False, extra={"Segment0_Extent": "0 0 0 0 0 0"})
+    with caplog.at_level(logging.WARNING, logger="slicerecon.io.nrrd"):
+        label_map = read_nrrd_label_map(path)
+    assert [s.name for s in label_map.structures] == ["spleen"]
+    assert "all of the 48 voxels of segment 0 (liver) lie outside its extent" in caplog.text
+    assert "the segment is skipped" in caplog.text
+
+
+@pytest.mark.parametrize(
+    ("extra", "drop", "four_d", "match"),
+    [
+        # a LabelValue the voxels lack, while the voxels of its value belong to no segment
+        ({"Segment1_LabelValue": "5"}, (), False, r"segment 1 \(spleen\) claims label value 5"),
+        # no LabelValue: 1 is assumed, as Slicer does, and the liver has 1 already
+        ({}, ("Segment1_LabelValue",), False, "LabelValue is missing: 1 is assumed"),
+        # the tumour said to be in layer 0, where the liver has its value
+        ({"Segment2_Layer": "0"}, (), True, "both claim label value 1 of layer 0"),
+        # the tumour (value 7 in layer 1) said to be in layer 0: its voxels are unclaimed
+        ({"Segment2_Layer": "0", "Segment2_LabelValue": "7"}, (), True, "layer 1: 1"),
+    ],
+    ids=["label-value-absent", "label-value-missing", "layer-collides", "layer-wrong"],
+)
+def test_segments_that_cannot_match_the_voxels_are_refused(
+    tmp_path: Path, extra: dict, drop: tuple, four_d: bool, match: str
+) -> None:
+    path = _segmentation(tmp_path, four_d=four_d, extra=extra)
+    if drop:
+        data, header = nrrd.read(str(path))
+        for key in drop:
+            del header[key]
+        _write(path, data, header)
+    with pytest.raises(FormatError, match=match):
+        read_nrrd_label_map(path)
+    assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 2
+    assert main(["info", str(path)]) == 2  # info reads the voxels too: it agrees with run
 
 
 def test_values_no_segment_claims_are_ignored_with_a_warning(tmp_path: Path, caplog) -> None:
@@ -445,6 +488,30 @@ def test_seg_nrrd_writer_refuses_bad_arguments(tmp_path: Path, kwargs: dict, mat
         )
 
 
+def test_names_round_trip_in_utf8_as_slicer_writes_them(tmp_path: Path) -> None:
+    """Slicer writes key/value pairs in UTF-8; newlines and backslashes escaped (NRRD spec)."""
+    structures = [
+        Structure(1, "Tête fémorale", (200, 10, 30)),
+        Structure(2, "two\nlines \\ and a backslash"),
+        Structure(5, ""),
+    ]
+    path = write_seg_nrrd(_labels(), np.eye(4), structures, tmp_path / "labels.seg.nrrd")
+    header = path.read_bytes().split(b"\n\n", 1)[0]
+    assert "Segment0_Name:=Tête fémorale\n".encode() in header
+    assert b"Segment1_Name:=two\\nlines \\\\ and a backslash\n" in header
+    assert b"Segment2_Name:=Segment_5\n" in header  # the one name of an unnamed structure
+    back = read_nrrd_label_map(path)
+    assert [s.name for s in back.structures] == [
+        "Tête fémorale",
+        "two\nlines \\ and a backslash",
+        "Segment_5",
+    ]
+    np.testing.assert_array_equal(back.labels, _labels())
+    itk = pytest.importorskip("itk")  # what Slicer reads the file with
+    image = itk.imread(str(path))  # keep the image: its dictionary dies with it
+    assert image.GetMetaDataDictionary()["Segment0_Name"] == "Tête fémorale"
+
+
 # --------------------------------------------------------------------------- clear errors
 
 
@@ -473,6 +540,126 @@ def test_more_data_than_declared_is_refused_without_expanding_it(tmp_path: Path)
     )
     with pytest.raises(FormatError, match="more voxel data than its header declares"):
         read_nrrd_label_map(path)
+
+
+def _peak_mib(function) -> float:
+    """Peak Python-allocated memory while ``function()`` runs (it must raise), MiB."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        function()
+    except Exception:  # noqa: BLE001 - the caller checks the error itself
+        pass
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    return peak / 2**20
+
+
+@pytest.mark.parametrize("encoding", ["gzip", "bzip2"])
+def test_byte_skip_minus_one_does_not_bypass_the_decompression_bound(
+    tmp_path: Path, encoding: str
+) -> None:
+    """``byte skip: -1`` (the data are the last bytes of the stream) used to let pynrrd
+    inflate everything: a 64 kB gzip file took 3 GB. The stream may now hold at most
+    twice the declared data."""
+    zeros = bytes(64 * 2**20)
+    body = gzip.compress(zeros, compresslevel=1) if encoding == "gzip" else bz2.compress(zeros)
+    assert len(body) < 300_000
+    path = _raw_file(
+        tmp_path / "bomb.nrrd",
+        [
+            "type: unsigned char",
+            "dimension: 3",
+            "sizes: 4 4 4",
+            f"encoding: {encoding}",
+            "byte skip: -1",
+        ],
+        body,
+    )
+    with pytest.raises(FormatError, match="more voxel data than its header declares"):
+        read_nrrd_label_map(path)
+    assert _peak_mib(lambda: read_nrrd_label_map(path)) < 32
+
+
+def test_byte_skip_minus_one_reads_the_last_bytes(tmp_path: Path) -> None:
+    labels = _labels()
+    data = np.ascontiguousarray(labels.T).tobytes()
+    for encoding, compress in (("gzip", gzip.compress), ("bzip2", bz2.compress), ("raw", bytes)):
+        path = _raw_file(
+            tmp_path / f"{encoding}.nrrd",
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 9 8 7",
+                f"encoding: {encoding}",
+                "byte skip: -1",
+            ],
+            compress(b"a prefix of 23 bytes...." + data),
+        )
+        np.testing.assert_array_equal(read_nrrd_label_map(path).labels, labels)
+
+
+def test_byte_skip_counts_against_the_memory_budget(tmp_path: Path) -> None:
+    path = _raw_file(
+        tmp_path / "skip.nrrd",
+        [
+            "type: unsigned char",
+            "dimension: 3",
+            "sizes: 4 4 4",
+            "encoding: gzip",
+            f"byte skip: {2**40}",
+        ],
+        gzip.compress(bytes(64)),
+    )
+    with pytest.raises(MemoryBudgetError, match="byte skip"):
+        read_nrrd_label_map(path, memory_budget_gb=0.5)
+    raw = _raw_file(
+        tmp_path / "raw.nrrd",
+        [
+            "type: unsigned char",
+            "dimension: 3",
+            "sizes: 4 4 4",
+            "encoding: raw",
+            f"byte skip: {10**30}",
+        ],
+        bytes(64),
+    )
+    with pytest.raises(FormatError, match="truncated"):
+        read_nrrd_label_map(raw)
+
+
+@pytest.mark.parametrize("line_skip", ["1000000000", "1" * 31, "-3"])
+def test_absurd_line_skip_is_refused_at_once(tmp_path: Path, line_skip: str) -> None:
+    """``line skip: N`` cost N readline() calls: 1e9 took a quarter of an hour."""
+    import time
+
+    path = _raw_file(
+        tmp_path / "lines.nrrd",
+        [
+            "type: unsigned char",
+            "dimension: 3",
+            "sizes: 4 4 4",
+            "encoding: raw",
+            f"line skip: {line_skip}",
+        ],
+        b"one line\n" * 1000 + bytes(64),
+    )
+    start = time.perf_counter()
+    with pytest.raises(FormatError, match="line skip"):
+        read_nrrd_label_map(path)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_line_skip_skips_lines(tmp_path: Path) -> None:
+    labels = _labels()
+    path = _raw_file(
+        tmp_path / "lines.nrrd",
+        ["type: unsigned char", "dimension: 3", "sizes: 9 8 7", "encoding: gzip", "line skip: 2"],
+        b"first\nsecond\n" + gzip.compress(np.ascontiguousarray(labels.T).tobytes()),
+    )
+    np.testing.assert_array_equal(read_nrrd_label_map(path).labels, labels)
 
 
 @pytest.mark.parametrize("compress", [gzip.compress, bz2.compress, None])
@@ -635,6 +822,43 @@ def test_truncated_data_is_a_format_error(tmp_path: Path, compress) -> None:
             ["type: unsigned char", "dimension: 3", "sizes: 1 1", "encoding: raw"],
             FormatError,
             "sizes",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "space: left-posterior-superior",
+                "space directions: (1,0,0) (0,1,0)",
+            ],
+            GeometryError,
+            "lists 2 vectors for a 3-D image",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 4",
+                "sizes: 2 1 1 1",
+                "encoding: raw",
+                "space: left-posterior-superior",
+                "space directions: none (1,0,0) (0,1,0)",
+                "Segment0_ID:=a",
+            ],
+            GeometryError,
+            "lists 3 vectors for a 4-D image",
+        ),
+        (
+            [
+                "type: unsigned char",
+                "dimension: 3",
+                "sizes: 1 1 1",
+                "encoding: raw",
+                "Segment0_ID:=a",
+                "Segment0_LabelValue:=99999999999999999999",
+            ],
+            FormatError,
+            "Segment0_LabelValue must be a voxel value",
         ),
     ],
 )

@@ -84,7 +84,7 @@ def test_read_back_into_the_same_structures(ct_series, tmp_path):
 
     path = write_rtstruct(labels, affine, STRUCTURES, series_dir, tmp_path / "out" / "rt.dcm")
 
-    assert list_rois(path) == [(4, "Body"), (9, "GTV"), (2, "Structure 2")]
+    assert list_rois(path) == [(4, "Body"), (9, "GTV"), (2, "Segment_2")]
     _assert_same_structures(path, series_dir, affine, labels, STRUCTURES)
     ds = pydicom.dcmread(path)
     colours = {
@@ -167,8 +167,10 @@ def _reference(tmp_path, paths):
         },
     )
     ds = pydicom.dcmread(path)
-    ds.PatientName, ds.PatientID = "Doe^Jane", "MRN-0042"
+    ds.PatientName, ds.PatientID = "Doe^Jane", image.PatientID  # the name as the plan spells it
     ds.StudyInstanceUID = image.StudyInstanceUID
+    for item in ds.StructureSetROISequence:
+        item.ReferencedFrameOfReferenceUID = image.FrameOfReferenceUID
     ds.StudyID, ds.AccessionNumber = "S17", "ACC-9"
     for item, colour in zip(
         ds.ROIContourSequence, ([10, 20, 30], [255, 255, 0], [0, 0, 255]), strict=True
@@ -198,7 +200,7 @@ def test_reference_keeps_identifiers_names_colours_and_numbers(ct_series, tmp_pa
     ds = pydicom.dcmread(path)
     assert (str(ds.PatientName), ds.PatientID, ds.StudyID, ds.AccessionNumber) == (
         "Doe^Jane",
-        "MRN-0042",
+        reference.PatientID,
         "S17",
         "ACC-9",
     )
@@ -228,7 +230,7 @@ def test_reference_given_as_a_path(ct_series, tmp_path):
         labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm", reference=tmp_path / "ref.dcm"
     )
 
-    assert pydicom.dcmread(path).PatientID == "MRN-0042"
+    assert str(pydicom.dcmread(path).PatientName) == "Doe^Jane"
     with pytest.raises(InputError, match="not an RTSTRUCT"):
         write_rtstruct(
             labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm", reference=paths[0]
@@ -242,8 +244,8 @@ def test_an_empty_structure_is_an_roi_without_contours(ct_series, tmp_path, capl
     with caplog.at_level(logging.WARNING):
         path = write_rtstruct(without_bar, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm")
 
-    assert "structure 2 (Structure 2) holds no voxel" in caplog.text
-    assert (2, "Structure 2") in list_rois(path)
+    assert "structure 2 (Segment_2) holds no voxel" in caplog.text
+    assert (2, "Segment_2") in list_rois(path)
     with pytest.raises(EmptyMaskError, match="no contours"):
         read_rtstruct(path, roi=2, image_dir=series_dir)
 
@@ -279,12 +281,12 @@ def test_rt_utils_reads_it(tmp_path):
         dicom_series_path=str(tmp_path / "ct"), rt_struct_path=str(path)
     )
 
-    assert rtstruct.get_roi_names() == ["Body", "GTV", "Structure 2"]
+    assert rtstruct.get_roi_names() == ["Body", "GTV", "Segment_2"]
     for structure in STRUCTURES[:2]:
         # rt-utils rounds vertices to pixel centres and fills the boundary: about a half
         # pixel more all round; masks are (row, column, slice)
         mask = np.transpose(
-            rtstruct.get_roi_mask_by_name(structure.name or f"Structure {structure.value}"),
+            rtstruct.get_roi_mask_by_name(structure.name or f"Segment_{structure.value}"),
             (1, 0, 2),
         )
         truth = labels == structure.value
@@ -334,3 +336,21 @@ def test_irregular_series_contours_lie_on_their_own_images(tmp_path):
     own = [k for k, uid in enumerate(uids) if uid]
     for p, k in enumerate(own):
         assert sections.masks[p].sum() == np.count_nonzero(labels[:, :, k])
+
+
+def test_a_reference_of_another_patient_or_frame_is_refused(ct_series, tmp_path):
+    """The structure set copies the reference's patient: it must be the images' patient."""
+    series_dir, paths, affine, labels = ct_series
+    reference = _reference(tmp_path, paths)
+    reference.PatientID = "MRN-0042"
+    with pytest.raises(InputError, match="of patient 'MRN-0042'"):
+        write_rtstruct(
+            labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm", reference=reference
+        )
+    reference = _reference(tmp_path, paths)
+    reference.StructureSetROISequence[0].ReferencedFrameOfReferenceUID = "1.2.3.4"
+    with pytest.raises(InputError, match="frame of reference"):
+        write_rtstruct(
+            labels, affine, STRUCTURES, series_dir, tmp_path / "rt.dcm", reference=reference
+        )
+    assert not (tmp_path / "rt.dcm").exists()

@@ -10,7 +10,7 @@ import numpy as np
 import pydicom
 import pytest
 
-from slicerecon.errors import EmptyMaskError, GeometryError, LabelError, OptionError
+from slicerecon.errors import EmptyMaskError, GeometryError, InputError, LabelError, OptionError
 from slicerecon.io.dicom import read_dicom_seg, write_seg
 from slicerecon.io.dicom.derived import labels_on_series, load_source_series
 from slicerecon.io.labelmap import read_label_map
@@ -94,7 +94,7 @@ def test_highdicom_reads_the_same_segments_labels_and_colours(ct_series, tmp_pat
         assert description.segmented_property_type.meaning == "Tissue"
         assert description.algorithm_type.value == "SEMIAUTOMATIC"
         assert description.algorithm_identification[0].AlgorithmName == "slicerecon"
-    assert got[1][0] == "Liver" and got[2][0] == "Tumour" and got[3][0] == "Structure 3"
+    assert got[1][0] == "Liver" and got[2][0] == "Tumour" and got[3][0] == "Segment_3"
     for number, structure in ((1, STRUCTURES[0]), (2, STRUCTURES[1])):
         assert np.abs(np.subtract(got[number][1], structure.colour)).max() <= 1
     assert np.abs(np.subtract(got[3][1], DEFAULT_COLOURS[2])).max() <= 1
@@ -162,7 +162,7 @@ def test_slicerecon_reads_the_same_masks(ct_series, tmp_path):
     assert [(s.value, s.name) for s in label_map.structures] == [
         (1, "Liver"),
         (2, "Tumour"),
-        (3, "Structure 3"),
+        (3, "Segment_3"),
     ]
     np.testing.assert_array_equal(
         _place(label_map.labels, label_map.affine, affine, labels.shape), labels
@@ -291,3 +291,18 @@ def test_an_empty_structure_becomes_a_segment_without_frames(ct_series, tmp_path
         for i in seg.PerFrameFunctionalGroupsSequence
     }
     assert numbers == {1, 2}
+
+
+def test_source_images_of_two_studies_are_refused_naming_each(ct_series, tmp_path):
+    """highdicom raised a bare ValueError (a traceback, exit 1) for one stray image."""
+    series_dir, paths, affine, labels = ct_series
+    images = [pydicom.dcmread(p) for p in paths]
+    images[3].StudyInstanceUID = pydicom.uid.generate_uid()
+    images[3].SeriesDescription = "Head"
+    with pytest.raises(InputError, match=r"2 studies.*1 image of CT 'Head'"):
+        write_seg(labels, affine, STRUCTURES, images, tmp_path / "seg.dcm")
+    images[3].PatientID = "SOMEONE-ELSE"
+    images[3].StudyInstanceUID = images[0].StudyInstanceUID
+    with pytest.raises(InputError, match="2 patients"):
+        write_seg(labels, affine, STRUCTURES, images, tmp_path / "seg.dcm")
+    assert not (tmp_path / "seg.dcm").exists()

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import logging
 import os
+import re
+import unicodedata
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,25 +41,35 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...errors import FormatError, GeometryError, InputError, LabelError, OptionError
-from ...labels import Structure, structure_colour
+from ...labels import Structure, structure_colour, structure_name
 from ...sections import check_affine
 from ..limits import check_geometry
 from .geometry import require_path
-from .series import _layout, _scan_series, _Slice, _slice_from
-from .sniff import read_dicom_header
+from .series import _layout, _scan_series, _Slice, _slice_from, check_one_series, series_label
+from .sniff import PARSE_ERRORS, read_dicom_header
 
 __all__ = [
     "SourceSeries",
     "check_label_map",
+    "check_same_subject",
+    "dicom_name",
     "display_colour",
     "labels_on_series",
     "load_source_series",
+    "reference_frames",
 ]
 
 logger = logging.getLogger(__name__)
 
+LO_MAX_CHARS = 64
+"""Longest DICOM LO (Long String) value, characters."""
+
 GRID_TOLERANCE_PX = 0.01
 """How far, in pixels, a label map's in-plane pixels may lie from the series' pixels."""
+
+_UID = re.compile(r"(?=.{1,64}$)[0-9]+(\.[0-9]+)*")
+"""A DICOM UID: dot-separated numbers, at most 64 characters (PS3.5 9.1; a leading zero in
+a component, which some scanners write, is let through)."""
 
 _REQUIRED_UIDS = (
     "SOPClassUID",
@@ -162,17 +174,12 @@ def _slices_from_items(items: Sequence[Any]) -> list[_Slice]:
         raise InputError(
             "source_images hold no DICOM image: pass the image series the label map was drawn on"
         )
-    series = {s.series_uid for s in slices}
-    if len(series) > 1:
-        raise InputError(
-            f"source_images belong to {len(series)} series "
-            f"({', '.join(sorted(series))}); pass the images of one series"
-        )
+    check_one_series(slices, "source_images")
     return slices
 
 
 def load_source_series(
-    source_images: str | os.PathLike[str] | Sequence[Any],
+    source_images: str | os.PathLike[str] | Sequence[Any] | SourceSeries,
     *,
     allow_irregular: bool = False,
 ) -> SourceSeries:
@@ -180,10 +187,10 @@ def load_source_series(
 
     Parameters
     ----------
-    source_images : path-like or sequence of pydicom.Dataset or path-like
+    source_images : path-like, sequence of pydicom.Dataset or path-like, or SourceSeries
         The directory of the series (non-image objects in it are skipped, as by
         :func:`read_dicom_series`), or its images as datasets or file paths (in
-        any order).
+        any order); a SourceSeries already loaded is returned as it is.
     allow_irregular : bool
         Accept uneven slice spacing (the grid of :func:`read_dicom_series`
         with ``allow_irregular=True``).
@@ -195,12 +202,15 @@ def load_source_series(
     Raises
     ------
     InputError
-        No image, several series, a missing file.
+        No image, a missing file, images of several series, studies or
+        patients (named by modality and SeriesDescription).
     FormatError
         An unreadable file, or images lacking the UIDs a derived object refers to.
     GeometryError
         What the series reader refuses (non-parallel slices, irregular spacing, ...).
     """
+    if isinstance(source_images, SourceSeries):
+        return source_images
     if isinstance(source_images, (str, os.PathLike)):
         directory = require_path(source_images, want_dir=True)
         slices = _scan_series(directory, stop_before_pixels=True)
@@ -215,11 +225,25 @@ def load_source_series(
     images = tuple(item.dataset for item in own)
     positions = np.array([item.position for item in own], dtype=np.float64)
     for image, k in zip(images, planes, strict=True):
-        missing = [key for key in _REQUIRED_UIDS if not str(image.get(key, "") or "")]
+        try:
+            uids = {key: str(image.get(key, "") or "") for key in _REQUIRED_UIDS}
+        except PARSE_ERRORS as exc:
+            raise FormatError(
+                f"{name}: the UIDs of the image of plane {int(k)} cannot be read "
+                f"({type(exc).__name__}: {exc}); a SEG or RTSTRUCT cannot refer to it"
+            ) from exc
+        missing = [key for key, uid in uids.items() if not uid]
         if missing:
             raise FormatError(
                 f"{name}: the image of plane {int(k)} lacks {', '.join(missing)}; a SEG or "
                 "RTSTRUCT cannot refer to it"
+            )
+        invalid = [f"{key} {uid!r}" for key, uid in uids.items() if not _UID.fullmatch(uid)]
+        if invalid:
+            raise FormatError(
+                f"{name}: the image of plane {int(k)} has an invalid {', '.join(invalid)} "
+                "(a UID is digits and dots, at most 64 characters); a SEG or RTSTRUCT cannot "
+                "refer to it"
             )
     frames = {str(image.FrameOfReferenceUID) for image in images}
     if len(frames) > 1:
@@ -228,6 +252,79 @@ def load_source_series(
             "they are not one series in one frame of reference"
         )
     return SourceSeries(layout.affine, layout.shape, images, planes, positions, name)
+
+
+def reference_frames(ds: Any) -> tuple[set[str], set[str]]:
+    """The FrameOfReferenceUIDs an RTSTRUCT (or any derived object) names.
+
+    Returns
+    -------
+    rois : set of str
+        The frames its ROIs lie in (StructureSetROISequence).
+    listed : set of str
+        Every frame it names (also FrameOfReferenceUID and
+        ReferencedFrameOfReferenceSequence, which may list registered frames).
+    """
+    rois = {
+        str(item.get("ReferencedFrameOfReferenceUID", "") or "")
+        for item in ds.get("StructureSetROISequence", None) or []
+    }
+    listed = rois | {str(ds.get("FrameOfReferenceUID", "") or "")}
+    for item in ds.get("ReferencedFrameOfReferenceSequence", None) or []:
+        listed.add(str(item.get("FrameOfReferenceUID", "") or ""))
+    rois.discard("")
+    listed.discard("")
+    return rois, listed
+
+
+def check_same_subject(reference: Any, series: SourceSeries, *, what: str) -> None:
+    """Refuse a derived object that belongs to another patient or frame than its images.
+
+    A SEG or RTSTRUCT written from ``reference`` (the input RTSTRUCT) refers to
+    the images of ``series``: were they of another patient, or in another frame
+    of reference, the new object would be labelled with the wrong patient or
+    place its contours in the wrong space.
+
+    Parameters
+    ----------
+    reference : pydicom.Dataset
+        The input object (headers suffice).
+    series : SourceSeries
+        The images the output will refer to.
+    what : str
+        The input, for the message.
+
+    Raises
+    ------
+    InputError
+        Both have a PatientID and they differ; an ROI of ``reference`` lies in
+        another frame of reference than the images; or ``reference`` names
+        frames (and no ROI frame) and the images' is not one of them.
+    """
+    try:
+        theirs = str(reference.get("PatientID", "") or "").strip()
+        rois, listed = reference_frames(reference)
+    except PARSE_ERRORS as exc:
+        raise FormatError(
+            f"{what}: cannot read its patient and frame of reference ({exc})"
+        ) from exc
+    first = series.first
+    ours = str(first.get("PatientID", "") or "").strip()
+    label = series_label(first)
+    if theirs and ours and theirs != ours:
+        raise InputError(
+            f"{what} is of patient {theirs!r}, the images it lies on ({label}, {series.name}) of "
+            f"patient {ours!r}; a DICOM object referring to those images would be labelled with "
+            "the wrong patient"
+        )
+    frame = series.frame_of_reference_uid
+    frames = rois - {frame} if rois else (set() if frame in listed else listed)
+    if frames:
+        raise InputError(
+            f"{what} lies in frame of reference {', '.join(sorted(frames))}, the images it "
+            f"lies on ({label}, {series.name}) in {frame}; their "
+            "coordinates do not match, so no DICOM object may refer to both"
+        )
 
 
 def check_label_map(
@@ -287,6 +384,33 @@ def check_label_map(
             f"{sorted(numbers)}); pass a Structure for each value"
         )
     return values, aff, chosen
+
+
+def dicom_name(structure: Structure) -> str:
+    """The structure's name as a DICOM LO value (SegmentLabel, ROIName).
+
+    :func:`~slicerecon.labels.structure_name` (the name every output gives it:
+    its own, else ``Segment_<value>``), with what LO cannot hold replaced: a
+    backslash (the value separator) by ``/``, control characters by spaces; cut
+    to 64 characters with a warning. Accents and other scripts are kept: the
+    writers declare SpecificCharacterSet ISO_IR 192 (UTF-8).
+    """
+    name = structure_name(structure)
+    text = "".join(
+        "/" if c == "\\" else " " if unicodedata.category(c)[0] == "C" else c for c in name
+    )
+    text = " ".join(text.split())
+    if len(text) > LO_MAX_CHARS:
+        logger.warning(
+            "structure %d: its name %r is longer than the %d characters DICOM allows; "
+            "it is cut to %r in DICOM outputs",
+            structure.value,
+            name,
+            LO_MAX_CHARS,
+            text[:LO_MAX_CHARS],
+        )
+        text = text[:LO_MAX_CHARS].rstrip()
+    return text or f"Segment_{structure.value}"
 
 
 def display_colour(structure: Structure, index: int) -> tuple[int, int, int]:

@@ -235,6 +235,48 @@ def _segmentation_type(ds: Any, path: Path) -> str:
     return seg_type
 
 
+def _fractional_bits(ds: Any, path: Path, seg_type: str) -> int:
+    """BitsAllocated of a FRACTIONAL SEG (8, or 16 with a warning); 1 for BINARY.
+
+    The standard stores fractional segments in 8 bits; a 16-bit one (whose
+    MaximumFractionalValue may reach 65535) is decoded by pydicom as its
+    BitsAllocated says, not by highdicom, which would cut its values to 8 bits.
+
+    Raises
+    ------
+    FormatError
+        BitsAllocated not 8 or 16, or a MaximumFractionalValue that is not a
+        whole number from 1 to ``2**BitsAllocated - 1``.
+    """
+    if seg_type != "FRACTIONAL":
+        return 1
+    try:
+        bits = int(ds.get("BitsAllocated", 8) or 8)
+    except PARSE_ERRORS as exc:
+        raise FormatError(f"{path}: BitsAllocated is not a number ({exc})") from exc
+    if bits not in (8, 16):
+        raise FormatError(
+            f"{path}: a FRACTIONAL SEG stores 8-bit values (BitsAllocated 8), not {bits}-bit ones"
+        )
+    if bits == 16:
+        logger.warning(
+            "%s: a FRACTIONAL SEG with 16-bit values is not standard (the standard stores "
+            "8 bits); its values are read as 16-bit, against MaximumFractionalValue",
+            path,
+        )
+    try:
+        given = ds.get("MaximumFractionalValue")
+        maximum = None if given is None or given == "" else float(given)
+    except PARSE_ERRORS as exc:
+        raise FormatError(f"{path}: MaximumFractionalValue is not a number ({exc})") from exc
+    if maximum is not None and not (1 <= maximum < 2**bits and maximum == int(maximum)):
+        raise FormatError(
+            f"{path}: MaximumFractionalValue {maximum:g} is not a whole number from 1 to "
+            f"{2**bits - 1} ({bits}-bit values)"
+        )
+    return bits
+
+
 def _foreground(values: NDArray[Any], ds: Any, seg_type: str) -> NDArray[np.bool_]:
     """Stored values → foreground: non-zero (BINARY), at least half the maximum (FRACTIONAL)."""
     if seg_type == "BINARY":
@@ -397,7 +439,9 @@ def read_dicom_seg(
     if unknown:
         raise FormatError(f"{p}: frames refer to segments {unknown} missing from SegmentSequence")
     seg_type = _segmentation_type(ds, p)
-    mask = _mask_by_highdicom(ds, p, number, geometry, seg_type)
+    mask = None
+    if _fractional_bits(ds, p, seg_type) != 16:  # highdicom cuts 16-bit fractional values
+        mask = _mask_by_highdicom(ds, p, number, geometry, seg_type)
     if mask is None:  # highdicom changed ds in place: read the file again
         mask = _mask_by_frames(
             _read_seg_dataset(p, stop_before_pixels=False), p, number, geometry, seg_type

@@ -14,7 +14,9 @@ Segments
   it; structures are numbered in the order of their values, so a label map
   with values 1..N keeps them as SegmentNumbers. Each segment's
   SegmentDescription records the label value (``"label value 5"``).
-* SegmentLabel: the structure's name, else ``"Structure <value>"``.
+* SegmentLabel: the structure's name, else ``"Segment_<value>"``
+  (:func:`~slicerecon.io.dicom.derived.dicom_name`: the name every output
+  gives it), in UTF-8 (SpecificCharacterSet ISO_IR 192).
 * RecommendedDisplayCIELabValue: the structure's colour (RGB converted to
   CIELab by highdicom), else one of
   :data:`~slicerecon.labels.DEFAULT_COLOURS`.
@@ -41,10 +43,17 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ... import __version__
-from ...errors import DependencyError, EmptyMaskError
+from ...errors import DependencyError, EmptyMaskError, FormatError
 from ...labels import Structure
 from ..atomic import atomic_path
-from .derived import check_label_map, display_colour, labels_on_series, load_source_series
+from .derived import (
+    SourceSeries,
+    check_label_map,
+    dicom_name,
+    display_colour,
+    labels_on_series,
+    load_source_series,
+)
 
 __all__ = ["SEG_ALGORITHM_NAME", "write_seg"]
 
@@ -69,7 +78,7 @@ def _segment_descriptions(structures: Sequence[Structure]) -> list[Any]:
     for number, structure in enumerate(structures, start=1):
         description = SegmentDescription(
             segment_number=number,
-            segment_label=structure.name.strip() or f"Structure {structure.value}",
+            segment_label=dicom_name(structure),
             segmented_property_category=codes.SCT.Tissue,
             segmented_property_type=codes.SCT.Tissue,
             algorithm_type="SEMIAUTOMATIC",
@@ -85,7 +94,7 @@ def write_seg(
     labels: ArrayLike,
     affine: ArrayLike,
     structures: Sequence[Structure],
-    source_images: str | os.PathLike[str] | Sequence[Any],
+    source_images: str | os.PathLike[str] | Sequence[Any] | SourceSeries,
     path: str | os.PathLike[str],
     *,
     allow_irregular: bool = False,
@@ -106,9 +115,10 @@ def write_seg(
     structures : sequence of Structure
         One per label value (every non-zero value of ``labels`` needs one); a
         structure without voxels becomes a segment without frames.
-    source_images : path-like or sequence of pydicom.Dataset or path-like
+    source_images : path-like, sequence of pydicom.Dataset or path-like, or SourceSeries
         The image series: its directory, or its images (datasets, headers
-        suffice, or file paths) in any order.
+        suffice, or file paths) in any order, or the series already loaded
+        (:func:`~slicerecon.io.dicom.derived.load_source_series`).
     path : path-like
         Output file, written atomically (temporary file, then rename).
     allow_irregular : bool
@@ -129,7 +139,9 @@ def write_seg(
     OptionError, LabelError
         Bad labels or structures (:func:`~slicerecon.io.dicom.derived.check_label_map`).
     InputError, FormatError, GeometryError
-        The image series cannot be read, or the label map is not on its grid.
+        The image series cannot be read (or mixes studies or patients: see
+        :func:`~slicerecon.io.dicom.derived.load_source_series`), the label map
+        is not on its grid, or highdicom refuses the images.
     EmptyMaskError
         No structure holds a voxel on the series' images.
     DependencyError
@@ -138,7 +150,6 @@ def write_seg(
     values, aff, chosen = check_label_map(labels, affine, structures)
     try:
         from highdicom.seg import Segmentation
-        from pydicom.uid import generate_uid
     except ImportError as exc:  # pragma: no cover - highdicom is a dependency
         raise DependencyError("writing a DICOM SEG needs highdicom: pip install highdicom") from exc
 
@@ -163,7 +174,41 @@ def write_seg(
                 structure.value,
                 structure.name,
             )
-    segmentation = Segmentation(
+    try:
+        segmentation = _segmentation(
+            Segmentation, series, frames, ordered, series_number, series_description
+        )
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise FormatError(
+            f"highdicom cannot make a SEG referring to {series.name} "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())[:240]})"
+        ) from exc
+    target = Path(path)
+    with atomic_path(target) as tmp:
+        segmentation.save_as(tmp)
+    logger.info(
+        "wrote DICOM SEG %s: %d segments, %d frames, referring to %s",
+        target,
+        len(ordered),
+        int(segmentation.NumberOfFrames),
+        series.name,
+    )
+    return target
+
+
+def _segmentation(
+    segmentation_class: Any,
+    series: Any,
+    frames: Any,
+    ordered: Sequence[Structure],
+    series_number: int,
+    series_description: str,
+) -> Any:
+    from pydicom.uid import generate_uid
+
+    from ... import __version__
+
+    return segmentation_class(
         source_images=list(series.images),
         pixel_array=frames,
         segmentation_type="BINARY",
@@ -181,15 +226,5 @@ def write_seg(
         content_creator_name="slicerecon^",
         omit_empty_frames=True,
         series_description=series_description,
+        specific_character_set="ISO_IR 192",  # UTF-8: names keep their accents
     )
-    target = Path(path)
-    with atomic_path(target) as tmp:
-        segmentation.save_as(tmp)
-    logger.info(
-        "wrote DICOM SEG %s: %d segments, %d frames, referring to %s",
-        target,
-        len(ordered),
-        int(segmentation.NumberOfFrames),
-        series.name,
-    )
-    return target

@@ -64,10 +64,12 @@ from .sniff import DICOM_SUFFIXES, PARSE_ERRORS, is_dicom_file, object_kind, rea
 __all__ = [
     "FOREGROUND_EPSILON",
     "MAX_RESAMPLE_FACTOR",
+    "check_one_series",
     "dicom_series_geometry",
     "read_dicom_series",
     "read_dicom_series_values",
     "series_info",
+    "series_label",
 ]
 
 logger = logging.getLogger(__name__)
@@ -91,6 +93,9 @@ class _Slice:
     rows: int
     columns: int
     pixel_spacing: NDArray[np.float64]
+    study_uid: str = ""
+    patient_id: str = ""
+    label: str = ""
 
 
 @dataclass(frozen=True)
@@ -150,6 +155,9 @@ def _slice_from(ds: Any, path: Path) -> _Slice | None:
         dataset=ds,
         sop_uid=str(ds.get("SOPInstanceUID", "")),
         series_uid=str(ds.get("SeriesInstanceUID", "")),
+        study_uid=str(ds.get("StudyInstanceUID", "") or "").strip(),
+        patient_id=str(ds.get("PatientID", "") or "").strip(),
+        label=series_label(ds),
         position=floats(ds, "ImagePositionPatient", 3, path),
         orientation=floats(ds, "ImageOrientationPatient", 6, path),
         rows=rows,
@@ -180,16 +188,63 @@ def _scan_series(directory: Path, *, stop_before_pixels: bool) -> list[_Slice]:
         raise InputError(
             f"no DICOM image files in {directory}; pass a directory holding one image series"
         )
-    by_series: dict[str, int] = {}
-    for s in slices:
-        by_series[s.series_uid] = by_series.get(s.series_uid, 0) + 1
+    check_one_series(slices, str(directory))
+    return slices
+
+
+def series_label(ds: Any) -> str:
+    """How a user knows a series: modality and SeriesDescription (``CT 'Thorax 3 mm'``)."""
+    modality = str(ds.get("Modality", "") or "").strip() or "(no modality)"
+    description = " ".join(str(ds.get("SeriesDescription", "") or "").split())
+    return f"{modality} '{description}'" if description else f"{modality} (no SeriesDescription)"
+
+
+def _groups(slices: list[_Slice], field: str) -> dict[str, list[_Slice]]:
+    groups: dict[str, list[_Slice]] = {}
+    for item in slices:
+        groups.setdefault(getattr(item, field), []).append(item)
+    return groups
+
+
+def _listing(groups: dict[str, list[_Slice]], what: str) -> str:
+    parts = []
+    for uid, items in sorted(groups.items(), key=lambda kv: -len(kv[1])):
+        names = ", ".join(i.path.name for i in items[:3]) + (", ..." if len(items) > 3 else "")
+        count = f"{len(items)} image{'s' if len(items) != 1 else ''}"
+        parts.append(f"{count} of {items[0].label} ({what} {uid or '(none)'}: {names})")
+    return "; ".join(parts)
+
+
+def check_one_series(slices: list[_Slice], where: str) -> None:
+    """Refuse images of several series, studies or patients, naming each group.
+
+    Groups are named by modality and SeriesDescription (what a viewer shows),
+    then by UID and file names.
+
+    Raises
+    ------
+    InputError
+        The images hold several SeriesInstanceUIDs, StudyInstanceUIDs or
+        (non-empty) PatientIDs.
+    """
+    by_series = _groups(slices, "series_uid")
     if len(by_series) > 1:
-        listing = "; ".join(f"{uid or '(no UID)'} ({n} files)" for uid, n in by_series.items())
         raise InputError(
-            f"{directory} holds {len(by_series)} image series: {listing}. "
+            f"{where} holds {len(by_series)} image series: {_listing(by_series, 'series')}. "
             "Move each series into its own directory and pass one of them"
         )
-    return slices
+    by_study = _groups(slices, "study_uid")
+    if len(by_study) > 1:
+        raise InputError(
+            f"{where} mixes images of {len(by_study)} studies under one series: "
+            f"{_listing(by_study, 'study')}. Move the images of the other study out"
+        )
+    by_patient = {k: v for k, v in _groups(slices, "patient_id").items() if k}
+    if len(by_patient) > 1:
+        raise InputError(
+            f"{where} mixes images of {len(by_patient)} patients: "
+            f"{_listing(by_patient, 'PatientID')}. Move the images of the other patient out"
+        )
 
 
 def _check_same_grid(slices: list[_Slice]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
