@@ -566,6 +566,7 @@ def score_case(
             n_points=config.n_points,
             seed=config.seed,
             pred_occupancy=item.occupancy,
+            memory_budget_gb=config.max_memory_gb,
         ).to_dict()
         scored[item.structure.label] = item.metrics
     if not scored:

@@ -28,7 +28,7 @@ from .inputs import axis_upsample, prepare_inputs
 from .io import InputKind, detect_kind, load_ground_truth, load_input
 from .io.contours import read_contour_annotation
 from .io.dicom import dicom_info
-from .io.labelmap import LABEL_MAP_KINDS, read_label_map
+from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.rtstruct import read_rtstruct_annotation
 from .labels import LabelMap, Structure, StructureMasks
@@ -181,6 +181,16 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         assert isinstance(volume, Volume)
         label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
         return case_from_label_map(label_map, replace(config, label=None, roi=None), kind=kind)
+    if kind.kind == "dicom-seg" and not config.union:
+        # SEG segments may overlap or nest: kept whole, each reconstructed on its own
+        masks = read_seg_masks(kind.path, memory_budget_gb=config.max_memory_gb)
+        if masks.overlap_voxels:
+            logger.info(
+                "%s: segments overlap on %d voxels; each is reconstructed whole",
+                kind.path,
+                masks.overlap_voxels,
+            )
+            return case_from_label_map(masks, config, kind=kind)
     label_map = read_label_map(
         kind.path,
         allow_irregular=config.allow_irregular,

@@ -202,6 +202,7 @@ def write_case(
         ),
         rtstruct=kind.path if kind.kind == "rtstruct" else None,
         allow_irregular=config.allow_irregular,
+        source=kind.path if kind.kind == "nifti" else None,
     )
     write_json(
         outdir / STRUCTURES_FILE,

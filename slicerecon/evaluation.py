@@ -128,7 +128,9 @@ def evaluate_structures(
         if pred is None:
             missing.append(structure.label)
             continue
-        scored[structure.label] = evaluate(pred, target, n_points=n_points, seed=seed).to_dict()
+        scored[structure.label] = evaluate(
+            pred, target, n_points=n_points, seed=seed, memory_budget_gb=budget
+        ).to_dict()
     if not scored:
         raise InputError(
             f"{pred_path} holds none of the {len(truth.structures)} structures of {ground_truth}"

@@ -52,7 +52,22 @@ class _OneLine(logging.Formatter):
 
 
 class _CliHandler(logging.StreamHandler):  # type: ignore[type-arg]
-    """The one handler the command line puts on :data:`LOGGERS` (replaced on each call)."""
+    """The one handler the command line puts on :data:`LOGGERS` (replaced on each call).
+
+    A message already shown in this invocation is not shown again (a file read
+    twice warns once).
+    """
+
+    def __init__(self, stream: object) -> None:
+        super().__init__(stream)  # type: ignore[arg-type]
+        self._seen: set[tuple[int, str]] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        key = (record.levelno, record.getMessage())
+        if key in self._seen:
+            return False
+        self._seen.add(key)
+        return super().filter(record)
 
 
 def show_messages(level: int) -> None:

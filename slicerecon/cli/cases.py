@@ -14,6 +14,7 @@ from typing import Annotated, Any
 import typer
 
 from ..console import StageProgress, ctrl_c_after, print_run_summary
+from ..errors import SlicereconError
 from .app import (
     DEFAULT_MAX_MEMORY_GB,
     AnnotationOpt,
@@ -65,7 +66,12 @@ def info(
     from ..case_inputs import reading_of
 
     if "not_a_label_map" not in details:
-        read_as = reading_of(input, allow_irregular=allow_irregular, memory_budget_gb=max_memory)
+        try:
+            read_as = reading_of(
+                input, allow_irregular=allow_irregular, memory_budget_gb=max_memory
+            )
+        except SlicereconError as exc:  # info describes; run says why it cannot read
+            read_as = f"not read by run: {' '.join(str(exc).split())}"
         if read_as is not None:
             details["read as"] = read_as
     if as_json:
@@ -377,6 +383,7 @@ def evaluate(
         load_ground_truth(ground_truth, label=label, memory_budget_gb=max_memory),
         n_points=n_points,
         seed=seed,
+        memory_budget_gb=max_memory,
     )
     typer.echo(json.dumps(metrics.to_dict(), indent=2))
 

@@ -68,6 +68,8 @@ __all__ = [
     "table",
 ]
 
+_OUR_WARNING = re.compile(r"^warning: \S")
+"""A warning the command line shows by default (``warning: <message>``), not a stray line."""
 KINDS = ("ok", "error", "escape", "memory", "timeout", "crash", "warning", "unclean")
 """Outcome kinds, in table order (the last two only through the command line)."""
 FAILURES = ("escape", "memory", "timeout", "crash", "warning", "unclean")
@@ -232,10 +234,15 @@ def _cli_command(args: list[str], command_timeout: float) -> dict[str, Any]:
             "message": found.group("text")[:400],
             "where": found.group("where"),
         }
-    elif code == 0 and not lines:
-        result = {"kind": "ok"}
-    elif code == 2 and len(lines) == 1 and lines[0].startswith("error: "):
-        result = {"kind": "error", "message": lines[0][len("error: ") :][:400]}
+    elif code == 0 and all(_OUR_WARNING.match(line) for line in lines):
+        result = {"kind": "ok"}  # warnings the command line shows, one line each
+    elif (
+        code == 2
+        and lines
+        and lines[-1].startswith("error: ")
+        and all(_OUR_WARNING.match(line) for line in lines[:-1])
+    ):
+        result = {"kind": "error", "message": lines[-1][len("error: ") :][:400]}
     else:
         result = {
             "kind": "unclean",
