@@ -77,7 +77,7 @@ from .contour_schema import (
     closed_polygon,
     parse_json,
 )
-from .limits import DEFAULT_MEMORY_BUDGET_GB
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_coordinates, reading
 from .plane_groups import annotation_from_polygons, orientation_count
 from .polygons import polygons_from_sections, sections_from_polygons
 
@@ -203,8 +203,16 @@ def read_contour_annotation(
     InputError, FormatError, GeometryError, EmptyMaskError, MemoryBudgetError
         As :func:`read_contours`.
     """
-    p = Path(path)
+    with reading(path):
+        return _read_contour_annotation(Path(path), pixel_spacing, memory_budget_gb)
+
+
+def _read_contour_annotation(
+    p: Path, pixel_spacing: float | None, memory_budget_gb: float
+) -> Annotation:
     parsed = _read_parsed(p)
+    for polygon, name in zip(parsed.polygons, parsed.names, strict=True):
+        check_coordinates(polygon, what=f"{p}: {name}")
     reference = parsed.grid if pixel_spacing is None else None
     simple = len(parsed.structures) == 1 and orientation_count(parsed.polygons) <= 1
     if simple or parsed.version == 1:  # version 1: one structure on parallel planes

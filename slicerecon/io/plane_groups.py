@@ -43,7 +43,7 @@ from ..annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose
 from ..errors import EmptyMaskError, GeometryError
 from ..labels import Structure
 from ..sections import check_affine, in_plane_axes
-from .limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
+from .limits import DEFAULT_MEMORY_BUDGET_GB, check_coordinates, check_grid
 from .polygons import (
     DEFAULT_PIXELS_ACROSS,
     MARGIN_PX,
@@ -162,6 +162,7 @@ def annotation_from_polygons(
     for structure, own in zip(structures, polygons, strict=True):
         for raw in own:
             points = np.asarray(raw, dtype=np.float64).reshape(-1, 3)
+            check_coordinates(points, what=f"structure {structure.label}")
             normal, area = polygon_normal(points)
             if area <= 0:
                 logger.warning("structure %s: a polygon encloses no area; skipped", structure.label)
