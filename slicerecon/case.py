@@ -174,6 +174,12 @@ class CaseReconstruction:
     overlap_voxels : int
         Voxels claimed by several structures (0 for a partition).
     timings : dict of str to float
+    layers : ndarray of shape (L, I, J, K), integer, or None
+        Where structures overlap: a layered label map on the grid of
+        :attr:`labels` that holds every structure whole (each layer a label map
+        of structures that do not overlap; a value lies in one layer), what
+        ``labels.seg.nrrd``, ``seg.dcm`` and ``rtstruct.dcm`` are written from.
+        None when no voxel is claimed twice.
     """
 
     results: list[StructureResult]
@@ -186,6 +192,7 @@ class CaseReconstruction:
     exclusive: bool = True
     overlap_voxels: int = 0
     timings: dict[str, float] = field(default_factory=dict)
+    layers: NDArray[np.integer] | None = None
 
     @property
     def reconstructed(self) -> list[StructureResult]:
@@ -391,7 +398,7 @@ def reconstruct_case(
         _resolve(results, fields, annotation, smooth=options.smooth)
         timings["resolve"] = time.perf_counter() - start
     results += [StructureResult(s, NO_CONTOURS) for s in case.missing]
-    labels, overlap = _label_map(case, results)
+    labels, overlap, layers = _label_map(case, results)
     logger.info(
         "%d structure(s): %d reconstructed",
         len(results),
@@ -408,6 +415,7 @@ def reconstruct_case(
         annotation.exclusive,
         overlap,
         timings,
+        layers,
     )
 
 
@@ -486,20 +494,25 @@ def _resolve(
         item.occupancy = Volume(inside, annotation.affine)
 
 
-def _label_map(case: CaseInput, results: list[StructureResult]) -> tuple[NDArray[np.integer], int]:
-    """The structures as one label map on the output grid, and the voxels claimed twice.
+def _label_map(
+    case: CaseInput, results: list[StructureResult]
+) -> tuple[NDArray[np.integer], int, NDArray[np.integer] | None]:
+    """The structures as one label map on the output grid, the voxels claimed twice, and
+    the layered label map that keeps each structure whole (None without overlap).
 
     A partition's shares never overlap. Overlapping structures (ROIs) are
     painted largest first, so the smallest is on top; the count says how many
-    voxels some structure lost in this one file. Each structure's
-    ``volume_mm3`` is set from its own voxels.
+    voxels some structure lost in that one map. Each goes whole into the first
+    layer where it overlaps nothing (3D Slicer's segmentation layers). Each
+    structure's ``volume_mm3`` is set from its own voxels.
     """
     values = [r.structure.value for r in results] or [0]
-    fits = 0 <= min(values) and max(values) < 256
-    labels = np.zeros(case.output_shape, dtype=np.uint8 if fits else np.int32)
+    dtype = np.uint8 if 0 <= min(values) and max(values) < 256 else np.int32
+    labels = np.zeros(case.output_shape, dtype=dtype)
     voxel = float(abs(np.linalg.det(case.output_affine[:3, :3])))
     claimed = np.zeros(case.output_shape, dtype=bool)
     overlap = 0
+    layers: list[NDArray[np.integer]] = []
     painted = [r for r in results if r.mesh is not None]
     painted.sort(key=lambda r: -_size(r))
     for item in painted:
@@ -508,7 +521,12 @@ def _label_map(case: CaseInput, results: list[StructureResult]) -> tuple[NDArray
         claimed |= inside
         labels[inside] = item.structure.value
         item.volume_mm3 = float(np.count_nonzero(inside)) * voxel
-    return labels, overlap
+        free = next((layer for layer in layers if not layer[inside].any()), None)
+        if free is None:
+            free = np.zeros(case.output_shape, dtype=dtype)
+            layers.append(free)
+        free[inside] = item.structure.value
+    return labels, overlap, np.stack(layers) if overlap else None
 
 
 def _voxels(

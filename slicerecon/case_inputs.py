@@ -30,6 +30,7 @@ from .io.contours import read_contour_annotation
 from .io.dicom import dicom_info
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
+from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
 from .labels import LabelMap, Structure, StructureMasks
 from .plane_detection import detect_planes, parse_annotation
@@ -181,9 +182,13 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         assert isinstance(volume, Volume)
         label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
         return case_from_label_map(label_map, replace(config, label=None, roi=None), kind=kind)
-    if kind.kind == "dicom-seg" and not config.union:
-        # SEG segments may overlap or nest: kept whole, each reconstructed on its own
-        masks = read_seg_masks(kind.path, memory_budget_gb=config.max_memory_gb)
+    if not config.union and (kind.kind == "dicom-seg" or _layered_nrrd(kind)):
+        # SEG segments, and segments in different layers of a .seg.nrrd, may overlap or
+        # nest: kept whole, each reconstructed on its own
+        if kind.kind == "dicom-seg":
+            masks = read_seg_masks(kind.path, memory_budget_gb=config.max_memory_gb)
+        else:
+            masks = read_nrrd_masks(kind.path, memory_budget_gb=config.max_memory_gb)
         if masks.overlap_voxels:
             logger.info(
                 "%s: segments overlap on %d voxels; each is reconstructed whole",
@@ -199,6 +204,14 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
     )
     assert label_map is not None
     return case_from_label_map(label_map, config, kind=kind)
+
+
+def _layered_nrrd(kind: InputKind) -> bool:
+    """Whether a NRRD is a Slicer segmentation of several layers (headers only)."""
+    if kind.kind != "nrrd":
+        return False
+    info = nrrd_info(kind.path)
+    return bool(info.is_segmentation and info.layers > 1)
 
 
 def _seg_segment(kind: InputKind, selector: int | str) -> Structure:

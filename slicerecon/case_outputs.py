@@ -185,8 +185,9 @@ def write_case(
         records.append(record)
     if result.overlap_voxels:
         logger.warning(
-            "%s: structures overlap on %d voxels; labels.nii.gz and labels.seg.nrrd hold "
-            "one structure per voxel (the smallest on top); the meshes keep each whole",
+            "%s: structures overlap on %d voxels; labels.nii.gz holds one structure per voxel "
+            "(the smallest on top); the meshes, labels.seg.nrrd (in layers) and the DICOM "
+            "outputs keep each whole",
             case.input_path,
             result.overlap_voxels,
         )
@@ -203,6 +204,7 @@ def write_case(
         rtstruct=kind.path if kind.kind == "rtstruct" else None,
         allow_irregular=config.allow_irregular,
         source=kind.path if kind.kind == "nifti" else None,
+        layers=result.layers,
     )
     write_json(
         outdir / STRUCTURES_FILE,
@@ -215,7 +217,8 @@ def write_case(
                 "voxels": result.overlap_voxels,
                 "rule": "a partition: no voxel in two structures"
                 if result.exclusive
-                else "structures may overlap; the label maps hold the smallest on top",
+                else "structures may overlap; labels.nii.gz holds the smallest on top, "
+                "labels.seg.nrrd holds each whole in layers",
             },
             "outputs": outputs.to_dict(),
         },

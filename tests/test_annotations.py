@@ -158,25 +158,30 @@ def test_info_and_run_say_how_a_label_map_was_read(
 
 
 def test_nested_rois_are_each_reconstructed_whole(tmp_path: Path) -> None:
-    """BODY ⊃ Liver ⊃ GTV: an ROI inside another is never given away."""
+    """BODY ⊃ Liver ⊃ GTV: an ROI inside another is never given away, in any output."""
     import dicom_factory as factory  # tests/io, on pytest's pythonpath
 
+    from slicerecon.io.labelmap import read_seg_masks
+    from slicerecon.io.nrrd import read_nrrd_masks
+    from slicerecon.io.rtstruct import read_rtstruct
+
     affine = factory.affine_from_geometry(
-        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 3.0], [-31.5, -31.5, 0.0]
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [-31.5, -31.5, 0.0]
     )
-    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 21), np.uint16), affine, modality="CT")
-    radii = {"BODY": 26.0, "Liver": 14.0, "GTV": 6.0}
+    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 31), np.uint16), affine, modality="CT")
+    radii = {"BODY": 26.0, "Liver": 16.0, "GTV": 9.0}
 
     def rings(radius: float) -> list:
         return [
             factory.contour_item(factory.circle(np.sqrt(radius**2 - (z - 30) ** 2), (0, 0), z))
-            for z in np.arange(21) * 3.0
+            for z in np.arange(31) * 2.0
             if abs(z - 30) < radius - 1
         ]
 
     factory.write_rtstruct(
         tmp_path / "ct" / "rs.dcm",
         {(n, name): rings(r) for n, (name, r) in enumerate(radii.items(), start=1)},
+        on_series=tmp_path / "ct",
     )
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "ct"), "-o", str(out)]) == 0
@@ -184,13 +189,30 @@ def test_nested_rois_are_each_reconstructed_whole(tmp_path: Path) -> None:
         r["name"]: r for r in json.loads((out / "structures.json").read_text())["structures"]
     }
     assert [records[n]["status"] for n in radii] == ["reconstructed"] * 3
+
+    def dice(mask: np.ndarray, grid: np.ndarray, radius: float) -> float:
+        """Dice of a mask on a grid (voxel index → LPS mm) against the ROI's sphere."""
+        index = np.stack(np.meshgrid(*map(np.arange, mask.shape), indexing="ij"), -1)
+        world = index @ grid[:3, :3].T + grid[:3, 3]
+        truth = np.linalg.norm(world - [0, 0, 30], axis=-1) < radius
+        return float(2 * (mask & truth).sum() / (mask.sum() + truth.sum()))
+
+    seg = read_seg_masks(out / "seg.dcm")
+    layered = read_nrrd_masks(out / "labels.seg.nrrd")
     for name, radius in radii.items():
         mesh = trimesh.load(out / records[name]["mesh"])
         assert mesh.is_watertight
-        # Dice of the mesh against its sphere, from volumes of nested shapes
-        sphere = 4 / 3 * np.pi * radius**3
-        assert mesh.volume == pytest.approx(sphere, rel=0.1), name
         assert np.linalg.norm(mesh.centroid - [0, 0, 30]) < 1.0
+        # every output holds each ROI whole: the DICOM SEG, the layered .seg.nrrd, the RTSTRUCT
+        (mask,) = [m for s, m in zip(seg.structures, seg.masks, strict=True) if s.name == name]
+        assert dice(mask, seg.affine, radius) >= 0.95, name
+        (mask,) = [
+            m for s, m in zip(layered.structures, layered.masks, strict=True) if s.name == name
+        ]
+        assert dice(mask, layered.affine, radius) >= 0.95, name
+        drawn = read_rtstruct(out / "rtstruct.dcm", roi=name, image_dir=tmp_path / "ct")
+        assert dice(drawn.to_volume().mask, drawn.affine, radius) >= 0.95, name
+    assert layered.overlap_voxels > 0  # the layers hold the nesting
 
 
 def _ellipsoid_section(normal: np.ndarray, offset: float, n: int = 120) -> np.ndarray:
@@ -350,3 +372,25 @@ def test_overlapping_seg_segments_are_each_reconstructed_whole(tmp_path: Path) -
     assert records["overlap"]["exclusive"] is False
     organ_mesh = trimesh.load(out / "meshes" / "1_Organ.stl")
     assert organ_mesh.volume == pytest.approx(organ.sum() * 2.0, rel=0.1)
+
+
+def test_layered_seg_nrrd_runs_with_nested_segments_whole(tmp_path: Path) -> None:
+    """A .seg.nrrd whose layers nest one segment in another: each reconstructed whole."""
+    from slicerecon.io.nrrd import read_nrrd_masks
+    from slicerecon.io.nrrd_writer import write_seg_nrrd
+    from slicerecon.labels import Structure
+
+    outer = _ellipsoid()
+    centre = np.array([24, 22, 15])[:, None, None, None]
+    inner = np.linalg.norm(np.mgrid[:48, :44, :30] - centre, axis=0) < 7
+    layers = np.stack([np.where(outer, 1, 0), np.where(inner, 2, 0)]).astype(np.uint8)
+    path = write_seg_nrrd(
+        layers, AFFINE, [Structure(1, "Liver"), Structure(2, "GTV")], tmp_path / "in.seg.nrrd"
+    )
+    out = tmp_path / "out"
+    assert main(["run", str(path), "-o", str(out)]) == 0
+    record = json.loads((out / "structures.json").read_text())
+    assert record["overlap"]["exclusive"] is False
+    back = read_nrrd_masks(out / "labels.seg.nrrd")
+    for truth, mask in zip((outer, inner), back.masks, strict=True):
+        assert _iou(mask, truth) > 0.9

@@ -11,8 +11,9 @@ Two kinds of file are read:
 * **Slicer segmentations** (``.seg.nrrd``, any NRRD holding ``Segment<N>_*``
   key/value pairs): each segment has a name, a colour, a label value and a
   layer. A file whose segments overlap has a fourth, ``list`` axis: one 3-D
-  layer per group of non-overlapping segments. The layers are flattened into
-  one label map (:func:`read_nrrd_label_map`).
+  layer per group of non-overlapping segments. :func:`read_nrrd_masks` keeps
+  each segment whole (what a run reconstructs from when segments overlap);
+  :func:`read_nrrd_label_map` flattens the layers into one label map.
 
 Geometry: voxel index ``(i, j, k)`` along the three spatial axes, in the
 file's axis order, lies at ``space origin + Σ index · space direction``. The
@@ -60,7 +61,7 @@ from ..errors import (
     InputError,
     LabelError,
 )
-from ..labels import LabelMap, Structure
+from ..labels import LabelMap, Structure, StructureMasks
 from ..sections import Volume
 from ..selection import choose_structure, parse_selector
 from .limits import (
@@ -90,6 +91,7 @@ __all__ = [
     "pynrrd_module",
     "read_nrrd",
     "read_nrrd_label_map",
+    "read_nrrd_masks",
 ]
 
 logger = logging.getLogger(__name__)
@@ -270,8 +272,12 @@ def label_values(layer: NDArray[np.integer]) -> set[int]:
     return found | {int(v) for v in np.unique(foreground)}
 
 
-def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
-    """One label map from the segments of every layer; later layers win on overlap.
+def _segment_masks(
+    p: Path, info: NrrdInfo, data: NDArray[np.integer]
+) -> tuple[list[NrrdSegment], dict[int, NDArray[np.bool_]], dict[int, int]]:
+    """Each segment's own voxels: the segments kept, their masks by segment index, and the
+    value each is given (its ``LabelValue``, or 1, 2, ... in file order when segments of
+    different layers share values).
 
     Nothing is dropped silently: a segment with label value 0, one without a
     voxel, and voxels a segment's ``Extent`` leaves out are each reported in one
@@ -374,6 +380,13 @@ def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
                 for s in drawn
             ),
         )
+    return drawn, masks, out_value
+
+
+def _flatten(p: Path, info: NrrdInfo, data: NDArray[np.integer]) -> LabelMap:
+    """One label map from the segments of every layer; later layers win on overlap
+    (:func:`_segment_masks` says what is reported or refused)."""
+    drawn, masks, out_value = _segment_masks(p, info, data)
     labels = np.zeros(info.shape, dtype=labels_dtype(list(out_value.values())))
     overlap = 0
     for segment in sorted(drawn, key=lambda s: (s.layer, s.index)):
@@ -497,6 +510,59 @@ def read_nrrd_label_map(
         info.coordinates,
     )
     return result
+
+
+def read_nrrd_masks(
+    path: str | os.PathLike[str],
+    *,
+    memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
+) -> StructureMasks:
+    """Every segment of a Slicer segmentation as its own mask, overlaps between layers kept.
+
+    Parameters
+    ----------
+    path : path-like
+        A ``.seg.nrrd`` segmentation (3-D, or 4-D with a list axis of layers).
+    memory_budget_gb : float
+        As for :func:`read_nrrd_label_map`.
+
+    Returns
+    -------
+    StructureMasks
+        One mask of shape ``(I, J, K)`` per segment that holds a voxel, named,
+        coloured and numbered as :func:`read_nrrd_label_map` numbers them.
+
+    Raises
+    ------
+    InputError
+        Not a segmentation (no ``Segment<N>_*`` fields), or what
+        :func:`read_nrrd_label_map` raises.
+    EmptyMaskError
+        No segment holds a voxel.
+    """
+    p = open_nrrd(path)
+    with reading(p), open(p, "rb") as fh:
+        header = read_header(p, fh)
+        info = header_info(p, header)
+        if not info.is_segmentation:
+            raise InputError(f"{p} holds no Slicer segment fields: read it as a label map")
+        check_grid(
+            info.shape,
+            what=str(p),
+            memory_budget_gb=memory_budget_gb,
+            bytes_per_voxel=2 * info.layers * info.dtype.itemsize + 5,
+        )
+        data = _integer_values(p, _voxels(p, header, info, fh, memory_budget_gb))
+        drawn, masks, out_value = _segment_masks(p, info, data)
+    if not drawn:
+        raise EmptyMaskError(f"{p} is empty: no segment holds a voxel")
+    ordered = sorted(drawn, key=lambda s: out_value[s.index])
+    return StructureMasks(
+        tuple(masks[s.index] for s in ordered),
+        info.affine,
+        tuple(Structure(out_value[s.index], s.name, s.colour) for s in ordered),
+        info.coordinates,
+    )
 
 
 def read_nrrd(

@@ -118,6 +118,7 @@ def write_label_outputs(
     rtstruct: str | os.PathLike[str] | None = None,
     allow_irregular: bool = False,
     source: str | os.PathLike[str] | None = None,
+    layers: NDArray[np.integer] | None = None,
 ) -> LabelOutputs:
     """Write the reconstructed label map in every format the input's workflow reads.
 
@@ -146,6 +147,12 @@ def write_label_outputs(
         ``labels.nii.gz`` keeps its sform and qform codes (an MNI-coded input
         stays in MNI space; :func:`slicerecon.io.nifti.nifti_xform_codes`);
         otherwise both are 1 (scanner anatomical).
+    layers : ndarray of shape (L, I, J, K), integer, optional
+        Structures that overlap, each whole, as a layered label map (each layer
+        holds structures that do not overlap). ``labels.seg.nrrd`` (one layer
+        each), ``seg.dcm`` (overlapping segments) and ``rtstruct.dcm`` are
+        written from it; ``labels.nii.gz`` holds ``labels``, one structure per
+        voxel.
 
     Returns
     -------
@@ -169,8 +176,9 @@ def write_label_outputs(
     result.written["labels"] = write_label_map(
         labels, affine, out / "labels.nii.gz", coordinates=coordinates, xform_codes=codes
     )
+    whole = labels if layers is None else layers
     result.written["seg_nrrd"] = write_seg_nrrd(
-        labels, affine, list(structures), out / "labels.seg.nrrd", coordinates=coordinates
+        whole, affine, list(structures), out / "labels.seg.nrrd", coordinates=coordinates
     )
     if series is None:
         if rtstruct is not None:
@@ -179,7 +187,7 @@ def write_label_outputs(
     lps = np.asarray(affine, dtype=np.float64)
     if coordinates == "RAS":
         lps = LPS_TO_RAS @ lps
-    chosen = [s for s in structures if np.any(labels == s.value)]
+    chosen = [s for s in structures if np.any(whole == s.value)]
     if not chosen:
         result.skipped["seg"] = "no structure holds a voxel"
         return result
@@ -194,7 +202,7 @@ def write_label_outputs(
 
     try:
         with writing(out / "seg.dcm"):
-            result.written["seg"] = write_seg(labels, lps, chosen, images, out / "seg.dcm")
+            result.written["seg"] = write_seg(whole, lps, chosen, images, out / "seg.dcm")
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
@@ -202,7 +210,7 @@ def write_label_outputs(
         try:
             with writing(out / "rtstruct.dcm"):
                 result.written["rtstruct"] = write_rtstruct(
-                    labels,
+                    whole,
                     lps,
                     list(structures),
                     images,

@@ -66,8 +66,9 @@ from .dicom.derived import (
     check_same_subject,
     dicom_name,
     display_colour,
-    labels_on_series,
+    layers_on_series,
     load_source_series,
+    structure_mask,
 )
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 
@@ -255,11 +256,13 @@ def write_rtstruct(
 
     Parameters
     ----------
-    labels : array_like of shape (I, J, K), integer
+    labels : array_like of shape (I, J, K) or (L, I, J, K), integer
         Label values, 0 for background, on the grid of the image series
         (array axes (column, row, slice), as :func:`read_dicom_series` reads
         it), or on a grid sharing its in-plane pixels and slice direction
-        (:func:`~slicerecon.io.dicom.derived.labels_on_series`).
+        (:func:`~slicerecon.io.dicom.derived.labels_on_series`); or a layered
+        label map whose structures overlap across layers: each ROI is
+        contoured whole (:func:`~slicerecon.io.dicom.derived.check_label_map`).
     affine : array_like of shape (4, 4)
         Voxel index of ``labels`` → DICOM patient LPS mm.
     structures : sequence of Structure
@@ -314,7 +317,7 @@ def write_rtstruct(
     ref = None if reference is None else _read_reference(reference)
     if ref is not None:
         check_same_subject(ref, series, what=_reference_name(reference))
-    on_grid = labels_on_series(values, aff, series)
+    on_grid = layers_on_series(values, aff, series)
 
     ref_rois, ref_colours, ref_observations = (
         _reference_rois(ref) if ref is not None else ({}, {}, {})
@@ -402,7 +405,7 @@ def write_rtstruct(
 
         holder = Dataset()
         holder.ROIDisplayColor = list(colour)
-        polygons = _roi_polygons(on_grid == number, series)
+        polygons = _roi_polygons(structure_mask(on_grid, number), series)
         if polygons:
             holder.ContourSequence = _sequence(
                 [

@@ -463,8 +463,9 @@ def test_seg_nrrd_opens_in_itk_with_the_geometry_slicer_sees(tmp_path: Path) -> 
     [
         ({"path": "labels.nii.gz"}, "seg.nrrd"),
         ({"coordinates": "RAI"}, "RAS"),
-        ({"labels": np.zeros((3, 3), np.uint8)}, "3-D integer"),
-        ({"labels": np.zeros((3, 3, 3), np.float32)}, "3-D integer"),
+        ({"labels": np.zeros((3, 3), np.uint8)}, "3-D .*integer"),
+        ({"labels": np.zeros((3, 3, 3), np.float32)}, "3-D .*integer"),
+        ({"labels": np.ones((2, 3, 3, 3), np.uint8)}, "lies in layers 0 and 1"),
         ({"structures": [Structure(1), Structure(1)]}, "distinct"),
     ],
 )
@@ -962,3 +963,23 @@ def test_mci_examples_are_interpolated_between_the_planes(
         middle = 2.0 + 1.5 * (PLANES[0] + PLANES[1]) / 2
         section = mesh.section(plane_origin=[0, 0, middle], plane_normal=[0, 0, 1])
         assert section is not None  # the surface crosses the mid-plane
+
+
+def test_layered_segmentation_keeps_nested_segments_whole(tmp_path: Path) -> None:
+    """Segments that overlap go to separate layers (a 4-D file, as 3D Slicer writes it)
+    and come back whole; flattening gives the later layer the shared voxels."""
+    from slicerecon.io.nrrd import read_nrrd_masks
+
+    r = np.linalg.norm(np.mgrid[:24, :24, :24] - 11.5, axis=0)
+    outer, inner = r < 10, r < 5
+    layers = np.stack([np.where(outer, 1, 0), np.where(inner, 2, 0)]).astype(np.uint8)
+    path = write_seg_nrrd(
+        layers, np.eye(4), [Structure(1, "Body"), Structure(2, "Tumour")], tmp_path / "n.seg.nrrd"
+    )
+    header = path.read_bytes()[:400].decode()
+    assert "dimension: 4" in header and "kinds: list domain domain domain" in header
+    masks = read_nrrd_masks(path)
+    assert [s.name for s in masks.structures] == ["Body", "Tumour"]
+    assert np.array_equal(masks.masks[0], outer) and np.array_equal(masks.masks[1], inner)
+    flat = read_nrrd_label_map(path)
+    assert np.count_nonzero(flat.labels == 1) == np.count_nonzero(outer & ~inner)

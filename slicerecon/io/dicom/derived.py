@@ -55,8 +55,10 @@ __all__ = [
     "dicom_name",
     "display_colour",
     "labels_on_series",
+    "layers_on_series",
     "load_source_series",
     "reference_frames",
+    "structure_mask",
 ]
 
 logger = logging.getLogger(__name__)
@@ -330,12 +332,15 @@ def check_same_subject(reference: Any, series: SourceSeries, *, what: str) -> No
 def check_label_map(
     labels: ArrayLike, affine: ArrayLike, structures: Sequence[Structure]
 ) -> tuple[NDArray[np.integer], NDArray[np.float64], list[Structure]]:
-    """Validate a label map and its structures for writing.
+    """Validate a label map (or a layered one) and its structures for writing.
 
     Parameters
     ----------
-    labels : array_like of shape (I, J, K), integer or bool
-        Label values, 0 for background.
+    labels : array_like of shape (I, J, K) or (L, I, J, K), integer or bool
+        Label values, 0 for background; or a layered label map whose layers
+        each hold structures that do not overlap (structures that overlap lie
+        in different layers, as in 3D Slicer's segmentations), every value in
+        one layer only.
     affine : array_like of shape (4, 4)
         Voxel index → LPS mm.
     structures : sequence of Structure
@@ -343,7 +348,8 @@ def check_label_map(
 
     Returns
     -------
-    labels : ndarray of shape (I, J, K), integer
+    layers : ndarray of shape (L, I, J, K), integer
+        The label map as layers (L = 1 for a plain label map).
     affine : ndarray of shape (4, 4)
     structures : list of Structure
         In the order given.
@@ -351,17 +357,21 @@ def check_label_map(
     Raises
     ------
     OptionError
-        Not a 3-D integer array; no structure, or values not positive and distinct.
+        Not a 3-D or 4-D integer array; no structure, or values not positive and
+        distinct.
     LabelError
-        Voxels hold a value that no structure describes.
+        Voxels hold a value that no structure describes, or one value lies in
+        two layers.
     """
     values = np.asarray(labels)
     if values.dtype == bool:
         values = values.astype(np.uint8)
-    if values.ndim != 3 or values.dtype.kind not in "iu":
+    if values.ndim not in (3, 4) or values.dtype.kind not in "iu":
         raise OptionError(
-            f"labels must be a 3-D integer array (got {values.dtype} of shape {values.shape})"
+            "labels must be a 3-D (or layered 4-D) integer array "
+            f"(got {values.dtype} of shape {values.shape})"
         )
+    layers = values if values.ndim == 4 else values[np.newaxis]
     aff = check_affine(affine)
     chosen = list(structures)
     if not chosen or not all(isinstance(s, Structure) for s in chosen):
@@ -369,21 +379,50 @@ def check_label_map(
     numbers = [s.value for s in chosen]
     if min(numbers) < 1 or len(set(numbers)) != len(numbers):
         raise OptionError(f"structure values must be positive and distinct (got {numbers})")
-    lo, hi = (int(values.min()), int(values.max())) if values.size else (0, 0)
-    if lo >= 0 and hi < 2**16:  # faster than np.unique on a CT-sized grid, slice by slice
-        seen = np.zeros(hi + 1, dtype=bool)
-        for k in range(values.shape[2]):
-            seen[values[:, :, k]] = True
-        present = np.flatnonzero(seen)
-    else:
-        present = np.unique(values)
-    unknown = sorted(set(present[present != 0].tolist()) - set(numbers))
+    owner: dict[int, int] = {}
+    for index, layer in enumerate(layers):
+        for value in _values_of(layer) - {0}:
+            if value in owner:
+                raise LabelError(
+                    f"label value {value} lies in layers {owner[value]} and {index}: "
+                    "a structure lies in one layer"
+                )
+            owner[value] = index
+    unknown = sorted(set(owner) - set(numbers))
     if unknown:
         raise LabelError(
             f"labels hold values {unknown} that no structure describes (structures: "
             f"{sorted(numbers)}); pass a Structure for each value"
         )
-    return values, aff, chosen
+    return layers, aff, chosen
+
+
+def _values_of(layer: NDArray[np.integer]) -> set[int]:
+    """The values one 3-D label map holds."""
+    lo, hi = (int(layer.min()), int(layer.max())) if layer.size else (0, 0)
+    if lo >= 0 and hi < 2**16:  # faster than np.unique on a CT-sized grid, slice by slice
+        seen = np.zeros(hi + 1, dtype=bool)
+        for k in range(layer.shape[2]):
+            seen[layer[:, :, k]] = True
+        return set(np.flatnonzero(seen).tolist())
+    return set(np.unique(layer).tolist())
+
+
+def structure_mask(layers: NDArray[np.integer], value: int) -> NDArray[np.bool_]:
+    """The voxels of one structure in a layered label map ``(L, I, J, K)``: shape (I, J, K)."""
+    if len(layers) == 1:
+        return np.asarray(layers[0] == value)
+    return np.asarray((layers == value).any(axis=0))
+
+
+def layers_on_series(
+    layers: NDArray[np.integer], affine: NDArray[np.float64], series: SourceSeries
+) -> NDArray[np.integer]:
+    """:func:`labels_on_series` for each layer of ``(L, I', J', K')``.
+
+    Returns an array of shape ``(L, *series.shape)``.
+    """
+    return np.stack([labels_on_series(layer, affine, series) for layer in layers])
 
 
 def dicom_name(structure: Structure) -> str:

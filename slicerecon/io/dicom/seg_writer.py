@@ -29,6 +29,10 @@ Segments
 
 Grid: the label map is placed on the series grid by
 :func:`~slicerecon.io.dicom.derived.labels_on_series`.
+
+Overlaps: a layered label map (structures that overlap in different layers)
+is written with each segment whole: a SEG's segments may overlap, each has
+its own frames.
 """
 
 from __future__ import annotations
@@ -51,8 +55,9 @@ from .derived import (
     check_label_map,
     dicom_name,
     display_colour,
-    labels_on_series,
+    layers_on_series,
     load_source_series,
+    structure_mask,
 )
 
 __all__ = ["SEG_ALGORITHM_NAME", "write_seg"]
@@ -105,11 +110,13 @@ def write_seg(
 
     Parameters
     ----------
-    labels : array_like of shape (I, J, K), integer
+    labels : array_like of shape (I, J, K) or (L, I, J, K), integer
         Label values, 0 for background, on the grid of the image series
         (array axes (column, row, slice), as :func:`read_dicom_series` reads
         it), or on a grid sharing its in-plane pixels and slice direction
-        (:func:`~slicerecon.io.dicom.derived.labels_on_series`).
+        (:func:`~slicerecon.io.dicom.derived.labels_on_series`); or a layered
+        label map whose structures overlap across layers, each written whole
+        (:func:`~slicerecon.io.dicom.derived.check_label_map`).
     affine : array_like of shape (4, 4)
         Voxel index of ``labels`` → DICOM patient LPS mm.
     structures : sequence of Structure
@@ -154,21 +161,31 @@ def write_seg(
         raise DependencyError("writing a DICOM SEG needs highdicom: pip install highdicom") from exc
 
     series = load_source_series(source_images, allow_irregular=allow_irregular)
-    on_grid = labels_on_series(values, aff, series)
+    on_grid = layers_on_series(values, aff, series)[:, :, :, series.planes]
     ordered = sorted(chosen, key=lambda s: s.value)
-    lut = np.zeros(
-        int(max(s.value for s in ordered)) + 1, dtype=np.uint8 if len(ordered) < 256 else np.uint16
-    )
-    for number, structure in enumerate(ordered, start=1):
-        lut[structure.value] = number
-    frames = np.ascontiguousarray(lut[on_grid[:, :, series.planes]].transpose(2, 1, 0))
-    if not frames.any():
+    if len(on_grid) == 1:
+        # one segment number per pixel: highdicom's label-map form of a BINARY SEG
+        lut = np.zeros(
+            int(max(s.value for s in ordered)) + 1,
+            dtype=np.uint8 if len(ordered) < 256 else np.uint16,
+        )
+        for number, structure in enumerate(ordered, start=1):
+            lut[structure.value] = number
+        frames = np.ascontiguousarray(lut[on_grid[0]].transpose(2, 1, 0))
+        holds = [bool(np.any(frames == n)) for n in range(1, len(ordered) + 1)]
+    else:
+        # segments that overlap: one binary plane per segment (frames, rows, columns, segments)
+        frames = np.stack(
+            [structure_mask(on_grid, s.value).transpose(2, 1, 0) for s in ordered], axis=-1
+        )
+        holds = [bool(frames[..., n].any()) for n in range(len(ordered))]
+    if not any(holds):
         raise EmptyMaskError(
             f"no structure holds a voxel on the images of {series.name}: "
             "there is nothing to write in a SEG"
         )
-    for number, structure in enumerate(ordered, start=1):
-        if not np.any(frames == number):
+    for structure, held in zip(ordered, holds, strict=True):
+        if not held:
             logger.warning(
                 "structure %d (%s) holds no voxel on the images; its segment has no frame",
                 structure.value,
