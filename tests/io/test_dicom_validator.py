@@ -40,9 +40,10 @@ def _errors(path: Path) -> list[str]:
     return [line for line in text.splitlines() if line.startswith("Error")]
 
 
-@pytest.fixture
-def written(tmp_path: Path) -> dict[str, Path]:
-    """A small synthetic CT, and an RTSTRUCT and a SEG of three structures written on it."""
+@pytest.fixture(params=["partition", "nested"])
+def written(tmp_path: Path, request: pytest.FixtureRequest) -> dict[str, Path]:
+    """A small synthetic CT, and an RTSTRUCT and a SEG of three structures written on it:
+    a partition, or structure 2 nested in structure 1 (a layered label map)."""
     affine = factory.affine_from_geometry(
         [1, 0, 0], [0, 1, 0], [0.9, 0.9], [0, 0, 2.5], [-14.0, -10.5, 20.0]
     )
@@ -50,9 +51,13 @@ def written(tmp_path: Path) -> dict[str, Path]:
     labels[3:10, 4:12, 2:6] = 1
     labels[15:25, 5:15, 3:8] = 2
     labels[20:28, 16:22, 1:4] = 3
+    if request.param == "nested":
+        outer = np.zeros(labels.shape, np.uint8)
+        outer[2:30, 2:22, 1:9] = 1
+        labels = np.stack([outer, np.where(labels == 1, 0, labels).astype(np.uint8)])
     series = tmp_path / "ct"
     factory.write_series(
-        series, np.zeros(labels.shape), affine, modality="CT", series_description="Pelvis"
+        series, np.zeros(labels.shape[-3:]), affine, modality="CT", series_description="Pelvis"
     )
     return {
         "rtstruct": write_rtstruct(labels, affine, STRUCTURES, series, tmp_path / "rtstruct.dcm"),
