@@ -110,8 +110,14 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.count_nonzero(a & b)) / union if union else 1.0
 
 
-def ours(sparse: np.ndarray, affine: np.ndarray) -> tuple[np.ndarray, str]:
-    """slicerecon from the sparse label map alone: its label map, and how it read the input."""
+def _closed(result: Any) -> bool:
+    """Whether every mesh of a reconstruction is watertight (each edge in two faces)."""
+    return bool(result.reconstructed) and all(r.mesh.is_watertight for r in result.reconstructed)
+
+
+def ours(sparse: np.ndarray, affine: np.ndarray) -> tuple[np.ndarray, str, bool]:
+    """slicerecon from the sparse label map alone: its label map, how it read the input,
+    and whether its meshes are watertight."""
     from slicerecon.case import reconstruct_structures
     from slicerecon.case_inputs import case_from_label_map
     from slicerecon.labels import LabelMap
@@ -120,7 +126,7 @@ def ours(sparse: np.ndarray, affine: np.ndarray) -> tuple[np.ndarray, str]:
     label_map = LabelMap.from_array(sparse.astype(np.uint8), affine)
     reading = case_from_label_map(label_map, ReconstructConfig()).annotation.source
     result = reconstruct_structures(label_map)
-    return result.labels > 0, reading
+    return result.labels > 0, reading, _closed(result)
 
 
 def plain_sdf(sparse: np.ndarray, spacing: np.ndarray, axial: np.ndarray) -> np.ndarray:
@@ -291,15 +297,17 @@ def contours_sparse(truth: Any, layout: str, directory: Path) -> tuple[Path, np.
     return path, sparse
 
 
-def ours_contours(path: Path) -> tuple[np.ndarray, str]:
-    """slicerecon from the contour file alone: its label map on the file's grid."""
+def ours_contours(path: Path) -> tuple[np.ndarray, str, bool]:
+    """slicerecon from the contour file alone: its label map on the file's grid, how it
+    read the file, and whether its meshes are watertight."""
     from slicerecon.case import reconstruct_case
     from slicerecon.case_inputs import load_case
     from slicerecon.reconstruct import ReconstructConfig
 
     config = ReconstructConfig()
     case = load_case(path, config)
-    return reconstruct_case(case, config).labels > 0, case.annotation.source
+    result = reconstruct_case(case, config)
+    return result.labels > 0, case.annotation.source, _closed(result)
 
 
 def run_case(name: str, protocol: dict[str, Any], layouts: list[str]) -> list[dict[str, Any]]:
@@ -315,9 +323,9 @@ def run_case(name: str, protocol: dict[str, Any], layouts: list[str]) -> list[di
         if layout in CONTOUR_LAYOUTS:
             path, sparse = contours_sparse(truth, layout, scratch)
             start = time.perf_counter()
-            result, reading = ours_contours(path)
+            result, reading, closed = ours_contours(path)
             row["ours_s"] = time.perf_counter() - start
-            row["ours"], row["reading"] = iou(result, mask), reading
+            row["ours"], row["reading"], row["watertight"] = iou(result, mask), reading, closed
             if sparse is not None:
                 axial = _evenly(np.flatnonzero(mask.any(axis=(0, 1))), 8)
                 row["plain_sdf"] = iou(plain_sdf(sparse, spacing, axial), mask)
@@ -331,16 +339,15 @@ def run_case(name: str, protocol: dict[str, Any], layouts: list[str]) -> list[di
         planes = layout_planes(mask, layout)
         sparse = sparse_mask(mask, planes)
         start = time.perf_counter()
-        result, reading = ours(sparse, affine)
+        result, reading, closed = ours(sparse, affine)
         row["ours_s"] = time.perf_counter() - start
-        row["ours"] = iou(result, mask)
-        row["reading"] = reading
+        row["ours"], row["reading"], row["watertight"] = iou(result, mask), reading, closed
         row["plain_sdf"] = iou(plain_sdf(sparse, spacing, planes[2]), mask)
         start = time.perf_counter()
         row["itk_mci"] = iou(itk_mci(sparse, spacing), mask)
         row["itk_s"] = time.perf_counter() - start
         if len(planes) > 1:
-            axial_only, _ = ours(sparse_mask(mask, {2: planes[2]}), affine)
+            axial_only, _, _ = ours(sparse_mask(mask, {2: planes[2]}), affine)
             row["ours_axial_only"] = iou(axial_only, mask)
         rows.append(row)
         _say(row)
@@ -390,8 +397,8 @@ def report(rows: list[dict[str, Any]], halves: dict[str, str], command: str) -> 
             "",
             "| layout | ours | plain SDF (axial) | ITK-MCI (all axes) | ours, axial only | "
             "ours − plain SDF (w / t / l) | ours − ITK-MCI (w / t / l) | "
-            "ours − axial only (w / t / l) | worst vs plain SDF |",
-            "|---|---:|---:|---:|---:|---|---|---|---:|",
+            "ours − axial only (w / t / l) | worst vs plain SDF | watertight |",
+            "|---|---:|---:|---:|---:|---|---|---|---:|---:|",
         ]
         for layout in LAYOUTS:
             sel = [r for r in own if r["layout"] == layout]
@@ -406,7 +413,7 @@ def report(rows: list[dict[str, Any]], halves: dict[str, str], command: str) -> 
             lines.append(
                 f"| {layout} | {ours_v.mean():.4f} | {mean(plain)} | {mean(itk)} | {mean(axial)} | "
                 f"{_versus(ours_v, plain)} | {_versus(ours_v, itk)} | {_versus(ours_v, axial)} | "
-                f"{worst} |"
+                f"{worst} | {sum(bool(r.get('watertight')) for r in sel)} / {len(sel)} |"
             )
         lines.append("")
     lines += [
@@ -431,16 +438,14 @@ def speed(repeat: int) -> str:
     """Ours against ITK-MCI on the 340 × 285 × 120 organ annotated 12 + 2 + 2, side by side."""
     import bench_clinical
 
-    with_tmp = Path(__import__("tempfile").mkdtemp())
-    cases = bench_clinical.make_cases(with_tmp)
-    mask, spacing = cases["liver 340x285x120"]
+    mask, spacing = bench_clinical.liver_340()
     affine = np.diag([*spacing, 1.0])
     sparse = sparse_mask(mask, layout_planes(mask, "axial12+2+2"))
     itk_mci(sparse[:8, :8, :8], np.asarray(spacing))  # ITK's first call loads the filter
     times: dict[str, list[float]] = {"ours": [], "itk": []}
     for _ in range(repeat):
         start = time.perf_counter()
-        result, reading = ours(sparse, affine)
+        result, reading, _ = ours(sparse, affine)
         times["ours"].append(time.perf_counter() - start)
         start = time.perf_counter()
         filled = itk_mci(sparse, np.asarray(spacing))
@@ -483,7 +488,16 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as exc:  # noqa: BLE001 - a case whose package is missing is listed
             print(f"{name}: skipped ({type(exc).__name__}: {exc})", file=sys.stderr)
     if args.out is not None:
-        fields = ["case", "layout", "ours", "plain_sdf", "itk_mci", "ours_axial_only", "reading"]
+        fields = [
+            "case",
+            "layout",
+            "ours",
+            "plain_sdf",
+            "itk_mci",
+            "ours_axial_only",
+            "watertight",
+            "reading",
+        ]
         buffer = io.StringIO()
         writer = csv.DictWriter(buffer, fieldnames=["half", *fields], extrasaction="ignore")
         writer.writeheader()

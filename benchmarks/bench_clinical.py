@@ -86,6 +86,16 @@ CASE_PLANES = {"sphere 256x256x256": [16]}
 """Cases measured at their own plane counts instead of ``--planes``."""
 
 
+def _liver_sized(liver: np.ndarray) -> np.ndarray:
+    target = (334, 279, 114)  # the cropped grid is this plus 3 voxels of margin per side
+    return _resample(liver, tuple(t / s for t, s in zip(target, liver.shape, strict=True)))
+
+
+def liver_340() -> tuple[np.ndarray, tuple[float, float, float]]:
+    """The 340 × 285 × 120 liver mask and its spacing (mm), as ``make_cases`` writes it."""
+    return _place(_liver_sized(_liver()[0]), (340, 285, 120)), (0.62, 0.62, 1.33)
+
+
 def make_cases(root: Path) -> dict[str, Path]:
     """Write the case masks as NIfTI files; return name → path."""
     import nibabel as nib
@@ -94,8 +104,7 @@ def make_cases(root: Path) -> dict[str, Path]:
 
     liver, spacing = _liver()
     cases: dict[str, tuple[np.ndarray, tuple[float, float, float]]] = {}
-    target = (334, 279, 114)  # the cropped grid is this plus 3 voxels of margin per side
-    size = _resample(liver, tuple(t / s for t, s in zip(target, liver.shape, strict=True)))
+    size = _liver_sized(liver)
     cases["liver 340x285x120"] = (_place(size, (340, 285, 120)), (0.62, 0.62, 1.33))
     fine = _resample(size, (1.5, 1.5, 1.0))
     cases["liver 510x428x120"] = (_place(fine, (510, 428, 120)), (0.41, 0.41, 1.33))
