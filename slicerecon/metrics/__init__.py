@@ -55,6 +55,7 @@ from .surface import (
     precision_recall,
     sample_surface,
     surface_distances,
+    surface_samples,
 )
 from .volume import (
     dice,
@@ -110,7 +111,10 @@ def evaluate(
     pred, gt : Volume or trimesh.Trimesh
         Prediction and ground truth, world mm. Meshes must be closed.
     n_points : int, optional
-        Surface samples per shape (default 100 000).
+        Surface samples per shape, at most (default 100 000): a surface small
+        on the evaluation grid gets fewer, at least 32 per voxel face
+        (:func:`~slicerecon.metrics.surface.surface_samples`); the record's
+        ``n_points`` is the number drawn.
     seed : int or numpy.random.Generator, optional
         Seed of the surface sampling.
     tau : float, optional
@@ -200,6 +204,7 @@ def _evaluate(
         shell_tolerance_mm=tol or 0.0,
     )
     tol_mm = tol if tol is not None else float(occ.spacing.max())
+    n = surface_samples(p, g, n, float(occ.spacing.max()))
     dist = distances_between(p, g, n_points=n, seed=seed)
     tau_mm = tau * dist.gt_diagonal_mm
     f, precision, recall = precision_recall(dist, tau_mm)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 import trimesh
@@ -96,6 +97,40 @@ def surface_distances(
     SurfaceDistances
     """
     return distances_between(*metric_inputs(pred, gt), n_points=check_n_points(n_points), seed=seed)
+
+
+SAMPLES_PER_VOXEL_FACE = 32
+"""Surface samples per voxel face (``h²`` of area, ``h`` the evaluation grid's voxel size)
+beyond which :func:`surface_samples` draws no more: the samples are then about ``h / 6``
+apart, and the sample-spacing bias of a distance (``0.5 · sqrt(area / n)``) at most
+``h / 11``."""
+
+MIN_SURFACE_SAMPLES = 5_000
+"""The fewest samples :func:`surface_samples` draws per surface (when ``n_points`` allows)."""
+
+
+def surface_samples(pred: MetricInput, gt: MetricInput, n_points: int, voxel_mm: float) -> int:
+    """Samples per surface: ``n_points``, or fewer for a surface small on the grid.
+
+    Parameters
+    ----------
+    pred, gt : MetricInput
+    n_points : int
+        The most samples per surface.
+    voxel_mm : float
+        The evaluation grid's voxel size, mm.
+
+    Returns
+    -------
+    int
+        ``min(n_points, max(5 000, 32 · A / h²))`` with ``A`` the larger surface
+        area (mm²) and ``h`` the voxel size: a structure a few voxels across is
+        sampled as densely as an organ, in a fraction of the time (a case of a
+        hundred small structures is scored in seconds, not minutes).
+    """
+    area = max(float(pred.surface.area), float(gt.surface.area))
+    dense = math.ceil(SAMPLES_PER_VOXEL_FACE * area / max(voxel_mm, 1e-12) ** 2)
+    return int(min(n_points, max(MIN_SURFACE_SAMPLES, dense)))
 
 
 def distances_between(
