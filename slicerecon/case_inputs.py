@@ -169,6 +169,11 @@ def load_case(
 
 def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
     """A label map file (or a mesh, voxelised), read whole."""
+    if config.pixel_spacing is not None:
+        raise OptionError(
+            "--pixel-spacing applies to contours without a grid (contour files, an RTSTRUCT "
+            f"without its image series); {kind.path} is a {kind.kind} input and keeps its voxels"
+        )
     selectors = config.selectors
     if kind.kind not in LABEL_MAP_KINDS:  # a mesh, voxelised
         volume = load_input(kind.path, label=config.label, memory_budget_gb=config.max_memory_gb)
@@ -370,6 +375,7 @@ def _load_rtstruct(
         rois=config.selectors,
         allow_irregular=config.allow_irregular,
         image_dir=image_dir if image_dir is not None else kind.image_dir,
+        pixel_spacing=config.pixel_spacing,
         memory_budget_gb=config.max_memory_gb,
     )
     for structure in missing:
@@ -398,7 +404,9 @@ def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         )
     if config.slices is not None or config.every is not None:
         raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
-    annotation = read_contour_annotation(kind.path, memory_budget_gb=config.max_memory_gb)
+    annotation = read_contour_annotation(
+        kind.path, pixel_spacing=config.pixel_spacing, memory_budget_gb=config.max_memory_gb
+    )
     if config.selectors:
         annotation = annotation.select(config.selectors, source=kind.path)
     first = annotation.grid_axis()

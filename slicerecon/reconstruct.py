@@ -122,6 +122,11 @@ class ReconstructConfig(ReconstructOptions):
     """Treat every non-zero voxel (every structure) as one structure."""
     allow_irregular: bool = False
     """Accept DICOM series with uneven slice spacing."""
+    pixel_spacing: float | None = None
+    """In-plane pixel size, mm, of the grid contours are rasterized on when they
+    come without one (a contour file without ``grid``, an RTSTRUCT without its
+    image series); default: the longest in-plane extent / 256. A contour
+    file's own grid is then not used."""
     n_points: int = 50_000
     """Surface samples per mesh for the distance metrics."""
     max_memory_gb: float = DEFAULT_MEMORY_BUDGET_GB
@@ -189,6 +194,12 @@ class ReconstructConfig(ReconstructOptions):
         if len(self.projection_files) > 3:
             raise OptionError("--projections takes one to three silhouette files")
         check_budget(self.max_memory_gb)
+        if self.pixel_spacing is not None and not (
+            np.isfinite(self.pixel_spacing) and self.pixel_spacing > 0
+        ):
+            raise OptionError(
+                f"--pixel-spacing must be a positive number of mm (got {self.pixel_spacing})"
+            )
         if self.n_points < 1:
             raise OptionError(f"n_points must be >= 1 (got {self.n_points})")
 

@@ -394,3 +394,26 @@ def test_layered_seg_nrrd_runs_with_nested_segments_whole(tmp_path: Path) -> Non
     back = read_nrrd_masks(out / "labels.seg.nrrd")
     for truth, mask in zip((outer, inner), back.masks, strict=True):
         assert _iou(mask, truth) > 0.9
+
+
+def test_pixel_spacing_sets_the_grid_of_contours_without_one(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--pixel-spacing: the in-plane pixel of grid-free contours; refused for a label map."""
+    rings = [
+        {"position": z, "polygons": [[[r * np.cos(t), r * np.sin(t), z] for t in range(0, 6)]]}
+        for z, r in ((0.0, 6.0), (3.0, 8.0), (6.0, 6.0))
+    ]
+    path = tmp_path / "rings.json"
+    path.write_text(
+        json.dumps({"format": "slicerecon-contours", "version": 1, "units": "mm", "planes": rings})
+    )
+    assert main(["run", str(path), "-o", str(tmp_path / "out"), "--pixel-spacing", "0.5"]) == 0
+    zooms = nib.load(tmp_path / "out" / "labels.nii.gz").header.get_zooms()
+    assert zooms[:2] == pytest.approx((0.5, 0.5))
+    mask = tmp_path / "mask.nii.gz"
+    nib.save(nib.Nifti1Image(_ellipsoid().astype(np.uint8), AFFINE), mask)
+    capsys.readouterr()
+    assert main(["run", str(mask), "-o", str(tmp_path / "o2"), "--pixel-spacing", "0.5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--pixel-spacing applies to contours" in err[0]

@@ -190,6 +190,14 @@ RoiOpt = Annotated[str | None, typer.Option(help="Another name for --label (RTST
 IrregularOpt = Annotated[
     bool, typer.Option("--allow-irregular", help="Accept uneven DICOM slice spacing.")
 ]
+PixelSpacingOpt = Annotated[
+    float | None,
+    typer.Option(
+        "--pixel-spacing",
+        help="In-plane pixel size, mm, for contours without a grid (contour files, an RTSTRUCT "
+        "without its series; default: extent / 256).",
+    ),
+]
 WeightsOpt = Annotated[
     Path | None, typer.Option(help="Actor weights for --planner policy (default: shipped).")
 ]

@@ -29,6 +29,7 @@ from .app import (
     LabelOpt,
     MaxMemoryOpt,
     MethodOpt,
+    PixelSpacingOpt,
     PlannerOpt,
     ProjectionsOpt,
     RoiOpt,
@@ -152,6 +153,7 @@ def run(
     roi: RoiOpt = None,
     union: UnionOpt = False,
     allow_irregular: IrregularOpt = False,
+    pixel_spacing: PixelSpacingOpt = None,
     max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
     quiet: Annotated[
         bool,
@@ -242,6 +244,7 @@ def batch(
     label: LabelOpt = None,
     roi: RoiOpt = None,
     allow_irregular: IrregularOpt = False,
+    pixel_spacing: PixelSpacingOpt = None,
     max_memory: MaxMemoryOpt = DEFAULT_MAX_MEMORY_GB,
 ) -> None:
     """Reconstruct every case in INDIR on Dask; write OUTDIR/<case>/ and OUTDIR/summary.csv.

@@ -167,26 +167,22 @@ def _describe(exc: BaseException) -> dict[str, str]:
 
 
 def _pipeline(path: str, method: str, pixel_spacing: float | None, budget_gb: float) -> None:
-    from slicerecon.io import load_input
-    from slicerecon.io.labelmap import read_label_map
-    from slicerecon.reconstruct import prepare_inputs, reconstruct
-    from slicerecon.sections import Volume
+    from slicerecon.case import reconstruct_case
+    from slicerecon.case_inputs import load_case
+    from slicerecon.io import detect_kind
+    from slicerecon.reconstruct import ReconstructConfig
 
-    # every structure of a label map (a SEG of overlapping segments, a .seg.nrrd of
-    # layers), their union reconstructed; contours through load_input
-    label_map = read_label_map(path, memory_budget_gb=budget_gb)
-    if label_map is not None:
-        data: Any = label_map.union()
-    else:
-        data = load_input(path, pixel_spacing=pixel_spacing, memory_budget_gb=budget_gb)
-    if isinstance(data, Volume):
-        sections, projections, _ = prepare_inputs(data, slices=6, memory_budget_gb=budget_gb)
-    else:
-        sections, projections, _ = prepare_inputs(data, memory_budget_gb=budget_gb)
+    # the one case pipeline `slicerecon run` uses: every structure, dense or sparse, planes
+    # of any orientation; grid-free contours on the mutant's pixel spacing (--pixel-spacing)
+    options: dict[str, Any] = {"max_memory_gb": budget_gb}
     if method == "sdf":
-        reconstruct(sections, projections, method="sdf", planner="none", carve=False)
+        options.update(method="sdf", planner="none", carve=False)
+    if detect_kind(path).is_sparse:
+        options["pixel_spacing"] = pixel_spacing
     else:
-        reconstruct(sections, projections)
+        options["slices"] = 6
+    config = ReconstructConfig(**options)
+    reconstruct_case(load_case(path, config), config)
 
 
 def _cli_command(args: list[str], command_timeout: float) -> dict[str, Any]:

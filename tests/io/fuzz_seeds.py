@@ -288,7 +288,51 @@ def _contour_seeds(root: Path) -> list[Seed]:
         seeds.append(Seed("json", name, json_path, gridless=True))
         csv_path = write_contour_file(root / f"{name}.csv", rings, frame)
         seeds.append(Seed("csv", name, csv_path, gridless=True))
+    # version 2: a tumour nested in a body, on axial, sagittal and tilted planes in one file
+    seeds.append(Seed("json", "v2-views-nested", _views_file(root / "views.json"), gridless=True))
     return seeds
+
+
+def _views_file(path: Path) -> Path:
+    """A version 2 contour file: two nested structures, planes of three orientations."""
+    tilted = _rotation(np.array([1.0, 0.0, 0.0]), np.radians(40))
+    frames = [
+        (np.eye(3), (-4.0, 0.0, 4.0)),  # axial
+        (np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]), (-2.0, 2.0)),  # sagittal
+        (tilted, (0.0,)),
+    ]
+    planes = []
+    for frame, offsets in frames:
+        u, v, n = frame[0], frame[1], frame[2]
+        for offset in offsets:
+            for name, radius in (("Body", 7.0), ("Tumour", 3.0)):
+                r = float(np.sqrt(max(radius**2 - offset**2, 0.0)))
+                if r < 1.0:
+                    continue
+                ring = [
+                    offset * n + r * (np.cos(t) * u + np.sin(t) * v)
+                    for t in np.linspace(0, 2 * np.pi, 12, endpoint=False)
+                ]
+                planes.append(
+                    {
+                        "position": offset,
+                        "normal": n.tolist(),
+                        "structure": name,
+                        "polygons": [[[round(float(c), 4) for c in p] for p in ring]],
+                    }
+                )
+    document = {
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "structures": [
+            {"value": 1, "name": "Body", "colour": [200, 150, 120]},
+            {"value": 2, "name": "Tumour"},
+        ],
+        "planes": planes,
+    }
+    path.write_text(json.dumps(document), encoding="utf-8")
+    return path
 
 
 def _vti_payload(raw: bytes, *, compressor: str | None, header: str, block: int = 64) -> bytes:
