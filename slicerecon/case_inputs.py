@@ -380,20 +380,7 @@ def _load_rtstruct(
     )
     for structure in missing:
         logger.warning("ROI %s has no contours: nothing to reconstruct", structure.label)
-    annotation = replace(
-        annotation,
-        source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}",
-    )
-    return CaseInput(
-        annotation,
-        None,
-        kind.path,
-        kind,
-        annotation.affine,
-        annotation.grid_shape,
-        np.zeros(3, np.int64),
-        missing=missing,
-    )
+    return _contour_input(annotation, kind, config, missing)
 
 
 def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
@@ -409,11 +396,26 @@ def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
     )
     if config.selectors:
         annotation = annotation.select(config.selectors, source=kind.path)
+    return _contour_input(annotation, kind, config, ())
+
+
+def _contour_input(
+    annotation: Annotation,
+    kind: InputKind,
+    config: ReconstructConfig,
+    missing: tuple[Structure, ...],
+) -> CaseInput:
+    """The case input of contours read as ``annotation``, its sampled grid inside the budget.
+
+    Contours on parallel planes are reconstructed on a grid sampled along the
+    plane normal as finely as in plane (:func:`_upsampled`): that grid, not only
+    the rasterized planes, must fit ``--max-memory``.
+    """
     first = annotation.grid_axis()
     if first is not None:
         check_grid(
             _upsampled(annotation, first),
-            what="the reconstruction grid",
+            what=f"{kind.path}: the reconstruction grid",
             memory_budget_gb=config.max_memory_gb,
         )
     annotation = replace(
@@ -428,6 +430,7 @@ def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         annotation.affine,
         annotation.grid_shape,
         np.zeros(3, np.int64),
+        missing=missing,
     )
 
 

@@ -36,6 +36,7 @@ __all__ = [
     "as_labels",
     "check_label_values",
     "label_values",
+    "layer_of_values",
     "structure_colour",
     "structure_name",
 ]
@@ -456,6 +457,48 @@ def _gradual_share(data: NDArray[Any]) -> float | None:
         changes += int(np.count_nonzero(step_in | step_out))
         between += int(np.count_nonzero(step_in & step_out & (left != right)))
     return None if changes < _MIN_CHANGES else between / changes
+
+
+def layer_of_values(layers: NDArray[np.integer]) -> dict[int, int]:
+    """Each non-zero value of a layered label map and the layer that holds it.
+
+    Parameters
+    ----------
+    layers : ndarray of shape (L, I, J, K)
+        Integer label layers (a 3-D label map is one layer): a structure's
+        value lies in one layer; structures in different layers may overlap.
+
+    Returns
+    -------
+    dict of int to int
+        Value → layer index, for every non-zero value present.
+
+    Raises
+    ------
+    LabelError
+        A value lies in two layers.
+    """
+    owner: dict[int, int] = {}
+    for index, layer in enumerate(layers):
+        for value in _present_values(layer) - {0}:
+            if value in owner:
+                raise LabelError(
+                    f"label value {value} lies in layers {owner[value]} and {index}: "
+                    "a structure lies in one layer"
+                )
+            owner[value] = index
+    return owner
+
+
+def _present_values(layer: NDArray[np.integer]) -> set[int]:
+    """The values one 3-D integer label map holds (background included)."""
+    lo, hi = (int(layer.min()), int(layer.max())) if layer.size else (0, 0)
+    if lo >= 0 and hi < 2**16:  # faster than np.unique on a CT-sized grid, slice by slice
+        seen = np.zeros(hi + 1, dtype=bool)
+        for k in range(layer.shape[2]):
+            seen[layer[:, :, k]] = True
+        return set(np.flatnonzero(seen).tolist())
+    return set(np.unique(layer).tolist())
 
 
 def label_values(values: ArrayLike) -> LabelValues:

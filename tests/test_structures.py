@@ -185,6 +185,30 @@ def test_every_roi_of_an_rtstruct_with_its_name_and_colour(tmp_path: Path) -> No
         assert mesh.is_watertight and mesh.volume == pytest.approx(sphere, rel=0.06)
 
 
+def test_an_rtstruct_whose_sampled_grid_exceeds_the_budget_is_refused_before_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Contours 10 mm apart on 0.1 mm pixels are sampled 9 times along z: that grid is checked."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    def rings(centre: tuple[float, float]) -> list:
+        return [
+            factory.contour_item(factory.circle(np.sqrt(144 - (z - 30) ** 2), centre, z))
+            for z in (20.0, 30.0, 40.0)
+        ]
+
+    path = factory.write_rtstruct(
+        tmp_path / "rs.dcm", {(1, "Left"): rings((-10, 0)), (2, "Right"): rings((10, 0))}
+    )
+    out = tmp_path / "out"
+    args = ["run", str(path), "-o", str(out), "--pixel-spacing", "0.1", "--max-memory", "0.03"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rs.dcm: the reconstruction grid" in err[0]
+    assert "x 27 voxels" in err[0] and "over the memory budget of 0.03 GiB" in err[0]
+    assert not out.exists()
+
+
 def test_batch_and_report_give_one_row_per_structure(four: Path, tmp_path: Path) -> None:
     import csv
     import shutil

@@ -132,10 +132,15 @@ def check_grid(
     if need_gb > budget:
         grid = " x ".join(str(s) for s in sizes)
         raise MemoryBudgetError(
-            f"{what}: its grid of {grid} voxels needs about {need_gb:,.1f} GiB, over the "
+            f"{what}: its grid of {grid} voxels needs about {_gib(need_gb)} GiB, over the "
             f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} "
             "if this machine has that much memory"
         )
+
+
+def _gib(value: float) -> str:
+    """A size in GiB for a message: one decimal from 10 GiB, else three significant digits."""
+    return f"{value:,.1f}" if value >= 10 else f"{value:.3g}"
 
 
 def check_bytes(n_bytes: int, *, what: str, memory_budget_gb: float) -> None:
@@ -159,7 +164,7 @@ def check_bytes(n_bytes: int, *, what: str, memory_budget_gb: float) -> None:
     need_gb = int(n_bytes) / 2**30
     if need_gb > budget:
         raise MemoryBudgetError(
-            f"{what} asks for {int(n_bytes):,} bytes (about {need_gb:,.1f} GiB), over the "
+            f"{what} asks for {int(n_bytes):,} bytes (about {_gib(need_gb)} GiB), over the "
             f"memory budget of {budget:g} GiB; pass --max-memory {math.ceil(need_gb)} if "
             "this machine has that much memory"
         )

@@ -433,6 +433,26 @@ def _inside(extent: Sequence[int], shape: Sequence[int]) -> NDArray[np.bool_]:
     return box
 
 
+def _label_voxels(
+    p: Path,
+    header: Mapping[str, Any],
+    info: NrrdInfo,
+    fh: io.BufferedIOBase,
+    memory_budget_gb: float,
+) -> NDArray[np.integer]:
+    """The integer voxels of a label map or segmentation, its grid checked against the budget.
+
+    Shape (L, I, J, K): L layers (1 for a 3-D file).
+    """
+    check_grid(
+        info.shape,
+        what=str(p),
+        memory_budget_gb=memory_budget_gb,
+        bytes_per_voxel=2 * info.layers * info.dtype.itemsize + 5,
+    )
+    return _integer_values(p, _voxels(p, header, info, fh, memory_budget_gb))
+
+
 def read_nrrd_label_map(
     path: str | os.PathLike[str],
     *,
@@ -487,13 +507,7 @@ def read_nrrd_label_map(
                 f"{p} is a 4-D image holding {info.layers} volumes and no Slicer segment "
                 "fields; extract the one 3-D label map to use and pass that"
             )
-        check_grid(
-            info.shape,
-            what=str(p),
-            memory_budget_gb=memory_budget_gb,
-            bytes_per_voxel=2 * info.layers * info.dtype.itemsize + 5,
-        )
-        data = _integer_values(p, _voxels(p, header, info, fh, memory_budget_gb))
+        data = _label_voxels(p, header, info, fh, memory_budget_gb)
         if info.is_segmentation:
             result = _flatten(p, info, data)
         else:
@@ -546,13 +560,7 @@ def read_nrrd_masks(
         info = header_info(p, header)
         if not info.is_segmentation:
             raise InputError(f"{p} holds no Slicer segment fields: read it as a label map")
-        check_grid(
-            info.shape,
-            what=str(p),
-            memory_budget_gb=memory_budget_gb,
-            bytes_per_voxel=2 * info.layers * info.dtype.itemsize + 5,
-        )
-        data = _integer_values(p, _voxels(p, header, info, fh, memory_budget_gb))
+        data = _label_voxels(p, header, info, fh, memory_budget_gb)
         drawn, masks, out_value = _segment_masks(p, info, data)
     if not drawn:
         raise EmptyMaskError(f"{p} is empty: no segment holds a voxel")

@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import OptionError
-from ..labels import LPS_TO_RAS, Structure, structure_colour, structure_name
+from ..errors import LabelError, OptionError
+from ..labels import LPS_TO_RAS, Structure, layer_of_values, structure_colour, structure_name
 from ..sections import check_affine
 from .atomic import atomic_path
-from .nrrd import label_values, labels_dtype
+from .nrrd import labels_dtype
 from .nrrd_header import escape
 
 __all__ = ["write_seg_nrrd"]
@@ -128,15 +128,10 @@ def write_seg_nrrd(
     numbers = [int(s.value) for s in chosen]
     if len(set(numbers)) != len(numbers) or 0 in numbers:
         raise OptionError(f"structures need distinct non-zero values (got {numbers})")
-    layer_of: dict[int, int] = {}
-    for index, layer in enumerate(layers):
-        for value in label_values(layer) - {0}:
-            if value in layer_of:
-                raise OptionError(
-                    f"label value {value} lies in layers {layer_of[value]} and {index}: "
-                    "a structure lies in one layer"
-                )
-            layer_of[value] = index
+    try:
+        layer_of = layer_of_values(layers)
+    except LabelError as exc:
+        raise OptionError(str(exc)) from exc
     for value in sorted(layer_of):
         if value not in numbers:
             logger.warning(

@@ -390,15 +390,14 @@ def read_rtstruct_structures(
         )
 
 
-def _read_structures(
-    path: str | os.PathLike[str],
-    rois: Sequence[int | str],
-    image_dir: str | os.PathLike[str] | None,
-    pixel_spacing: float | None,
-    allow_irregular: bool,
-    memory_budget_gb: float,
-) -> tuple[list[Structure], list[CrossSections | None], CrossSections]:
-    ds, p = _read_dataset(path)
+def _chosen_polygons(
+    ds: Any, p: Path, rois: Sequence[int | str]
+) -> tuple[list[Structure], list[list[NDArray[np.float64]]]]:
+    """The chosen ROIs of a read RTSTRUCT and each one's closed planar polygons (LPS mm).
+
+    An ROI without closed planar contours keeps an empty list and is reported
+    with a warning; :class:`EmptyMaskError` when no chosen ROI has any.
+    """
     available = _rois(ds, p)
     if not available:
         raise EmptyMaskError(f"{p} holds no ROI (its StructureSetROISequence is empty)")
@@ -412,9 +411,37 @@ def _read_structures(
         except EmptyMaskError as exc:
             logger.warning("%s", exc)
             polygons.append([])
-    everything = [poly for group in polygons for poly in group]
-    if not everything:
+    if not any(polygons):
         raise EmptyMaskError(f"{p}: no chosen ROI has a closed planar contour")
+    return structures, polygons
+
+
+def _read_structures(
+    path: str | os.PathLike[str],
+    rois: Sequence[int | str],
+    image_dir: str | os.PathLike[str] | None,
+    pixel_spacing: float | None,
+    allow_irregular: bool,
+    memory_budget_gb: float,
+) -> tuple[list[Structure], list[CrossSections | None], CrossSections]:
+    ds, p = _read_dataset(path)
+    structures, polygons = _chosen_polygons(ds, p, rois)
+    sections, union = _shared_grid_sections(
+        p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+    )
+    return structures, sections, union
+
+
+def _shared_grid_sections(
+    p: Path,
+    polygons: list[list[NDArray[np.float64]]],
+    image_dir: str | os.PathLike[str] | None,
+    pixel_spacing: float | None,
+    allow_irregular: bool,
+    memory_budget_gb: float,
+) -> tuple[list[CrossSections | None], CrossSections]:
+    """Each ROI's parallel polygons rasterized on the grid of all of them (or the series')."""
+    everything = [poly for group in polygons for poly in group]
     reference = None
     if image_dir is not None:
         affine, shape, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
@@ -442,7 +469,7 @@ def _read_structures(
         raise
     except SlicereconError as exc:
         raise type(exc)(f"{p}: {exc}") from exc
-    return structures, sections, union
+    return sections, union
 
 
 def read_rtstruct_annotation(
@@ -485,29 +512,15 @@ def read_rtstruct_annotation(
     """
     with reading(path):
         ds, p = _read_dataset(path)
-        available = _rois(ds, p)
-        if not available:
-            raise EmptyMaskError(f"{p} holds no ROI (its StructureSetROISequence is empty)")
-        chosen = [_choose_roi(available, r, p) for r in rois] if rois else available
-        colours = _roi_colours(ds)
-        structures = [Structure(number, name, colours.get(number)) for number, name in chosen]
-        polygons: list[list[NDArray[np.float64]]] = []
-        for number, name in chosen:
-            try:
-                polygons.append(_roi_polygons(ds, number, name, p)[0])
-            except EmptyMaskError as exc:
-                logger.warning("%s", exc)
-                polygons.append([])
+        structures, polygons = _chosen_polygons(ds, p, rois)
         everything = [poly for group in polygons for poly in group]
-        if not everything:
-            raise EmptyMaskError(f"{p}: no chosen ROI has a closed planar contour")
         missing = tuple(s for s, group in zip(structures, polygons, strict=True) if not group)
         drawn = [(s, group) for s, group in zip(structures, polygons, strict=True) if group]
         if orientation_count(everything) <= 1:
-            found, sections, _ = _read_structures(
-                path, rois, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+            sections, _ = _shared_grid_sections(
+                p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
             )
-            own = [(s, x) for s, x in zip(found, sections, strict=True) if x is not None]
+            own = [(s, x) for s, x in zip(structures, sections, strict=True) if x is not None]
             annotation = annotation_from_sections(
                 [s for s, _ in own],
                 [x for _, x in own],
@@ -518,8 +531,6 @@ def read_rtstruct_annotation(
             return annotation, missing
         reference = None
         if image_dir is not None:
-            from .dicom.series import dicom_series_geometry
-
             affine, shape, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
             reference = (affine, shape)
         try:

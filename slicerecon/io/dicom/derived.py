@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...errors import FormatError, GeometryError, InputError, LabelError, OptionError
-from ...labels import Structure, structure_colour, structure_name
+from ...labels import Structure, layer_of_values, structure_colour, structure_name
 from ...sections import check_affine
 from ..limits import check_geometry
 from .geometry import require_path
@@ -379,15 +379,7 @@ def check_label_map(
     numbers = [s.value for s in chosen]
     if min(numbers) < 1 or len(set(numbers)) != len(numbers):
         raise OptionError(f"structure values must be positive and distinct (got {numbers})")
-    owner: dict[int, int] = {}
-    for index, layer in enumerate(layers):
-        for value in _values_of(layer) - {0}:
-            if value in owner:
-                raise LabelError(
-                    f"label value {value} lies in layers {owner[value]} and {index}: "
-                    "a structure lies in one layer"
-                )
-            owner[value] = index
+    owner = layer_of_values(layers)
     unknown = sorted(set(owner) - set(numbers))
     if unknown:
         raise LabelError(
@@ -395,17 +387,6 @@ def check_label_map(
             f"{sorted(numbers)}); pass a Structure for each value"
         )
     return layers, aff, chosen
-
-
-def _values_of(layer: NDArray[np.integer]) -> set[int]:
-    """The values one 3-D label map holds."""
-    lo, hi = (int(layer.min()), int(layer.max())) if layer.size else (0, 0)
-    if lo >= 0 and hi < 2**16:  # faster than np.unique on a CT-sized grid, slice by slice
-        seen = np.zeros(hi + 1, dtype=bool)
-        for k in range(layer.shape[2]):
-            seen[layer[:, :, k]] = True
-        return set(np.flatnonzero(seen).tolist())
-    return set(np.unique(layer).tolist())
 
 
 def structure_mask(layers: NDArray[np.integer], value: int) -> NDArray[np.bool_]:
