@@ -143,6 +143,24 @@ def test_max_memory_default_matches_the_library() -> None:
     assert DEFAULT_MAX_MEMORY_GB == DEFAULT_MEMORY_BUDGET_GB
 
 
+@pytest.mark.parametrize("command", ["run", "batch"])
+def test_every_shared_option_has_the_librarys_default(command: str) -> None:
+    """run and batch spell their options out (typer); their defaults are the options bundle's."""
+    import dataclasses
+    import inspect
+
+    from slicerecon.cli import cases
+    from slicerecon.reconstruct import ReconstructConfig
+
+    library = {f.name: f.default for f in dataclasses.fields(ReconstructConfig)}
+    parameters = inspect.signature(getattr(cases, command)).parameters
+    shared = {"max_memory_gb" if n == "max_memory" else n: p.default for n, p in parameters.items()}
+    common = sorted(set(shared) & set(library))
+    assert len(common) >= 15, common
+    for name in common:
+        assert shared[name] == library[name], name
+
+
 # -- 2. structures by number or name ---------------------------------------------------
 @pytest.fixture(scope="module")
 def two_segments(tmp_path_factory: pytest.TempPathFactory) -> Path:
