@@ -230,22 +230,47 @@ class Annotation:
         return groups
 
     def grid_axis(self) -> int | None:
-        """The reference grid axis every plane is perpendicular to, or None.
+        """The reference grid axis every plane is a slice of, or None.
 
-        None when the planes have several orientations, or one that is not
-        perpendicular to a grid axis (oblique planes).
+        None when the planes have several orientations, one that is not
+        perpendicular to a grid axis (oblique planes), or when a plane's
+        pixels do not lie on the grid's voxels (another input's grid of
+        another pixel size).
         """
         groups = self.orientations()
         if len(groups) != 1:
             return None
-        normal = groups[0][0]
-        for axis in range(3):
-            a, b = in_plane_axes(axis)
-            grid_normal = np.cross(self.affine[:3, a], self.affine[:3, b])
-            grid_normal /= np.linalg.norm(grid_normal)
-            if float(np.linalg.norm(np.cross(grid_normal, normal))) < ANGLE_TOLERANCE:
-                return axis
-        return None
+        axis = self._axis_of(self.planes[0].pose)
+        if axis is None or any(self.grid_shift(p.pose, axis) is None for p in self.planes):
+            return None
+        return axis
+
+    def grid_shift(self, pose: PlanePose, axis: int) -> NDArray[np.int64] | None:
+        """Where a slice of grid ``axis`` has its pixel ``(0, 0)`` on the grid, or None.
+
+        Parameters
+        ----------
+        pose : PlanePose
+        axis : int
+            The grid axis the plane is perpendicular to.
+
+        Returns
+        -------
+        ndarray of shape (2,), int, or None
+            The grid's voxel indices along the two in-plane axes
+            (:func:`slicerecon.sections.in_plane_axes`) of the plane's first
+            pixel, when its rows and columns step as the grid's voxels do and
+            start on one of them (a plane of another crop of the same grid);
+            None otherwise.
+        """
+        a, b = in_plane_axes(axis)
+        steps = self.affine[:3, [a, b]]
+        if not np.allclose(pose.affine[:3, :2], steps, atol=1e-6 * float(np.abs(steps).max())):
+            return None
+        inverse = np.linalg.inv(self.affine)
+        origin = inverse[:3, :3] @ pose.affine[:3, 3] + inverse[:3, 3]
+        shift = np.rint(origin[[a, b]]).astype(np.int64)
+        return shift if np.allclose(origin[[a, b]], shift, atol=1e-6) else None
 
     def select(self, selectors: Sequence[int | str], *, source: Any) -> Annotation:
         """The structures named by ``selectors`` (numbers or names), in the order given.
@@ -325,8 +350,9 @@ class Annotation:
         value : int, optional
             The structure (default: every structure together, their union).
         axis : int, optional
-            Only the planes perpendicular to this grid axis (default: every
-            plane, which must then all be perpendicular to one axis).
+            Only the slices of this grid axis, on the grid's voxels (a plane
+            parallel to them on another input's pixels is left out); default:
+            every plane, which must then all be slices of one axis.
 
         Returns
         -------
@@ -349,7 +375,9 @@ class Annotation:
         chosen = [
             n
             for n, p in enumerate(self.planes)
-            if (value is None or p.annotates(value)) and self._axis_of(p.pose) == axis
+            if (value is None or p.annotates(value))
+            and self._axis_of(p.pose) == axis
+            and self.grid_shift(p.pose, axis) is not None
         ]
         planes = tuple(self.planes[n] for n in chosen)
         indices = self.plane_indices(axis)[chosen]
@@ -357,31 +385,79 @@ class Annotation:
         a, b = in_plane_axes(axis)
         masks = np.zeros((len(planes), self.grid_shape[a], self.grid_shape[b]), dtype=bool)
         for row, n in enumerate(order):
-            plane = planes[int(n)]
-            if plane.pose.shape != masks.shape[1:]:
-                raise GeometryError("a plane's pixels are not the reference grid's")
-            if value is None:
-                for mask in plane.masks.values():
-                    masks[row] |= mask
-            else:
-                masks[row] = plane.mask(value)
+            masks[row] = self.grid_mask(planes[int(n)], value, axis)
         return CrossSections(masks, indices[order], axis, self.affine, self.grid_shape)
+
+    def grid_mask(self, plane: AnnotatedPlane, value: int | None, axis: int) -> NDArray[np.bool_]:
+        """A slice's pixels of structure ``value`` (None: every structure) on the grid's voxels.
+
+        Returns
+        -------
+        ndarray of shape (grid_shape[a], grid_shape[b]), bool
+            ``a, b`` the in-plane axes of ``axis``; background where the plane
+            does not reach.
+
+        Raises
+        ------
+        GeometryError
+            The plane is not a slice of grid ``axis`` on the grid's voxels.
+        """
+        shift = self.grid_shift(plane.pose, axis) if self._axis_of(plane.pose) == axis else None
+        if shift is None:
+            raise GeometryError(f"the plane is not a slice of the grid's {AXIS_NAMES[axis]} axis")
+        a, b = in_plane_axes(axis)
+        size = np.array([self.grid_shape[a], self.grid_shape[b]])
+        if value is not None:
+            return window(plane.mask(value), -shift, size - shift)
+        out = np.zeros(tuple(size), dtype=bool)
+        for mask in plane.masks.values():
+            out |= window(mask, -shift, size - shift)
+        return out
 
     def describe(self) -> str:
         """One line: how many planes, which orientations, their spacing."""
-        groups = self.orientations()
-        axis = self.grid_axis()
         parts = []
-        for normal, members in groups:
+        for normal, members in self.orientations():
             offsets = np.sort([self.planes[n].pose.offset_mm for n in members])
             gaps = np.diff(offsets)
             spacing = f", spacing {np.median(gaps):.3g} mm" if gaps.size else ""
-            if axis is not None:
+            axis = self._axis_of(self.planes[members[0]].pose)
+            towards = "normal (" + ", ".join(f"{c:.2f}" for c in normal + 0.0) + ")"
+            if axis is None:
+                where = towards
+            elif np.max(np.abs(normal)) > 1 - ANGLE_TOLERANCE:
                 where = f"along {AXIS_NAMES[axis]}"
-            else:
-                where = "normal (" + ", ".join(f"{c:.2f}" for c in normal) + ")"
+            else:  # a grid axis that is no world axis (a grid built on oblique planes)
+                where = f"along the grid's {AXIS_NAMES[axis]}, {towards}"
             parts.append(f"{len(members)} planes {where}{spacing}")
         return "; ".join(parts) if parts else "no plane"
+
+
+def window(mask: NDArray[np.bool_], lo: ArrayLike, hi: ArrayLike) -> NDArray[np.bool_]:
+    """``mask[lo[0]:hi[0], lo[1]:hi[1]]``, background where the window leaves the mask.
+
+    Parameters
+    ----------
+    mask : ndarray of shape (M, N), bool
+    lo, hi : array-like of 2 int
+        The window's first and one-past-last pixel along rows and columns (may
+        lie outside the mask).
+
+    Returns
+    -------
+    ndarray of shape (hi[0] - lo[0], hi[1] - lo[1]), bool
+    """
+    lo = np.asarray(lo, dtype=np.int64)
+    hi = np.asarray(hi, dtype=np.int64)
+    out = np.zeros((int(hi[0] - lo[0]), int(hi[1] - lo[1])), dtype=bool)
+    src_lo = np.maximum(lo, 0)
+    src_hi = np.minimum(hi, mask.shape)
+    if np.all(src_hi > src_lo):
+        dst = src_lo - lo
+        out[dst[0] : dst[0] + src_hi[0] - src_lo[0], dst[1] : dst[1] + src_hi[1] - src_lo[1]] = (
+            mask[src_lo[0] : src_hi[0], src_lo[1] : src_hi[1]]
+        )
+    return out
 
 
 def plane_pose(affine: ArrayLike, shape: Sequence[int], axis: int, index: float) -> PlanePose:

@@ -22,7 +22,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .annotation import AnnotatedPlane, Annotation, annotation_from_sections, plane_pose
+from .annotated_planes import covering_grid, merge_repeated_planes, planes_of_each_structure
+from .annotation import (
+    AnnotatedPlane,
+    Annotation,
+    annotation_from_sections,
+    plane_pose,
+)
 from .errors import EmptyMaskError, OptionError
 from .inputs import axis_upsample, prepare_inputs
 from .io import InputKind, detect_kind, load_ground_truth, load_input
@@ -33,9 +39,9 @@ from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
 from .labels import LabelMap, Structure, StructureMasks
-from .plane_detection import detect_planes, parse_annotation
+from .plane_detection import PlaneReading, detect_planes, parse_annotation
 from .reconstruct import ReconstructConfig
-from .sections import CrossSections, Volume
+from .sections import CrossSections, Volume, axis_index
 from .selection import choose_structure
 
 __all__ = ["CaseInput", "case_from_label_map", "combine_cases", "load_case", "reading_of"]
@@ -145,7 +151,7 @@ def load_case(
         if len(paths) == 1:
             return load_case(paths[0], config, ground_truth=ground_truth, image_dir=image_dir)
         cases = [load_case(path, config, image_dir=image_dir) for path in paths]
-        case = combine_cases(cases)
+        case = combine_cases(cases, memory_budget_gb=config.max_memory_gb)
         if ground_truth is not None:
             case = _with_ground_truth(case, ground_truth, config)
         logger.info("%s", case.annotation.source)
@@ -265,6 +271,8 @@ def case_from_label_map(
     crop = union.crop(pad=3)
     check_grid(crop.shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
     reading = detect_planes(crop.mask, parse_annotation(config.annotation))
+    if not reading.dense:
+        _check_sparse_options(reading, config, crop.spacing)
     stated = "dense" if reading.dense else reading.axes
     if reading.dense or len(reading.axes) == 1:
         sections, _, cropped = prepare_inputs(
@@ -278,11 +286,6 @@ def case_from_label_map(
         )
         grid_affine, grid_shape = sections.affine, sections.grid_shape
     else:
-        if config.slices is not None or config.every is not None:
-            raise OptionError(
-                "--slices/--every apply to dense masks; this input is already sparse "
-                f"({reading.describe(crop.spacing)})"
-            )
         sections, cropped = None, None
         grid_affine, grid_shape = crop.affine, crop.shape
     crop_lo = np.rint(
@@ -315,6 +318,8 @@ def case_from_label_map(
             label_map, crops, grid_affine, grid_shape, reading.planes, exclusive
         )
     dense = cropped is not None
+    if not dense:
+        annotation = planes_of_each_structure(annotation, kind.path)
     how = "dense mask" if dense else reading.describe(crop.spacing)
     annotation = replace(
         annotation,
@@ -336,6 +341,30 @@ def case_from_label_map(
         label_map.shape,
         crop_lo,
     )
+
+
+def _check_sparse_options(
+    reading: PlaneReading, config: ReconstructConfig, spacing: NDArray[np.float64]
+) -> None:
+    """Refuse the options that choose planes of a dense mask when the input is annotated.
+
+    Raises
+    ------
+    OptionError
+        ``--slices`` or ``--every`` given, or ``--axis`` naming another axis than the
+        annotation's one.
+    """
+    if config.slices is not None or config.every is not None:
+        raise OptionError(
+            "--slices/--every apply to dense masks; this input is already sparse "
+            f"({reading.describe(spacing)})"
+        )
+    if config.axis != "z" and reading.axes != (axis_index(config.axis),):
+        raise OptionError(
+            f"--axis applies to dense masks; this input is already sparse "
+            f"({reading.describe(spacing)}): to read it along {config.axis} only, pass "
+            f"--annotation {config.axis}"
+        )
 
 
 def _views_annotation(
@@ -503,21 +532,28 @@ def _key(structure: Structure) -> str:
     return " ".join(structure.name.split()).casefold()
 
 
-def combine_cases(cases: Sequence[CaseInput]) -> CaseInput:
+def combine_cases(
+    cases: Sequence[CaseInput], *, memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB
+) -> CaseInput:
     """Several sparse inputs of one study as one annotation, in world mm.
 
-    The first input's grid is the reference grid (the label map is written on
-    it); the others' planes keep their poses in world mm (a plane that is not a
-    slice of that grid is sampled through its projection). Structures are
-    matched by name (case and spaces ignored), unnamed ones by value; a
-    structure new to the first input keeps its value, or takes the next free
-    one. The structures form a partition only when every input is a label map.
+    The first input's voxel lattice is the reference grid (the label map is
+    written on it), extended to hold every input's drawn pixels; the others'
+    planes keep their poses in world mm (a plane that is not a slice of that
+    grid is sampled through its projection). Structures are matched by name
+    (case and spaces ignored), unnamed ones by value; a structure new to the
+    first input keeps its value, or takes the next free one. The structures
+    form a partition only when every input is a label map. A structure drawn
+    on one plane in two inputs is kept once when both drawings agree.
 
     Raises
     ------
     OptionError
-        A dense input among several (a dense mask is its own case), or one
-        value named differently in two inputs.
+        A dense input among several (a dense mask is its own case), one value
+        named differently in two inputs, or one structure drawn differently on
+        one plane in two inputs.
+    MemoryBudgetError
+        The grid holding every input exceeds ``memory_budget_gb``.
     """
     for case in cases:
         if case.dense:
@@ -560,20 +596,28 @@ def combine_cases(cases: Sequence[CaseInput]) -> CaseInput:
         for plane in case.annotation.planes:
             masks = {remap[v]: m for v, m in plane.masks.items()}
             own = (
-                None if plane.structures is None else frozenset(remap[v] for v in plane.structures)
+                frozenset(remap.values())
+                if plane.structures is None
+                else frozenset(remap[v] for v in plane.structures)
             )
-            if own is None and not case.annotation.exclusive:
-                own = frozenset(remap.values())
             planes.append(AnnotatedPlane(plane.pose, masks, own))
     exclusive = all(c.annotation.exclusive for c in cases)
+    origins = [str(c.input_path) for c in cases for _ in c.annotation.planes]
+    affine = first.annotation.affine
+    lo, hi = covering_grid(planes, affine, first.annotation.grid_shape)
+    size = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), int(hi[2] - lo[2]))
+    check_grid(size, what="the grid of the inputs together", memory_budget_gb=memory_budget_gb)
+    moved = affine.copy()
+    moved[:3, 3] = affine[:3, :3] @ lo + affine[:3, 3]
     annotation = Annotation(
         tuple(planes),
         tuple(structures),
-        first.annotation.affine,
-        first.annotation.grid_shape,
+        moved,
+        size,
         first.annotation.coordinates,
         exclusive,
     )
+    annotation = merge_repeated_planes(annotation, origins, first.crop_lo + lo)
     names = ", ".join(str(c.input_path) for c in cases)
     annotation = replace(
         annotation,
@@ -581,4 +625,4 @@ def combine_cases(cases: Sequence[CaseInput]) -> CaseInput:
         f"{annotation.describe()}",
     )
     missing = tuple(s for c in cases for s in c.missing)
-    return replace(first, annotation=annotation, missing=missing)
+    return replace(first, annotation=annotation, missing=missing, crop_lo=first.crop_lo + lo)

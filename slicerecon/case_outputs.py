@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .annotation import AnnotatedPlane, Annotation
 from .errors import OptionError
 from .io.atomic import write_json
 from .io.mesh import mesh_file_closed, write_mesh
@@ -40,6 +41,7 @@ from .io.outputs import dicom_image_series, write_label_outputs
 from .preview import PreviewStructure, display_colour, write_preview
 from .reconstruct import ReconstructConfig
 from .results import METRICS_FILE, PLAN_FILE, PREVIEW_FILE, STRUCTURES_FILE, mesh_file
+from .sections import AXIS_NAMES
 
 if TYPE_CHECKING:
     from .case import CaseInput, CaseReconstruction
@@ -253,24 +255,46 @@ def write_case(
     }
 
 
+def _planes_in_words(annotation: Annotation) -> str:
+    """``12 planes along z`` or ``16 planes in 3 orientations``, for the preview's title."""
+    n = len(annotation.planes)
+    axis = annotation.grid_axis()
+    if axis is not None:
+        return f"{n} planes along {AXIS_NAMES[axis]}"
+    return f"{n} planes in {len(annotation.orientations())} orientations"
+
+
 def _write_preview(
     path: Path, case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
 ) -> None:
     """The preview (:mod:`slicerecon.preview`): the result in 3-D beside the annotated planes."""
     sections = result.sections
-    region = tuple(
-        slice(int(a), int(a) + n) for a, n in zip(result.crop_lo, sections.grid_shape, strict=True)
-    )
     annotation = case.annotation
-    order = np.argsort(annotation.plane_indices(sections.axis), kind="stable")
-    planes = [annotation.planes[int(n)] for n in order]
-    if len(planes) != sections.n_planes:
-        planes = []
+    region = tuple(
+        slice(int(a), int(a) + n)
+        for a, n in zip(result.crop_lo, annotation.grid_shape, strict=True)
+    )
+    planes: list[AnnotatedPlane] = []
+    if sections is not None:
+        axis = sections.axis
+        order = np.argsort(annotation.plane_indices(axis), kind="stable")
+        planes = [
+            plane
+            for plane in (annotation.planes[int(n)] for n in order)
+            if annotation.axis_of(plane.pose) == axis
+            and annotation.grid_shift(plane.pose, axis) is not None
+        ]
+        if len(planes) != sections.n_planes:
+            planes = []
     items = result.results
     structures = []
     for index, item in enumerate(items):
         colour = display_colour(item.structure, index, len(items))
-        annotated = np.stack([p.mask(item.structure.value) for p in planes]) if planes else None
+        annotated = (
+            np.stack([annotation.grid_mask(p, item.structure.value, sections.axis) for p in planes])
+            if planes
+            else None
+        )
         structure = item.structure
         structures.append(
             PreviewStructure(structure.value, structure.label, colour, item.mesh, annotated)
@@ -280,7 +304,7 @@ def _write_preview(
     drawn = sum(r.mesh is not None for r in items)
     title = (
         f"{case.input_path.name}: {drawn} of {len(items)} structure(s) reconstructed from "
-        f"{sections.n_planes} planes along {'xyz'[sections.axis]}; {config.method}, "
+        f"{_planes_in_words(annotation)}; {config.method}, "
         f"planner {case_planner(result)}, {n_parts} part(s)"
     )
     write_preview(

@@ -142,7 +142,7 @@ def _box_corners(box: Box, affine: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def _three_d(
     structures: Sequence[PreviewStructure],
-    sections: CrossSections,
+    sections: CrossSections | None,
     frame: str | None,
     boxes: Sequence[Box],
     box_affine: NDArray[np.float64] | None,
@@ -158,11 +158,15 @@ def _three_d(
         colour = np.asarray(item.colour, np.float64) / 255.0
         vertices = to_display_frame(np.asarray(item.mesh.vertices), frame)
         surfaces.append(Surface(vertices, np.asarray(item.mesh.faces, np.int64), colour))
-    outlines = [to_display_frame(c, frame) for c in _plane_outlines(sections)]
+    outlines = (
+        [] if sections is None else [to_display_frame(c, frame) for c in _plane_outlines(sections)]
+    )
     if surfaces:
         points = np.concatenate([s.vertices for s in surfaces])
-    else:
+    elif outlines:
         points = np.concatenate(outlines)
+    else:
+        points = np.zeros((1, 3))
     lo, hi = points.min(axis=0), points.max(axis=0)
     pad = 0.04 * float(np.max(hi - lo))
     camera = fit_camera(lo - pad, hi + pad, (_VIEW_PX, _VIEW_PX), margin=26)
@@ -284,7 +288,7 @@ def write_preview(
     path: str | os.PathLike[str],
     *,
     structures: Sequence[PreviewStructure],
-    sections: CrossSections,
+    sections: CrossSections | None,
     result: NDArray[np.integer],
     title: str,
     frame: str | None = None,
@@ -299,9 +303,11 @@ def write_preview(
         Output file.
     structures : sequence of PreviewStructure
         Every structure, in order (colours, meshes, annotated masks).
-    sections : CrossSections
-        The annotated planes of every structure together, on the grid of ``result``.
-    result : ndarray of shape sections.grid_shape, integer
+    sections : CrossSections or None
+        The annotated planes of every structure together, on the grid of
+        ``result``; None when no annotated plane is a slice of that grid
+        (oblique planes): the preview is then the 3-D view alone.
+    result : ndarray of shape (I, J, K), integer
         The reconstructed label map (each structure's value) on the sections' grid.
     title : str
         The first line (what was read and made).
@@ -320,19 +326,21 @@ def write_preview(
     from PIL import Image, ImageDraw
 
     view = _three_d(structures, sections, frame, boxes, box_affine)
-    n_planes = sections.n_planes
+    n_planes = 0 if sections is None else sections.n_planes
     chosen = (
         np.unique(np.linspace(0, n_planes - 1, min(n_planes, MAX_PLANES_SHOWN)).round()).astype(int)
         if n_planes
         else np.zeros(0, int)
     )
-    shown = _orientation(sections, frame)
-    spacing = np.linalg.norm(sections.affine[:3, :3], axis=0)
-    extent = np.array(
-        [result.shape[i] * spacing[i] for i in (shown.across, shown.up)], dtype=np.float64
-    )
-    scale = float(min(_PLANE_PX[0] / extent[0], _PLANE_PX[1] / extent[1]))
-    panels = [_plane_panel(structures, result, sections, int(r), scale, shown) for r in chosen]
+    panels = []
+    if sections is not None:
+        shown = _orientation(sections, frame)
+        spacing = np.linalg.norm(sections.affine[:3, :3], axis=0)
+        extent = np.array(
+            [result.shape[i] * spacing[i] for i in (shown.across, shown.up)], dtype=np.float64
+        )
+        scale = float(min(_PLANE_PX[0] / extent[0], _PLANE_PX[1] / extent[1]))
+        panels = [_plane_panel(structures, result, sections, int(r), scale, shown) for r in chosen]
     columns = 3 if len(panels) > 4 else 2 if len(panels) > 1 else 1
     cell_w, cell_h = _PLANE_PX[0] + _GAP_PX, _PLANE_PX[1] + _CAPTION_PX + 16 + _GAP_PX
     n_rows = math.ceil(len(panels) / columns) if panels else 0
@@ -347,12 +355,15 @@ def write_preview(
     canvas.paste(Image.fromarray(view), (_GAP_PX, _TITLE_PX))
     draw.text(
         (_GAP_PX + 4, _TITLE_PX + 4),
-        f"3-D, world mm, true aspect; red: the {n_planes} annotated planes",
+        f"3-D, world mm, true aspect; red: the {n_planes} annotated planes"
+        if sections is not None
+        else "3-D, world mm, true aspect (the annotated planes are oblique to the grid)",
         fill=(90, 90, 90),
         font=font(11),
     )
     left = 2 * _GAP_PX + _VIEW_PX
     for k, (row, panel) in enumerate(zip(chosen, panels, strict=True)):
+        assert sections is not None
         x = left + (k % columns) * cell_w
         y = _TITLE_PX + (k // columns) * cell_h
         position = float(sections.positions[row])

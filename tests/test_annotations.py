@@ -417,3 +417,118 @@ def test_pixel_spacing_sets_the_grid_of_contours_without_one(
     assert main(["run", str(mask), "-o", str(tmp_path / "o2"), "--pixel-spacing", "0.5"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--pixel-spacing applies to contours" in err[0]
+
+
+def _volume(path: Path) -> float:
+    mesh = trimesh.load(path)
+    assert mesh.is_watertight
+    return float(mesh.volume)
+
+
+def test_inputs_combine_in_any_order_on_a_grid_holding_them_all(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The sagittal file's drawing spans a few columns; given first, the result is not cut there."""
+    truth = _ellipsoid()
+    files = {
+        "axial": _keep(truth, {2: [5, 9, 13, 17, 21, 25]}),
+        "sagittal": _keep(truth, {0: [16, 32]}),
+    }
+    for name, mask in files.items():
+        nib.save(nib.Nifti1Image(mask.astype(np.uint8), AFFINE), tmp_path / f"{name}.nii.gz")
+    volumes = []
+    for order in (("axial", "sagittal"), ("sagittal", "axial")):
+        out = tmp_path / "-".join(order)
+        paths = [str(tmp_path / f"{name}.nii.gz") for name in order]
+        assert main(["run", *paths, "-o", str(out), "-q"]) == 0
+        volumes.append(_volume(out / "mesh.stl"))
+        labels = np.asanyarray(nib.load(out / "labels.nii.gz").dataobj)
+        assert labels.shape == truth.shape
+        for axis, indices in ((2, [5, 9, 13, 17, 21, 25]), (0, [16, 32])):  # drawn planes kept
+            kept = np.moveaxis(labels > 0, axis, 0)[indices]
+            assert (kept == np.moveaxis(truth, axis, 0)[indices]).mean() > 0.995
+    assert volumes[0] == pytest.approx(volumes[1], rel=1e-3)
+    assert volumes[0] == pytest.approx(truth.sum() * np.prod(SPACING), rel=0.05)
+
+
+def test_a_structure_of_another_input_is_not_cut_by_its_planes(tmp_path: Path) -> None:
+    """A second input's planes speak for its own structures, not for the first input's."""
+    truth = _ellipsoid()
+    axial = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    other = np.zeros_like(axial)
+    other[20:28, 18:26, 14] = 2  # a small structure on one axial slice between the planes
+    other[20:28, 18:26, 15] = 2
+    other[20:28, 18:26, 16] = 2
+    other = _keep(other.astype(bool), {0: [22, 24]}).astype(np.uint8) * 2
+    nib.save(nib.Nifti1Image(axial, AFFINE), tmp_path / "organ.nii.gz")
+    nib.save(nib.Nifti1Image(other, AFFINE), tmp_path / "lesion.nii.gz")
+    alone = tmp_path / "alone"
+    assert main(["run", str(tmp_path / "organ.nii.gz"), "-o", str(alone), "-q"]) == 0
+    both = tmp_path / "both"
+    argv = ["run", str(tmp_path / "organ.nii.gz"), str(tmp_path / "lesion.nii.gz")]
+    assert main([*argv, "-o", str(both), "-q"]) == 0
+    organ_alone = _volume(alone / "mesh.stl")
+    organ = _volume(both / "meshes" / "1.stl")
+    # the lesion's voxels go to the lesion (a partition); nothing else of the organ is lost
+    assert organ == pytest.approx(organ_alone, rel=0.01)
+
+
+def test_one_structure_drawn_on_one_slice_in_two_inputs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    truth = _ellipsoid()
+    first = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    same = _keep(truth, {2: [13, 15]}).astype(np.uint8)  # slice 13 drawn alike in both
+    shifted = np.roll(same, 3, axis=0)  # slice 13 drawn elsewhere
+    for name, data in (("a", first), ("same", same), ("shifted", shifted)):
+        nib.save(nib.Nifti1Image(data, AFFINE), tmp_path / f"{name}.nii.gz")
+    run = ["run", str(tmp_path / "a.nii.gz")]
+    assert main([*run, str(tmp_path / "same.nii.gz"), "-o", str(tmp_path / "o1"), "-q"]) == 0
+    capsys.readouterr()
+    assert main([*run, str(tmp_path / "shifted.nii.gz"), "-o", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "drawn on slice 13 along z" in err[0] and "differently" in err[0]
+    assert not (tmp_path / "o2").exists()
+
+
+def test_structures_drawn_on_interleaved_slices_are_each_read_on_their_own(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Left drawn on slices 0, 6, 12 ..., right on 3, 9, 15 ...: neither cuts the other."""
+    x, y, z = np.meshgrid(*[np.arange(64)] * 3, indexing="ij")
+    left = (x - 20) ** 2 + (y - 31.5) ** 2 + (z - 31.5) ** 2 < 12**2
+    right = (x - 46) ** 2 + (y - 31.5) ** 2 + (z - 31.5) ** 2 < 12**2
+    labels = np.zeros((64, 64, 64), np.uint8)
+    labels[left & (z % 6 == 0)] = 1
+    labels[right & (z % 6 == 3)] = 2
+    nib.save(nib.Nifti1Image(labels, np.eye(4)), tmp_path / "two.nii.gz")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "two.nii.gz"), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "drawn on planes of their own" in err
+    alone = tmp_path / "alone"
+    assert main(["run", str(tmp_path / "two.nii.gz"), "--label", "1", "-o", str(alone), "-q"]) == 0
+    for value in (1, 2):
+        mesh = trimesh.load(out / "meshes" / f"{value}.stl")
+        assert mesh.is_watertight and len(mesh.split(only_watertight=False)) == 1
+        assert mesh.volume == pytest.approx(_volume(alone / "mesh.stl"), rel=0.02)
+
+
+@pytest.mark.parametrize(
+    ("option", "words"),
+    [
+        (["--slices", "5"], "--slices/--every apply to dense masks"),
+        (["--every", "2"], "--slices/--every apply to dense masks"),
+        (["--axis", "x"], "--axis applies to dense masks"),
+    ],
+)
+def test_options_that_choose_planes_are_refused_for_an_annotation(
+    option: list[str], words: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    sparse = _keep(_ellipsoid(), {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(sparse, AFFINE), tmp_path / "sparse.nii.gz")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "sparse.nii.gz"), *option, "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and "sparse annotation" in err[0]
+    assert not out.exists()

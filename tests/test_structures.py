@@ -209,6 +209,30 @@ def test_an_rtstruct_whose_sampled_grid_exceeds_the_budget_is_refused_before_wor
     assert not out.exists()
 
 
+def test_contours_oblique_to_their_series_give_a_preview_of_the_3d_view(tmp_path: Path) -> None:
+    """Radial contours through a ball beside its series: no plane is a slice of the grid."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+    from PIL import Image
+
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [-31.5, -31.5, -20.0]
+    )
+    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 21), np.uint16), affine, modality="CT")
+    t = np.linspace(0.0, 2.0 * np.pi, 120, endpoint=False)
+    items = []
+    for angle in np.radians([10.0, 55.0, 100.0, 145.0]):  # planes through the z axis
+        u = np.array([np.cos(angle), np.sin(angle), 0.0])
+        points = 12.0 * (np.cos(t)[:, None] * u + np.sin(t)[:, None] * np.array([0, 0, 1.0]))
+        items.append(factory.contour_item(points))
+    factory.write_rtstruct(tmp_path / "ct" / "rs.dcm", {(1, "Ball"): items})
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out), "-q"]) == 0
+    mesh = trimesh.load(out / "mesh.stl")
+    assert mesh.is_watertight
+    assert mesh.volume == pytest.approx(4 / 3 * np.pi * 12**3, rel=0.15)
+    assert Image.open(out / "preview.png").size[0] > 300
+
+
 def test_batch_and_report_give_one_row_per_structure(four: Path, tmp_path: Path) -> None:
     import csv
     import shutil

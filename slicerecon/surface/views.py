@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..annotation import Annotation, PlanePose
+from ..annotation import Annotation, PlanePose, window
 from ..errors import EmptyMaskError, GeometryError
 from ..io.limits import check_grid
 from ..sections import Volume, in_plane_axes
@@ -102,26 +102,17 @@ def _views(
     limit = np.sin(np.radians(0.5))
     for plane in annotation.planes_of(value):
         pose = plane.pose
-        found = None
-        for axis in range(3):
-            a, b = in_plane_axes(axis)
-            if np.allclose(pose.affine[:3, 0], annotation.affine[:3, a]) and np.allclose(
-                pose.affine[:3, 1], annotation.affine[:3, b]
-            ):
-                found = axis
-                break
-        if found is not None:
+        found = annotation.axis_of(pose)
+        shift = None if found is None else annotation.grid_shift(pose, found)
+        if found is not None and shift is not None:
+            # the plane's pixels on the grid's voxels (another input's crop of the grid
+            # may start elsewhere): its mask moved by whole pixels
             origin = inverse[:3, :3] @ pose.affine[:3, 3] + inverse[:3, 3]
             a, b = in_plane_axes(found)
-            shift = np.rint(origin[[a, b]]).astype(np.int64)
-            if np.allclose(origin[[a, b]], shift, atol=1e-6):
-                # the plane's pixels on the grid's voxels (another input's grid may
-                # start elsewhere): its mask moved by whole pixels
-                mask = plane.mask(value)
-                size = (annotation.grid_shape[a], annotation.grid_shape[b])
-                grid_mask = _window(mask, -shift, -shift + np.asarray(size))
-                aligned.setdefault(found, []).append((float(origin[found]), grid_mask))
-                continue
+            size = np.array([annotation.grid_shape[a], annotation.grid_shape[b]])
+            grid_mask = window(plane.mask(value), -shift, size - shift)
+            aligned.setdefault(found, []).append((float(origin[found]), grid_mask))
+            continue
         normal = pose.normal
         for view in oblique:
             if np.linalg.norm(np.cross(view.normal, normal)) < limit:
@@ -310,7 +301,7 @@ def _view(
     pixel = spacing[[a, b]]
     indices = np.array([p[0] for p in planes], dtype=np.float64)
     distances = {
-        n: plane_signed_distance(_window(mask, lo[[a, b]], hi[[a, b]]), pixel)
+        n: plane_signed_distance(window(mask, lo[[a, b]], hi[[a, b]]), pixel)
         for n, (_, mask) in enumerate(planes)
     }
     samples = positions if axis == along else np.arange(lo[axis], hi[axis], dtype=np.float64)
@@ -318,7 +309,7 @@ def _view(
     used = np.arange(len(planes))
     fill_between(field, samples, indices, used, distances, interpolation)
     if join_drift and len(planes) > 1:
-        masks = np.stack([_window(mask, lo[[a, b]], hi[[a, b]]) for _, mask in planes])
+        masks = np.stack([window(mask, lo[[a, b]], hi[[a, b]]) for _, mask in planes])
         join_drifting_regions(
             field, samples, indices, used, masks, pixel, float(spacing[axis]), plane_signed_distance
         )
@@ -471,19 +462,6 @@ def views_upsample(annotation: Annotation) -> int:
     factor = max(1, int(np.ceil(float(spacing[along] / min(spacing[a], spacing[b])) - 1e-6)))
     factor += 1 - factor % 2
     return int(min(factor, 9))
-
-
-def _window(mask: NDArray[np.bool_], lo: NDArray[np.int64], hi: NDArray[np.int64]) -> NDArray:
-    """``mask[lo[0]:hi[0], lo[1]:hi[1]]``, background where the window leaves the mask."""
-    out = np.zeros((int(hi[0] - lo[0]), int(hi[1] - lo[1])), dtype=bool)
-    src_lo = np.maximum(lo, 0)
-    src_hi = np.minimum(hi, mask.shape)
-    if np.all(src_hi > src_lo):
-        dst = src_lo - lo
-        out[dst[0] : dst[0] + src_hi[0] - src_lo[0], dst[1] : dst[1] + src_hi[1] - src_lo[1]] = (
-            mask[src_lo[0] : src_hi[0], src_lo[1] : src_hi[1]]
-        )
-    return out
 
 
 def views_surface(

@@ -1,0 +1,201 @@
+"""Which structures each annotated plane speaks for, across structures and inputs.
+
+A label map's annotated plane says that every structure it does not hold is
+absent there; an RTSTRUCT's contour plane speaks only for its ROI. When
+structures or inputs are drawn on planes of their own, these rules decide
+which planes bound which structure (:func:`planes_of_each_structure`), and how
+several inputs of one study become one annotation on one grid
+(:func:`covering_grid`, :func:`merge_repeated_planes`).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose
+from .errors import OptionError
+from .sections import AXIS_NAMES
+
+__all__ = ["COMBINED_PAD", "covering_grid", "merge_repeated_planes", "planes_of_each_structure"]
+
+logger = logging.getLogger(__name__)
+
+_EPS_MM = 1e-3
+"""Planes closer than this (mm) are one plane."""
+COMBINED_PAD = 3
+"""Voxels kept around every input's drawn pixels on the grid of several inputs."""
+
+
+def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
+    """Which planes of a sparse label map speak for which structure.
+
+    A label map's annotated plane says every structure it does not hold is
+    absent there, when the structures were drawn on the same planes. A
+    structure that shares **no** plane with another, while planes of others lie
+    inside its own extent, was drawn on planes of its own (structures annotated
+    on interleaved slices): it is read on its own planes, with one line saying
+    so. A structure that does share planes and is missing from planes inside
+    its extent that hold others is read as absent there, with a warning.
+
+    Parameters
+    ----------
+    annotation : Annotation
+        Planes that annotate every structure (``structures`` None).
+    source : path or str
+        The input, for the messages.
+
+    Returns
+    -------
+    Annotation
+        The same planes, each annotating the structures it speaks for.
+    """
+    values = annotation.values
+    if len(values) < 2:
+        return annotation
+    planes = annotation.planes
+    holding = [frozenset(p.masks) for p in planes]
+    alone: list[int] = []
+    gaps: dict[int, int] = {}
+    for value in values:
+        own = [n for n, h in enumerate(holding) if value in h]
+        inside = [
+            n
+            for n, h in enumerate(holding)
+            if value not in h and h and _between(planes[n].pose, [planes[k].pose for k in own])
+        ]
+        if not inside:
+            continue
+        if all(holding[n] == {value} for n in own):
+            alone.append(value)
+        else:
+            gaps[value] = len(inside)
+    if alone:
+        names = ", ".join(annotation.structure(v).label for v in alone)
+        logger.warning(
+            "%s: structure(s) %s drawn on planes of their own (none of them holds another "
+            "structure): each is read on its own planes, not as absent from the others'",
+            source,
+            names,
+        )
+    for value, count in gaps.items():
+        logger.warning(
+            "%s: structure %s is missing from %d plane(s) inside its extent that hold other "
+            "structures: read as absent there (a gap); if it was only not drawn there, draw "
+            "it, or reconstruct it alone with --label",
+            source,
+            annotation.structure(value).label,
+            count,
+        )
+    if not alone:
+        return annotation
+    everything = frozenset(values)
+    rebuilt = []
+    for plane, held in zip(planes, holding, strict=True):
+        speaks = (everything if plane.structures is None else plane.structures) - (
+            frozenset(alone) - held
+        )
+        rebuilt.append(AnnotatedPlane(plane.pose, plane.masks, speaks))
+    return replace(annotation, planes=tuple(rebuilt))
+
+
+def _between(pose: PlanePose, own: Sequence[PlanePose]) -> bool:
+    """Whether a plane lies strictly between two of ``own`` parallel to it."""
+    offsets = [p.offset_mm * np.sign(p.normal @ pose.normal) for p in own if p.is_parallel(pose)]
+    if len(offsets) < 2:
+        return False
+    return bool(min(offsets) + _EPS_MM < pose.offset_mm < max(offsets) - _EPS_MM)
+
+
+def covering_grid(
+    planes: Sequence[AnnotatedPlane], affine: NDArray[np.float64], shape: Sequence[int]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The index range ``[lo, hi)`` of the lattice of ``affine`` that holds ``shape`` and every
+    plane's drawn pixels with :data:`COMBINED_PAD` voxels around them."""
+    inverse = np.linalg.inv(affine)
+    lo = np.zeros(3, dtype=np.int64)
+    hi = np.asarray(shape, dtype=np.int64).copy()
+    for plane in planes:
+        if not plane.masks:
+            continue
+        drawn = np.logical_or.reduce(list(plane.masks.values()))
+        rows = np.flatnonzero(drawn.any(axis=1))
+        cols = np.flatnonzero(drawn.any(axis=0))
+        corners = [
+            [r, c] for r in (rows[0] - 0.5, rows[-1] + 0.5) for c in (cols[0] - 0.5, cols[-1] + 0.5)
+        ]
+        index = plane.pose.to_world(corners) @ inverse[:3, :3].T + inverse[:3, 3]
+        lo = np.minimum(lo, np.floor(index.min(axis=0)).astype(np.int64) - COMBINED_PAD)
+        hi = np.maximum(hi, np.ceil(index.max(axis=0)).astype(np.int64) + 1 + COMBINED_PAD)
+    return lo, hi
+
+
+def merge_repeated_planes(
+    annotation: Annotation, origins: Sequence[str], first_voxel: NDArray[np.int64]
+) -> Annotation:
+    """One plane where two inputs draw on one plane; refuse a structure drawn there unlike.
+
+    Two planes are one when they are the same slice of the grid, or have the
+    same pose and pixels. ``first_voxel``: the grid's first voxel on the first
+    input's grid (messages name slices there).
+
+    Raises
+    ------
+    OptionError
+        A structure drawn on one plane by two inputs, differently.
+    """
+    kept: dict[Any, tuple[AnnotatedPlane, str]] = {}
+    for number, (plane, origin) in enumerate(zip(annotation.planes, origins, strict=True)):
+        axis = annotation.axis_of(plane.pose)
+        shift = None if axis is None else annotation.grid_shift(plane.pose, axis)
+        if axis is not None and shift is not None:
+            index = float(annotation.plane_indices(axis)[number])
+            key: Any = ("slice", axis, round(index, 3))
+        else:
+            key = ("pose", plane.pose.shape, tuple(np.round(plane.pose.affine, 3).ravel()))
+        if key not in kept:
+            kept[key] = (plane, origin)
+            continue
+        other, first_origin = kept[key]
+        common = (other.structures or frozenset(annotation.values)) & (
+            plane.structures or frozenset(annotation.values)
+        )
+        on_grid = key[0] == "slice"
+        where = (
+            f"slice {key[2] + first_voxel[key[1]]:g} along {AXIS_NAMES[key[1]]}"
+            if on_grid
+            else "one plane"
+        )
+        for value in sorted(common):
+            if on_grid:
+                one = annotation.grid_mask(other, value, key[1])
+                two = annotation.grid_mask(plane, value, key[1])
+            else:
+                one, two = other.mask(value), plane.mask(value)
+            if not np.array_equal(one, two):
+                raise OptionError(
+                    f"structure {annotation.structure(value).label} is drawn on {where} in "
+                    f"{first_origin} and in {origin}, differently: keep one drawing of it, or "
+                    "choose the structures of each input with --label"
+                )
+        if on_grid:  # both drawings on the grid's pixels of that slice
+            pose = plane_pose(annotation.affine, annotation.grid_shape, key[1], key[2])
+            values = set(other.masks) | set(plane.masks)
+            masks = {
+                v: annotation.grid_mask(other, v, key[1]) | annotation.grid_mask(plane, v, key[1])
+                for v in values
+            }
+        else:
+            pose, masks = other.pose, {**plane.masks, **other.masks}
+        speaks = (other.structures or frozenset(annotation.values)) | (
+            plane.structures or frozenset(annotation.values)
+        )
+        kept[key] = (AnnotatedPlane(pose, masks, speaks), first_origin)
+    if len(kept) == len(annotation.planes):
+        return annotation
+    return replace(annotation, planes=tuple(p for p, _ in kept.values()))
