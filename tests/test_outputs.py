@@ -199,3 +199,29 @@ def test_a_series_with_a_slice_of_another_study_is_refused_naming_both(
     assert len(err) == 1 and err[0].startswith("error:")
     assert "2 studies" in err[0] and "CT 'Head 5mm'" in err[0] and stray.name in err[0]
     assert "20 images of CT (no SeriesDescription)" in err[0]
+
+
+def test_a_series_without_type_2_patient_and_study_attributes_still_gets_its_seg(
+    tmp_path: Path,
+) -> None:
+    """Research series often lack PatientBirthDate, StudyID ...: seg.dcm is written anyway."""
+    import pydicom
+
+    _ct(tmp_path / "ct")
+    for path in (tmp_path / "ct").iterdir():
+        ds = pydicom.dcmread(path)
+        for name in ("PatientBirthDate", "PatientSex", "StudyID", "AccessionNumber"):
+            if name in ds:
+                delattr(ds, name)
+        ds.save_as(path)
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {(1, "Ball"): _rings(12.0, (0.0, 0.0), 30.0)},
+        on_series=tmp_path / "ct",
+    )
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out), "-q"]) == 0
+    assert json.loads((out / "structures.json").read_text())["outputs"]["skipped"] == {}
+    seg = pydicom.dcmread(out / "seg.dcm")
+    assert "PatientBirthDate" in seg and seg.PatientBirthDate == ""
+

@@ -213,6 +213,46 @@ def write_seg(
     return target
 
 
+_TYPE2_COPIED = (
+    "PatientName",
+    "PatientID",
+    "PatientBirthDate",
+    "PatientSex",
+    "StudyID",
+    "StudyDate",
+    "StudyTime",
+    "ReferringPhysicianName",
+    "AccessionNumber",
+)
+"""Patient and study attributes a SEG copies from its source images (Type 2 there and in the
+SEG: present, possibly empty)."""
+
+
+def _with_type2_attributes(images: Sequence[Any]) -> list[Any]:
+    """The source headers with every attribute of :data:`_TYPE2_COPIED` present.
+
+    Research series often leave out Type 2 attributes (``PatientBirthDate``,
+    ``StudyID``); highdicom reads them from the source images. An absent one is
+    written empty on a copy of the header (the files are not touched), as the
+    standard allows for Type 2.
+    """
+    import copy
+
+    out = []
+    absent: set[str] = set()
+    for ds in images:
+        missing = [name for name in _TYPE2_COPIED if name not in ds]
+        if missing:
+            ds = copy.copy(ds)
+            for name in missing:
+                setattr(ds, name, "")
+            absent.update(missing)
+        out.append(ds)
+    if absent:
+        logger.info("the source images lack %s: empty in the SEG", ", ".join(sorted(absent)))
+    return out
+
+
 def _segmentation(
     segmentation_class: Any,
     series: Any,
@@ -226,7 +266,7 @@ def _segmentation(
     from ... import __version__
 
     return segmentation_class(
-        source_images=list(series.images),
+        source_images=_with_type2_attributes(series.images),
         pixel_array=frames,
         segmentation_type="BINARY",
         segment_descriptions=_segment_descriptions(ordered),
