@@ -358,11 +358,24 @@ def reconstruct_case(
         )
         if not crossed:
             logger.warning(
-                "structure %s lies between the kept planes: not reconstructed", structure.label
+                "%s: structure %s %s: not reconstructed",
+                case.input_path,
+                structure.label,
+                "lies between the kept planes" if case.dense else "is drawn on no plane",
             )
             results.append(StructureResult(structure, NO_PLANE))
             fields.append(None)
             continue
+        if crossed == 1 and sparse:
+            alone = len(annotation.planes_of(structure.value)) == 1
+            logger.warning(
+                "%s: structure %s is drawn on one plane only: %s",
+                case.input_path,
+                structure.label,
+                "its reconstruction is a slab one slice thick"
+                if alone
+                else "it ends towards the planes beside it, where it is absent",
+            )
         start = time.perf_counter()
         if views:
             results.append(_from_views(case, structure, per_structure, crossed))

@@ -532,3 +532,27 @@ def test_options_that_choose_planes_are_refused_for_an_annotation(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and "sparse annotation" in err[0]
     assert not out.exists()
+
+
+def test_a_structure_drawn_on_one_plane_of_an_annotation_is_warned_about(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    truth = _ellipsoid()
+    labels = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    labels[20:28, 18:26, 13] = 2  # a second structure on one of the planes only
+    nib.save(nib.Nifti1Image(labels, AFFINE), tmp_path / "two.nii.gz")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "two.nii.gz"), "-o", str(out)]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "one plane" in line]
+    assert len(err) == 1 and "two.nii.gz: structure 2 is drawn on one plane only" in err[0]
+    assert "planes beside it" in err[0]
+    z = trimesh.load(out / "meshes" / "2.stl").bounds[:, 2]
+    assert 13 * SPACING[2] - 8 < z[0] < z[1] < 13 * SPACING[2] + 8  # within the planes beside
+    # alone on its plane, the structure is a slab one slice thick
+    single = np.zeros_like(labels)
+    single[20:28, 18:26, 13] = 1
+    nib.save(nib.Nifti1Image(single, AFFINE), tmp_path / "one.nii.gz")
+    assert main(["run", str(tmp_path / "one.nii.gz"), "-o", str(tmp_path / "o1")]) == 0
+    assert "slab one slice thick" in capsys.readouterr().err
+    z = trimesh.load(tmp_path / "o1" / "mesh.stl").bounds[:, 2]
+    assert z[1] - z[0] == pytest.approx(SPACING[2], abs=0.05)
