@@ -39,14 +39,18 @@ from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
 from .labels import LabelMap, Structure, StructureMasks
-from .plane_detection import PlaneReading, detect_planes, parse_annotation
+from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
 from .reconstruct import ReconstructConfig
-from .sections import CrossSections, Volume, axis_index
+from .sections import AXIS_NAMES, CrossSections, Volume, axis_index
 from .selection import choose_structure
 
 __all__ = ["CaseInput", "case_from_label_map", "combine_cases", "load_case", "reading_of"]
 
 logger = logging.getLogger(__name__)
+
+MIN_GAPS_WARNED = 2
+"""Runs of empty slices inside a dense-read mask along one axis from which a warning says
+that it may be drawn on groups of slices (one gap: two pieces, which dense masks have)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -273,6 +277,8 @@ def case_from_label_map(
     reading = detect_planes(crop.mask, parse_annotation(config.annotation))
     if not reading.dense:
         _check_sparse_options(reading, config, crop.spacing)
+    elif not reading.stated:
+        _warn_of_gaps(crop.mask, kind.path)
     stated = "dense" if reading.dense else reading.axes
     if reading.dense or len(reading.axes) == 1:
         sections, _, cropped = prepare_inputs(
@@ -341,6 +347,20 @@ def case_from_label_map(
         label_map.shape,
         crop_lo,
     )
+
+
+def _warn_of_gaps(mask: NDArray[np.bool_], source: Any) -> None:
+    """Say when a mask read as dense has runs of empty slices inside it along an axis."""
+    for axis, runs in empty_runs_inside(mask).items():
+        if runs >= MIN_GAPS_WARNED:
+            logger.warning(
+                "%s: read as a dense mask, but %d runs of empty slices lie inside it along %s: "
+                "if it is drawn on groups of slices, pass --annotation %s",
+                source,
+                runs,
+                AXIS_NAMES[axis],
+                AXIS_NAMES[axis],
+            )
 
 
 def _check_sparse_options(

@@ -229,6 +229,32 @@ def detect_planes(mask: ArrayLike, annotation: str | tuple[int, ...] = "auto") -
     return PlaneReading(True, {}, share)
 
 
+def empty_runs_inside(mask: ArrayLike) -> dict[int, int]:
+    """Runs of empty slices inside a mask's extent, per axis.
+
+    Parameters
+    ----------
+    mask : ndarray of shape (I, J, K), bool
+
+    Returns
+    -------
+    dict of int to int
+        Axis → how many runs of slices without foreground lie between its
+        first and last slice holding some (axes without any are left out). A
+        dense organ has none; slabs of slices drawn with gaps between them
+        (4 slices on, 6 off) have one per gap.
+    """
+    data = np.asarray(mask, dtype=bool)
+    out: dict[int, int] = {}
+    for axis in range(3):
+        held = data.any(axis=in_plane_axes(axis))
+        inside = held[np.argmax(held) : len(held) - np.argmax(held[::-1])] if held.any() else held
+        starts = int(np.count_nonzero(~inside[1:] & inside[:-1])) if inside.size > 1 else 0
+        if starts:
+            out[axis] = starts
+    return out
+
+
 def _covered(data: NDArray[np.bool_], planes: dict[int, NDArray[np.int64]]) -> NDArray[np.bool_]:
     """The foreground that the given planes hold."""
     covered = np.zeros(data.shape, dtype=bool)

@@ -556,3 +556,19 @@ def test_a_structure_drawn_on_one_plane_of_an_annotation_is_warned_about(
     assert "slab one slice thick" in capsys.readouterr().err
     z = trimesh.load(tmp_path / "o1" / "mesh.stl").bounds[:, 2]
     assert z[1] - z[0] == pytest.approx(SPACING[2], abs=0.05)
+
+
+def test_a_mask_drawn_on_groups_of_slices_is_read_dense_with_a_warning(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Four slices drawn, four left out: no rule can tell this from a dense mask; a line says so."""
+    truth = _ellipsoid()
+    groups = truth & ((np.arange(truth.shape[2]) % 8) < 4)[None, None, :]
+    for name, mask in (("groups", groups), ("dense", truth)):
+        nib.save(nib.Nifti1Image(mask.astype(np.uint8), AFFINE), tmp_path / f"{name}.nii.gz")
+    assert main(["run", str(tmp_path / "groups.nii.gz"), "-o", str(tmp_path / "o1")]) == 0
+    err = capsys.readouterr().err
+    assert "groups.nii.gz: read as a dense mask, but 2 runs of empty slices" in err
+    assert "--annotation z" in err
+    assert main(["run", str(tmp_path / "dense.nii.gz"), "-o", str(tmp_path / "o2")]) == 0
+    assert "runs of empty slices" not in capsys.readouterr().err
