@@ -351,6 +351,30 @@ def test_contour_file_version_2_holds_planes_of_any_orientation_and_several_stru
     assert main(["run", str(path), "-o", str(tmp_path / "o1")]) == 2
 
 
+def test_a_version_2_plane_normal_that_contradicts_its_polygons_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    section = _ellipsoid_section(np.array([0, 0, 1.0]), 4.0).tolist()
+    for normal, tilt in (([1, 0, 0], "90°"), ([0, 0.2, 1], "11.3°")):
+        doc = {
+            "format": "slicerecon-contours",
+            "version": 2,
+            "units": "mm",
+            "planes": [
+                {"polygons": [section]},
+                {"normal": normal, "polygons": [(np.array(section) - [0, 0, 8]).tolist()]},
+            ],
+        }
+        path = tmp_path / "tilted.json"
+        path.write_text(json.dumps(doc))
+        assert main(["run", str(path), "-o", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"planes[1].polygons[0]: is tilted {tilt}" in err[0]
+    doc["planes"][1]["normal"] = [0, 0, -2]  # the true normal, either sign, any length
+    path.write_text(json.dumps(doc))
+    assert main(["run", str(path), "-o", str(tmp_path / "o"), "-q"]) == 0
+
+
 def test_overlapping_seg_segments_are_each_reconstructed_whole(tmp_path: Path) -> None:
     import dicom_factory as factory  # tests/io, on pytest's pythonpath
 

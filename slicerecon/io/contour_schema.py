@@ -38,6 +38,8 @@ from pydantic_core import ErrorDetails, PydanticCustomError
 
 from ..errors import FormatError
 from ..labels import Structure
+from .plane_groups import ANGLE_TOLERANCE_DEG
+from .polygons import polygon_normal
 
 __all__ = [
     "CONTOUR_FORMAT",
@@ -370,6 +372,8 @@ def parse_json(text: str, path: Path) -> Parsed:
         for q, polygon in enumerate(plane.polygons):
             pname = f"{where}.polygons[{q}]"
             points = np.array(polygon, dtype=np.float64)
+            if model.version == 2 and normal is not None:
+                _check_on_normal(points, normal, path, pname)
             if plane.position is not None and normal is not None:
                 at = float(points.mean(axis=0) @ normal)
                 if abs(at - plane.position) > max(0.01, 1e-6 * abs(plane.position)):
@@ -383,6 +387,23 @@ def parse_json(text: str, path: Path) -> Parsed:
             parsed.names.append(pname)
             parsed.owners.append(owner)
     return parsed
+
+
+def _check_on_normal(
+    points: NDArray[np.float64], normal: NDArray[np.float64], path: Path, where: str
+) -> None:
+    """Refuse a polygon whose own plane is tilted from the normal its plane declares."""
+    own, area = polygon_normal(points)
+    if area <= 0.0:
+        return  # no area: refused where planes are grouped
+    tilt = float(np.degrees(np.arccos(min(1.0, abs(float(own @ normal))))))
+    if tilt > ANGLE_TOLERANCE_DEG:
+        raise fail(
+            path,
+            where,
+            f"is tilted {tilt:.3g}° from its plane's normal {np.round(normal, 4).tolist()} "
+            f"(tolerance {ANGLE_TOLERANCE_DEG:g}°): give the plane's true normal, or none",
+        )
 
 
 def _structures(model: ContourFile, path: Path) -> list[Structure]:
