@@ -42,10 +42,17 @@ LOGGERS = ("slicerecon", "pipelines")
 
 
 class _OneLine(logging.Formatter):
-    """``warning: <message>`` on one line (a record's own line breaks become spaces)."""
+    """``warning: <message>`` on one line (a record's own line breaks become spaces); a
+    warning given while a file is read names that file when it does not itself."""
 
     def format(self, record: logging.LogRecord) -> str:
         text = " ".join(record.getMessage().split())
+        if record.levelno == logging.WARNING:
+            from ..io.limits import file_being_read
+
+            read = file_being_read()
+            if read is not None and read.name not in text:
+                text = f"{read}: {text}"
         if record.exc_info and record.levelno >= logging.ERROR:
             text += f" ({record.exc_info[1]})"
         return f"{record.levelname.lower()}: {text}"

@@ -26,6 +26,7 @@ import os
 import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,7 @@ __all__ = [
     "check_coordinates",
     "check_geometry",
     "check_grid",
+    "file_being_read",
     "check_label_range",
     "reading",
     "writing",
@@ -398,8 +400,23 @@ def reading(path: str | os.PathLike[str]) -> Iterator[None]:
         Naming the file, the parser's exception type and its message.
     """
     p = Path(path)
-    with _boundary(p), _quiet(p):
-        yield
+    token = _READING.set(p)
+    try:
+        with _boundary(p), _quiet(p):
+            yield
+    finally:
+        _READING.reset(token)
+
+
+_READING: ContextVar[Path | None] = ContextVar("slicerecon_reading", default=None)
+
+
+def file_being_read() -> Path | None:
+    """The file a :func:`reading` block is reading now (the innermost), or None.
+
+    The command line names it in a warning that does not name it itself.
+    """
+    return _READING.get()
 
 
 @contextmanager

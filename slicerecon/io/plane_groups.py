@@ -50,6 +50,8 @@ from .polygons import (
     PLANARITY_REL,
     polygon_normal,
     rasterize_polygons,
+    rings_that_cross,
+    warn_crossing,
 )
 
 __all__ = ["ANGLE_TOLERANCE_DEG", "annotation_from_polygons", "orientation_count"]
@@ -194,6 +196,14 @@ def annotation_from_polygons(
             for value in dict.fromkeys(v for v, _ in polys):
                 own = [(p @ to_px[:3, :3].T + to_px[:3, 3])[:, :2] for v, p in polys if v == value]
                 masks[value] = rasterize_polygons(own, pose.shape)
+                pair = rings_that_cross(own, pose.shape)
+                if pair is not None:
+                    where = ", ".join(f"{c:.4g}" for c in pose.affine[:3, 3])
+                    names = [
+                        f"contour {n + 1} of structure {value} on the plane at {where} mm"
+                        for n in range(len(own))
+                    ]
+                    warn_crossing(names, pair)
             drawn = frozenset(v for v, _ in polys)
             planes.append(AnnotatedPlane(pose, masks, drawn))
     return Annotation(

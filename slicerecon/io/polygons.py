@@ -373,6 +373,63 @@ def rasterize_polygons(
     return mask
 
 
+def rings_that_cross(
+    polygons_px: Sequence[ArrayLike], shape: tuple[int, int]
+) -> tuple[int, int, bool] | None:
+    """Two polygons of one plane that the even-odd rule reads against their intent.
+
+    Nested polygons (a hole) and disjoint ones are what the rule is for. Two
+    polygons that partly overlap make their overlap a hole, and one listed
+    twice cancels itself out; both are usually drawing mistakes.
+
+    Parameters
+    ----------
+    polygons_px : sequence of array_like of shape (N_i, 2)
+        As for :func:`rasterize_polygons`.
+    shape : tuple of int
+        ``(M, N)``, the mask size.
+
+    Returns
+    -------
+    (i, j, repeated) or None
+        The first such pair (indices into ``polygons_px``) and whether they
+        cover the same pixel centres (a repeat) rather than partly overlap;
+        None when the rule reads every polygon as drawn.
+    """
+    if len(polygons_px) < 2:
+        return None
+    masks = [rasterize_polygons([p], shape) for p in polygons_px]
+    for i in range(len(masks)):
+        for j in range(i + 1, len(masks)):
+            both = masks[i] & masks[j]
+            if not both.any():
+                continue
+            if np.array_equal(masks[i], masks[j]):
+                return i, j, True
+            if not (np.array_equal(both, masks[i]) or np.array_equal(both, masks[j])):
+                return i, j, False
+    return None
+
+
+def warn_crossing(names: Sequence[str], pair: tuple[int, int, bool]) -> None:
+    """One warning line for the pair :func:`rings_that_cross` found."""
+    i, j, repeated = pair
+    if repeated:
+        logger.warning(
+            "%s and %s are the same contour: by the even-odd rule they cancel out (that "
+            "area is empty); list each contour once",
+            names[i],
+            names[j],
+        )
+    else:
+        logger.warning(
+            "%s and %s cross each other: by the even-odd rule their overlap is a hole; "
+            "draw one outline, or nest a hole inside",
+            names[i],
+            names[j],
+        )
+
+
 def sections_from_polygons(
     polygons: Sequence[ArrayLike],
     /,
@@ -386,6 +443,7 @@ def sections_from_polygons(
     polygon_names: Sequence[str] | None = None,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
     own_planes: bool = False,
+    one_structure: bool = True,
 ) -> CrossSections:
     """Rasterize closed polygons lying on parallel planes into cross-sections.
 
@@ -433,6 +491,10 @@ def sections_from_polygons(
         planes, as without the reference. Off (the default), planes keep
         fractional indices on the reference grid (a contour file's own grid
         round-trips exactly).
+    one_structure : bool
+        The polygons outline one structure: two on one plane that cross or
+        repeat are warned about (:func:`rings_that_cross`). False for the
+        polygons of several structures together (they may overlap).
 
     Returns
     -------
@@ -513,14 +575,14 @@ def sections_from_polygons(
             indices = _built_indices(plane_pos, plane_tolerance_mm)
 
     check_grid(grid.shape, what="the contours", memory_budget_gb=memory_budget_gb)
-    masks = _rasterize_planes(polys, members, grid)
+    masks, crossing = _rasterize_planes(polys, members, grid, one_structure)
     if not masks.any():
         raise EmptyMaskError(
             "the contours cover no pixel centre: they are smaller than a pixel; "
             "choose a smaller pixel_spacing"
         )
     for p, (mask, group) in enumerate(zip(masks, members, strict=True)):
-        if group and not mask.any():
+        if group and not mask.any() and p not in crossing:  # else said by warn_crossing
             logger.warning("plane %d: its contours cover no pixel centre (too small)", p)
     logger.info(
         "%d polygons on %d planes, in-plane grid %d x %d",
@@ -591,11 +653,14 @@ def _contour_axis(
 
 
 def _rasterize_planes(
-    polys: list[_Polygon], members: list[list[int]], grid: _Grid
-) -> NDArray[np.bool_]:
+    polys: list[_Polygon], members: list[list[int]], grid: _Grid, check: bool
+) -> tuple[NDArray[np.bool_], set[int]]:
+    """Each plane's polygons filled by the even-odd rule, and the planes whose polygons
+    cross or repeat (warned about)."""
     a, b = in_plane_axes(grid.axis)
     inverse = np.linalg.inv(grid.affine)
     masks = np.zeros((len(members), grid.shape[a], grid.shape[b]), dtype=bool)
+    crossing: set[int] = set()
     clipped = 0
     for p, group in enumerate(members):
         rings = []
@@ -606,9 +671,13 @@ def _rasterize_planes(
             if low.min() < -0.5 or high[0] > grid.shape[a] - 0.5 or high[1] > grid.shape[b] - 0.5:
                 clipped += 1
         masks[p] = rasterize_polygons(rings, (grid.shape[a], grid.shape[b]))
+        pair = rings_that_cross(rings, (grid.shape[a], grid.shape[b])) if check else None
+        if pair is not None:
+            warn_crossing([polys[i].name for i in group], pair)
+            crossing.add(p)
     if clipped:
         logger.warning("%d contours extend beyond the image grid and are clipped", clipped)
-    return masks
+    return masks, crossing
 
 
 def polygons_from_sections(

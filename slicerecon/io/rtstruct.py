@@ -454,6 +454,7 @@ def _shared_grid_sections(
             reference=reference,
             memory_budget_gb=memory_budget_gb,
             own_planes=True,
+            one_structure=False,
         )
         sections = [
             None

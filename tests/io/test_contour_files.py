@@ -102,6 +102,37 @@ def test_hole_is_empty_and_ring_area_is_analytic(tmp_path):
     assert not cs.masks[0][centre[0], centre[1]] and cs.masks[1][centre[0], centre[1]]
 
 
+@pytest.mark.parametrize(
+    ("second", "words"),
+    [
+        (_circle(10.0, (8.0, 0.0, 5.0)), "cross each other"),  # the lens is a hole
+        (_circle(10.0, (0.0, 0.0, 5.0)), "are the same contour"),  # it cancels out
+    ],
+)
+def test_contours_that_cross_or_repeat_on_a_plane_are_warned_about(
+    tmp_path, capsys, second, words
+):
+    from slicerecon.cli import main
+
+    first = _circle(10.0, (0.0, 0.0, 5.0))
+    doc = _json_doc(
+        [
+            {"polygons": [first.tolist(), second.tolist()]},
+            {"polygons": [(first + [0, 0, 4]).tolist()]},
+        ]
+    )
+    path = _write_json(tmp_path, doc, name="drawn.json")
+    assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "even-odd" in line]
+    assert len(err) == 1 and err[0].startswith(f"warning: {path}: planes[0].polygons[0]")
+    assert words in err[0] and "too small" not in capsys.readouterr().err
+    # a hole nested inside is what the rule is for: no warning
+    doc["planes"][0]["polygons"][1] = _circle(4.0, (1.0, 0.0, 5.0)).tolist()
+    _write_json(tmp_path, doc, name="drawn.json")
+    assert main(["run", str(path), "-o", str(tmp_path / "o2")]) == 0
+    assert "even-odd" not in capsys.readouterr().err
+
+
 def test_repeated_first_point_is_accepted(tmp_path):
     square = [[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0]]
     cs = read_contours(
