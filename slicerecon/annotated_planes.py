@@ -20,9 +20,16 @@ from numpy.typing import NDArray
 
 from .annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose
 from .errors import OptionError
-from .sections import AXIS_NAMES
+from .sections import AXIS_NAMES, in_plane_axes
 
-__all__ = ["COMBINED_PAD", "covering_grid", "merge_repeated_planes", "planes_of_each_structure"]
+__all__ = [
+    "COMBINED_PAD",
+    "MAX_VIEW_DISAGREEMENT",
+    "covering_grid",
+    "merge_repeated_planes",
+    "planes_of_each_structure",
+    "views_disagreement",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -30,6 +37,9 @@ _EPS_MM = 1e-3
 """Planes closer than this (mm) are one plane."""
 COMBINED_PAD = 3
 """Voxels kept around every input's drawn pixels on the grid of several inputs."""
+MAX_VIEW_DISAGREEMENT = 0.2
+"""Share of the voxels where two views' planes meet on which they may disagree before a
+warning says so (hand-drawn views differ by a voxel or two at their edges)."""
 
 
 def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
@@ -199,3 +209,49 @@ def merge_repeated_planes(
     if len(kept) == len(annotation.planes):
         return annotation
     return replace(annotation, planes=tuple(p for p, _ in kept.values()))
+
+
+def views_disagreement(annotation: Annotation, value: int) -> tuple[int, int]:
+    """Where planes of two grid axes meet, how often their drawings of a structure differ.
+
+    A plane along one grid axis and a plane along another meet on a line of
+    voxels; both say there whether the structure is present. Planes off the
+    grid's voxels, or between its slices, are left out.
+
+    Parameters
+    ----------
+    annotation : Annotation
+    value : int
+        The structure.
+
+    Returns
+    -------
+    (differ, drawn) : tuple of int
+        Voxels on those lines where the two drawings differ, and where either
+        holds the structure.
+    """
+    slices: dict[int, list[tuple[int, NDArray[np.bool_]]]] = {}
+    indices = {axis: annotation.plane_indices(axis) for axis in range(3)}
+    for number, plane in enumerate(annotation.planes):
+        if not plane.annotates(value):
+            continue
+        axis = annotation.axis_of(plane.pose)
+        if axis is None or annotation.grid_shift(plane.pose, axis) is None:
+            continue
+        index = float(indices[axis][number])
+        if abs(index - round(index)) > 1e-6 or not 0 <= round(index) < annotation.grid_shape[axis]:
+            continue
+        slices.setdefault(axis, []).append((round(index), annotation.grid_mask(plane, value, axis)))
+    differ = drawn = 0
+    axes = sorted(slices)
+    for n, a in enumerate(axes):
+        for b in axes[n + 1 :]:
+            across_a = in_plane_axes(a).index(b)  # where b runs in a's masks
+            across_b = in_plane_axes(b).index(a)
+            for ka, mask_a in slices[a]:
+                for kb, mask_b in slices[b]:
+                    one = np.take(mask_a, kb, axis=across_a)
+                    two = np.take(mask_b, ka, axis=across_b)
+                    differ += int(np.count_nonzero(one != two))
+                    drawn += int(np.count_nonzero(one | two))
+    return differ, drawn

@@ -41,6 +41,7 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
+from .annotated_planes import MAX_VIEW_DISAGREEMENT, views_disagreement
 from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
@@ -438,6 +439,17 @@ def _from_views(
     """A structure drawn in one or several views (:mod:`slicerecon.surface.views`), in one
     part: its plan records that part's box."""
     annotation = case.annotation
+    differ, drawn = views_disagreement(annotation, structure.value)
+    if drawn and differ > MAX_VIEW_DISAGREEMENT * drawn:
+        logger.warning(
+            "%s: structure %s is drawn differently by its views where their planes meet "
+            "(%d of %d voxels on those lines differ): the result blends the drawings "
+            "between the planes; check that the views belong to one study and frame",
+            case.input_path,
+            structure.label,
+            differ,
+            drawn,
+        )
     made = views_surface(
         annotation,
         structure.value,

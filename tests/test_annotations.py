@@ -596,3 +596,23 @@ def test_a_mask_drawn_on_groups_of_slices_is_read_dense_with_a_warning(
     assert "--annotation z" in err
     assert main(["run", str(tmp_path / "dense.nii.gz"), "-o", str(tmp_path / "o2")]) == 0
     assert "runs of empty slices" not in capsys.readouterr().err
+
+
+def test_views_that_disagree_where_they_meet_are_warned_about(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    truth = _ellipsoid()
+    from scipy import ndimage
+
+    smaller = ndimage.binary_erosion(truth, iterations=4)  # another, smaller drawing
+    axial = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(axial, AFFINE), tmp_path / "axial.nii.gz")
+    for name, mask in (("agree", truth), ("disagree", smaller)):
+        sagittal = _keep(mask, {0: [16, 32]}).astype(np.uint8)
+        nib.save(nib.Nifti1Image(sagittal, AFFINE), tmp_path / f"{name}.nii.gz")
+    run = ["run", str(tmp_path / "axial.nii.gz")]
+    assert main([*run, str(tmp_path / "agree.nii.gz"), "-o", str(tmp_path / "o1")]) == 0
+    assert "drawn differently" not in capsys.readouterr().err
+    assert main([*run, str(tmp_path / "disagree.nii.gz"), "-o", str(tmp_path / "o2")]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "drawn differently" in line]
+    assert len(err) == 1 and "axial.nii.gz: structure 1" in err[0]
