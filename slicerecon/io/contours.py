@@ -169,7 +169,8 @@ def read_contours(
         raise FormatError(
             f"{p}: the file lists {parsed.n_planes} planes but its polygons lie at "
             f"{sections.n_planes} distinct positions along the normal (tolerance 0.01 mm); "
-            "each plane entry must hold the polygons of one plane, and no two entries the same"
+            "each plane entry must hold the polygons of one plane, and no two entries the "
+            "same (a plane whose only polygon encloses no area has no position)"
         )
     return sections
 

@@ -151,7 +151,11 @@ def _as_polygons(polygons: Sequence[ArrayLike], names: Sequence[str] | None) -> 
         diameter = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         vector = _vector_area(pts)
         if np.linalg.norm(vector) <= DEGENERATE_REL * diameter**2:
-            logger.warning("%s encloses no area (collinear points); skipped", name)
+            logger.warning(
+                "%s encloses no area (its points are collinear, or it crosses itself into "
+                "lobes of opposite turn, a figure 8); skipped",
+                name,
+            )
             continue
         out.append(_Polygon(pts, name, vector, diameter))
     return out
