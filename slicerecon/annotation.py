@@ -48,6 +48,8 @@ __all__ = [
 
 ANGLE_TOLERANCE = 1e-3
 """Two plane normals whose cross product is below this (radians, about) are parallel."""
+MAX_ORIENTATIONS_LISTED = 3
+"""Orientations :meth:`Annotation.describe` lists one by one; more are counted."""
 
 
 def _readonly(array: ArrayLike, dtype: Any) -> NDArray[Any]:
@@ -417,7 +419,10 @@ class Annotation:
     def describe(self) -> str:
         """One line: how many planes, which orientations, their spacing."""
         parts = []
-        for normal, members in self.orientations():
+        groups = self.orientations()
+        if len(groups) > MAX_ORIENTATIONS_LISTED:  # a radial set: one plane per orientation
+            return f"{len(self.planes)} planes in {len(groups)} orientations"
+        for normal, members in groups:
             offsets = np.sort([self.planes[n].pose.offset_mm for n in members])
             gaps = np.diff(offsets)
             spacing = f", spacing {np.median(gaps):.3g} mm" if gaps.size else ""
@@ -429,7 +434,7 @@ class Annotation:
                 where = f"along {AXIS_NAMES[axis]}"
             else:  # a grid axis that is no world axis (a grid built on oblique planes)
                 where = f"along the grid's {AXIS_NAMES[axis]}, {towards}"
-            parts.append(f"{len(members)} planes {where}{spacing}")
+            parts.append(f"{len(members)} plane{'s' * (len(members) != 1)} {where}{spacing}")
         return "; ".join(parts) if parts else "no plane"
 
 
