@@ -256,6 +256,8 @@ def _run_cli(request: dict[str, Any]) -> dict[str, Any]:
 
     budget = f"{request['budget_gb']:g}"
     options = ["--planner", "none", "--no-carve"] if request["method"] == "sdf" else []
+    if request["pixel_spacing"] is not None:  # grid-free contours, as in the pipeline mode
+        options += ["--pixel-spacing", f"{request['pixel_spacing']:g}"]
     outdir = tempfile.mkdtemp(prefix="slicerecon-fuzz-out-")
     try:
         results = {
