@@ -351,6 +351,29 @@ def test_contour_file_version_2_holds_planes_of_any_orientation_and_several_stru
     assert main(["run", str(path), "-o", str(tmp_path / "o1")]) == 2
 
 
+def test_info_describes_every_structure_of_a_contour_file_of_any_orientation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    radial = [np.array([-np.sin(t), np.cos(t), 0.0]) for t in np.radians(22.5 * np.arange(8))]
+    lesion = [(_ellipsoid_section(np.array([0, 0, 1.0]), z) * 0.3).tolist() for z in (-6.0, 6.0)]
+    doc = {
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "structures": [{"value": 1, "name": "gland"}, {"value": 2, "name": "lesion"}],
+        "planes": [
+            {"structure": 1, "polygons": [_ellipsoid_section(n, 0.0).tolist()]} for n in radial
+        ]
+        + [{"structure": 2, "polygons": [p]} for p in lesion],
+    }
+    path = tmp_path / "radial.json"
+    path.write_text(json.dumps(doc))
+    assert main(["info", str(path), "--json"]) == 0
+    records = {r["name"]: r for r in json.loads(capsys.readouterr().out)["structures"]}
+    assert records["gland"]["planes"] == 8 and records["gland"]["orientations"] == 8
+    assert records["lesion"]["planes"] == 2 and records["lesion"]["contours"] == 2
+
+
 def test_a_version_2_plane_normal_that_contradicts_its_polygons_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -58,6 +58,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..annotation import Annotation, annotation_from_sections
 from ..errors import FormatError, GeometryError, InputError, OptionError, SlicereconError
@@ -90,6 +91,7 @@ __all__ = [
     "ContourFile",
     "ContourGrid",
     "ContourPlane",
+    "contour_structures",
     "read_contour_annotation",
     "read_contours",
     "write_contours_csv",
@@ -144,8 +146,9 @@ def read_contours(
     parsed = _read_parsed(p)
     if len(parsed.structures) > 1:
         raise FormatError(
-            f"{p} holds {len(parsed.structures)} structures: read it with "
-            "read_contour_annotation (slicerecon run reads every one)"
+            f"{p} holds {len(parsed.structures)} structures: read them with "
+            "read_contour_annotation, or choose one with --label (slicerecon run reads "
+            "every one)"
         )
 
     reference = parsed.grid if pixel_spacing is None else None
@@ -250,6 +253,43 @@ def _read_contour_annotation(
         )
     except SlicereconError as exc:
         raise type(exc)(f"{p}: {exc}") from exc
+
+
+def contour_structures(
+    path: str | os.PathLike[str],
+) -> list[tuple[Structure, list[NDArray[np.float64]]]]:
+    """Every structure of a contour file with its polygons, as the file lists them.
+
+    Parameters
+    ----------
+    path : path-like
+        A contour file (JSON of either version, or CSV).
+
+    Returns
+    -------
+    list of (Structure, list of ndarray of shape (N, 3))
+        In the file's order; polygons in world mm (a structure without any
+        keeps an empty list).
+
+    Raises
+    ------
+    InputError, FormatError
+        As :func:`read_contours`.
+    """
+    p = Path(path)
+    with reading(p):
+        parsed = _read_parsed(p)
+    return [
+        (
+            s,
+            [
+                poly
+                for poly, owner in zip(parsed.polygons, parsed.owners, strict=True)
+                if owner == s.value
+            ],
+        )
+        for s in parsed.structures
+    ]
 
 
 def _read_parsed(p: Path) -> Parsed:

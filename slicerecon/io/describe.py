@@ -22,9 +22,11 @@ from ..errors import EmptyMaskError, LabelError
 from ..labels import check_label_values
 from ..sections import AXIS_NAMES, CrossSections, Volume
 from . import detect_kind, load_input
+from .contours import contour_structures
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, reading
 from .nrrd import nrrd_info, read_nrrd_label_map
+from .plane_groups import orientation_count
 from .polygons import polygon_normal
 from .rtstruct import roi_contours
 from .vti import read_vti
@@ -179,7 +181,17 @@ def _polygon_record(
         "min": _round(points.min(axis=0), 3),
         "max": _round(points.max(axis=0), 3),
     }
-    if normal is not None:
+    if orientation_count(polygons) > 1:  # planes of several orientations (a radial set)
+        planes: list[tuple[NDArray[np.float64], float]] = []
+        for polygon in polygons:
+            own, _ = polygon_normal(polygon)
+            own = own if own[np.argmax(np.abs(own))] > 0 else -own
+            at = float(polygon.mean(axis=0) @ own)
+            if not any(abs(n @ own) > 1 - 1e-6 and abs(o - at) < 0.01 for n, o in planes):
+                planes.append((own, at))
+        record["planes"] = len(planes)
+        record["orientations"] = orientation_count(polygons)
+    elif normal is not None:
         positions = np.array([float(p.mean(axis=0) @ normal) for p in polygons])
         distinct = np.unique(np.round(positions, 2))
         record["planes"] = int(distinct.size)
@@ -195,11 +207,7 @@ def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
     details: dict[str, Any] = {}
     rois = []
     for number, name, polygons, note in roi_contours(path):
-        normal = None
-        if polygons:
-            normal = max((polygon_normal(p) for p in polygons), key=lambda na: na[1])[0]
-            normal = normal if normal[np.argmax(np.abs(normal))] > 0 else -normal
-        record = _polygon_record(number, name, polygons, normal)
+        record = _polygon_record(number, name, polygons, _main_normal(polygons))
         if note:
             record["note"] = note
         rois.append(record)
@@ -210,6 +218,27 @@ def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
             **dicom_info(image_dir, allow_irregular=True),
         }
     return details
+
+
+def _describe_contours(path: Path) -> dict[str, Any]:
+    """Each structure of a contour file: its polygons, planes and extent."""
+    structures = []
+    everything = []
+    for structure, polygons in contour_structures(path):
+        normal = _main_normal(polygons)
+        record = _polygon_record(structure.value, structure.name, polygons, normal)
+        record["value"] = record.pop("number")
+        structures.append(record)
+        everything.extend(polygons)
+    return {"structures": structures, "orientations": orientation_count(everything)}
+
+
+def _main_normal(polygons: list[NDArray[np.float64]]) -> NDArray[np.float64] | None:
+    """The normal of a structure's largest polygon, signed so its largest component is > 0."""
+    if not polygons:
+        return None
+    normal = max((polygon_normal(p) for p in polygons), key=lambda na: na[1])[0]
+    return normal if normal[np.argmax(np.abs(normal))] > 0 else -normal
 
 
 def describe_input(
@@ -314,6 +343,8 @@ def describe_input(
             details["segments"] = segments
         elif kind.kind == "rtstruct":
             details.update(_describe_rtstruct(kind.path, kind.image_dir))
+        elif kind.kind == "contours":
+            details.update(_describe_contours(kind.path))
         elif kind.kind == "mesh":
             from .mesh import read_mesh
 
@@ -324,7 +355,10 @@ def describe_input(
                 "watertight": bool(mesh.is_watertight),
                 "extent_mm": {"min": _round(mesh.bounds[0], 3), "max": _round(mesh.bounds[1], 3)},
             }
-        single = kind.kind in ("contours", "mesh")
+        single = kind.kind == "mesh" or (
+            kind.kind == "contours" and details.get("orientations") == 1
+        )
+        single = single and len(details.get("structures", [None])) == 1
         if single or label is not None:
             data = load_input(
                 kind.path,
