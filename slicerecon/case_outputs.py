@@ -37,10 +37,18 @@ from .annotation import AnnotatedPlane, Annotation
 from .errors import OptionError
 from .io.atomic import write_json
 from .io.mesh import mesh_file_closed, write_mesh
-from .io.outputs import dicom_image_series, write_label_outputs
+from .io.outputs import LABEL_OUTPUT_FILES, dicom_image_series, write_label_outputs
 from .preview import PreviewStructure, display_colour, write_preview
 from .reconstruct import ReconstructConfig
-from .results import METRICS_FILE, PLAN_FILE, PREVIEW_FILE, STRUCTURES_FILE, mesh_file
+from .results import (
+    MESH_SUFFIXES,
+    MESHES_DIR,
+    METRICS_FILE,
+    PLAN_FILE,
+    PREVIEW_FILE,
+    STRUCTURES_FILE,
+    mesh_file,
+)
 from .sections import AXIS_NAMES
 
 if TYPE_CHECKING:
@@ -237,6 +245,11 @@ def write_case(
     plan["config"] = {**config.to_dict(), "planner": config.resolved_planner(sparse=not case.dense)}
     plan["timings_s"] = {k: round(v, 4) for k, v in times.items()}
     write_json(outdir / PLAN_FILE, plan)
+    files = [*written, outdir / STRUCTURES_FILE, outdir / PREVIEW_FILE, outdir / PLAN_FILE]
+    files += [Path(p) for p in outputs.written.values()]
+    if metrics is not None:
+        files.append(outdir / METRICS_FILE)
+    _remove_stale(outdir, files)
     mesh_path = (
         outdir / mesh_file(result.results[0].structure.label, config.mesh_format, several=False)
         if not several
@@ -253,6 +266,33 @@ def write_case(
         "annotation": case.annotation.source,
         "timings_s": plan["timings_s"],
     }
+
+
+def _remove_stale(outdir: Path, written: list[Path]) -> None:
+    """Remove what an earlier run left in a case folder that this run did not write.
+
+    Only the names a case writes are looked at (``plan.json``, ``metrics.json``,
+    meshes, label maps, DICOM outputs, ...); any other file stays. Said in one
+    line: a results folder never mixes two runs.
+    """
+    keep = {p.resolve() for p in written}
+    names = [PLAN_FILE, METRICS_FILE, PREVIEW_FILE, STRUCTURES_FILE, *LABEL_OUTPUT_FILES]
+    names += [mesh_file("", suffix.lstrip("."), several=False) for suffix in MESH_SUFFIXES]
+    found = [outdir / name for name in names]
+    meshes = outdir / MESHES_DIR
+    if meshes.is_dir():
+        found += [p for p in meshes.iterdir() if p.suffix.lower() in MESH_SUFFIXES]
+    stale = [p for p in found if p.is_file() and p.resolve() not in keep]
+    for path in stale:
+        path.unlink()
+    if meshes.is_dir() and not any(meshes.iterdir()):
+        meshes.rmdir()
+    if stale:
+        logger.warning(
+            "%s held outputs of an earlier run that this run does not write; removed: %s",
+            outdir,
+            ", ".join(str(p.relative_to(outdir)) for p in stale),
+        )
 
 
 def _planes_in_words(annotation: Annotation) -> str:

@@ -225,3 +225,28 @@ def test_a_series_without_type_2_patient_and_study_attributes_still_gets_its_seg
     seg = pydicom.dcmread(out / "seg.dcm")
     assert "PatientBirthDate" in seg and seg.PatientBirthDate == ""
 
+
+
+def test_a_run_into_an_earlier_runs_folder_leaves_nothing_of_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Outputs of the earlier run that this run does not write are removed, and it is said."""
+    x, y, z = np.meshgrid(*[np.arange(40)] * 3, indexing="ij")
+    ball = ((x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 100).astype(np.uint8)
+    three = ball.copy()
+    three[(x > 20) & (ball > 0)] = 2
+    three[(x < 14) & (ball > 0)] = 5
+    sparse = ball * (z % 4 == 0)
+    for name, data in (("three", three), ("sparse", sparse)):
+        nib.save(nib.Nifti1Image(data.astype(np.uint8), np.eye(4)), tmp_path / f"{name}.nii.gz")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "three.nii.gz"), "-o", str(out), "-q"]) == 0
+    (out / "notes.txt").write_text("mine")
+    assert {p.name for p in (out / "meshes").iterdir()} == {"1.stl", "2.stl", "5.stl"}
+    assert (out / "metrics.json").is_file()  # a dense mask is its own ground truth
+    capsys.readouterr()
+    assert main(["run", str(tmp_path / "sparse.nii.gz"), "-o", str(out)]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "earlier run" in line]
+    assert len(err) == 1 and "metrics.json" in err[0] and "meshes/5.stl" in err[0]
+    assert not (out / "metrics.json").exists() and not (out / "meshes").exists()
+    assert (out / "mesh.stl").is_file() and (out / "notes.txt").read_text() == "mine"

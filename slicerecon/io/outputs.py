@@ -51,7 +51,10 @@ from .rtstruct_writer import write_rtstruct
 if TYPE_CHECKING:
     from .dicom.derived import SourceSeries
 
-__all__ = ["LabelOutputs", "dicom_image_series", "write_label_outputs"]
+__all__ = ["LABEL_OUTPUT_FILES", "LabelOutputs", "dicom_image_series", "write_label_outputs"]
+
+LABEL_OUTPUT_FILES = ("labels.nii.gz", "labels.seg.nrrd", "seg.dcm", "rtstruct.dcm")
+"""The names :func:`write_label_outputs` may write in a case folder."""
 
 logger = logging.getLogger(__name__)
 
