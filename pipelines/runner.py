@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 from slicerecon import __version__
 from slicerecon.errors import InputError
+from slicerecon.messages import collected_warnings
 from slicerecon.results import (
     CaseFiles,
     CaseResult,
@@ -205,9 +206,11 @@ def process_case(
     clear_stale(final.parent, final.name)
     staging = staging_dir(final)
     start = time.perf_counter()
+    said: list[str] = []
     try:
         try:
-            summary = run_case(case.path, staging, config, image_dir=case.image_dir)
+            with collected_warnings() as said:
+                summary = run_case(case.path, staging, config, image_dir=case.image_dir)
         except Exception as exc:  # noqa: BLE001 - every failure is recorded, none stops the batch
             result = failure_result(job, exc, time.perf_counter() - start)
             logger.info("case %s failed: %s: %s", job.folder, result.error_type, result.error)
@@ -230,6 +233,7 @@ def process_case(
                 seconds=round(time.perf_counter() - start, 3),
                 method=config.method,
                 planner=config.planner,
+                warnings=tuple(said),
             )
             done = {
                 "case": job.folder,
@@ -241,6 +245,9 @@ def process_case(
                     for record in summary.get("structures") or []
                     if record.get("mesh")
                 ],
+                "files": sorted(
+                    p.relative_to(staging).as_posix() for p in staging.rglob("*") if p.is_file()
+                ),
                 "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                 "result": result.to_json(),
             }
@@ -252,7 +259,7 @@ def process_case(
     if result.ok:  # what a reader of the folder sees (paths, config, timings)
         published = read_case(final, name=job.folder)
         if published.ok:
-            result = published
+            result = replace(published, warnings=result.warnings)
     return result
 
 
@@ -282,7 +289,10 @@ def finished_result(outdir: Path, job: Job) -> CaseResult | None:
     meshes = done.get("meshes", [done.get("mesh", "")])
     if not isinstance(meshes, list) or not meshes:
         return None
-    if not all((files.directory / str(name)).is_file() for name in meshes):
+    written = done.get("files", [])  # every file the case wrote (older runs: the meshes)
+    if not isinstance(written, list):
+        return None
+    if not all((files.directory / str(name)).is_file() for name in [*meshes, *written]):
         return None
     stored = read_case(files.directory, name=job.folder)
     if not stored.ok:

@@ -46,13 +46,9 @@ class _OneLine(logging.Formatter):
     warning given while a file is read names that file when it does not itself."""
 
     def format(self, record: logging.LogRecord) -> str:
-        text = " ".join(record.getMessage().split())
-        if record.levelno == logging.WARNING:
-            from ..io.limits import file_being_read
+        from ..messages import warning_text
 
-            read = file_being_read()
-            if read is not None and read.name not in text:
-                text = f"{read}: {text}"
+        text = warning_text(record)
         if record.exc_info and record.levelno >= logging.ERROR:
             text += f" ({record.exc_info[1]})"
         return f"{record.levelname.lower()}: {text}"
@@ -70,6 +66,10 @@ class _CliHandler(logging.StreamHandler):  # type: ignore[type-arg]
         self._seen: set[tuple[int, str]] = set()
 
     def filter(self, record: logging.LogRecord) -> bool:
+        from ..messages import collecting
+
+        if record.levelno == logging.WARNING and collecting():
+            return False  # a batch case's: printed with its case name when it finishes
         key = (record.levelno, record.getMessage())
         if key in self._seen:
             return False

@@ -294,7 +294,16 @@ def batch(
                     f"progress: case {done}/{total} {result.status}: {result.case}",
                     markup=False,
                     highlight=False,
+                    soft_wrap=True,
                 )
+            if result.status == "ok":  # its warnings, wherever it ran (a Dask worker too)
+                for line in result.warnings:
+                    console.print(
+                        f"warning: {result.case}: {line}",
+                        markup=False,
+                        highlight=False,
+                        soft_wrap=True,
+                    )
 
         outcome = run_batch(
             indir,

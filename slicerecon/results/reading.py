@@ -214,6 +214,7 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
         structure_metrics=per_structure,
         structures=structures,
         coordinates=frame,
+        warnings=tuple(str(w) for w in done.get("warnings") or () if isinstance(w, str)),
     )
 
 

@@ -246,6 +246,8 @@ class CaseResult:
         meshes, per-structure metrics); empty when the folder has none.
     coordinates : str or None
         The world frame of the meshes (``RAS`` or ``LPS``), when recorded.
+    warnings : tuple of str
+        The warnings the case gave when it ran (one line each).
     """
 
     case: str
@@ -271,6 +273,7 @@ class CaseResult:
     structure_metrics: Mapping[str, Mapping[str, float]] | None = None
     structures: tuple[StructureRecord, ...] = ()
     coordinates: str | None = None
+    warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -338,6 +341,7 @@ class CaseResult:
             "seconds": self.seconds,
             "method": self.method,
             "planner": self.planner,
+            "warnings": list(self.warnings),
         }
 
 

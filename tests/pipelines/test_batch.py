@@ -758,3 +758,30 @@ def test_ctrl_c_prints_one_line_exits_130_and_a_rerun_resumes(tmp_path):
         n: ("skipped" if n in finished else "ok") for n in ("a", "b", "c")
     }
     assert not _hidden_or_temporary(out)
+
+
+@pytest.mark.parametrize("workers", ["0", "1"])  # in this process, and on a Dask worker
+def test_a_cases_warnings_reach_the_user_with_its_name_and_stay_in_done_json(
+    tmp_path, capsys, workers
+):
+    mask = make_shape("sphere", radius=8.0)
+    gapped = mask.mask & ((np.arange(mask.mask.shape[2]) % 8) < 4)[None, None, :]
+    write_nifti(type(mask)(gapped, mask.affine), tmp_path / "in" / "gapped.nii.gz")
+    out = tmp_path / "out"
+    args = ["batch", str(tmp_path / "in"), "-o", str(out), "--workers", workers, "--no-report"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "runs of empty slices" in line]
+    assert len(lines) == 1 and lines[0].startswith("warning: gapped: ")
+    done = json.loads((out / "gapped" / "done.json").read_text())
+    assert len(done["result"]["warnings"]) == 1
+
+
+def test_a_case_missing_any_of_its_files_is_computed_again(tmp_path):
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "ball.nii.gz")
+    out = tmp_path / "out"
+    assert run_batch(tmp_path / "in", out, CONFIG, workers=0, report=False).n_ok == 1
+    (out / "ball" / "labels.nii.gz").unlink()
+    again = run_batch(tmp_path / "in", out, CONFIG, workers=0, report=False)
+    assert [c.status for c in again.cases] == ["ok"]
+    assert (out / "ball" / "labels.nii.gz").is_file()
