@@ -231,11 +231,12 @@ SPARSE_KINDS = ("contours", "rtstruct")
 
 def config_for(case: Case, config: ReconstructConfig) -> ReconstructConfig:
     """The options ``case`` runs with: ``config``, without ``slices`` / ``every`` for a
-    contour file or RTSTRUCT (its planes are the ones drawn), so that one batch may
-    mix dense masks and contours."""
+    contour file or RTSTRUCT (its planes are the ones drawn), and with ``dense_only``
+    (a sparse label map leaves them out too, with a note), so that one batch may mix
+    dense masks and annotations."""
     if case.kind in SPARSE_KINDS and (config.slices is not None or config.every is not None):
-        return replace(config, slices=None, every=None)
-    return config
+        config = replace(config, slices=None, every=None)
+    return replace(config, dense_only=True)
 
 
 def check_dirs(indir: Path, outdir: Path) -> None:

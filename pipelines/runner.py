@@ -88,7 +88,7 @@ def case_key(case: Case, config: ReconstructConfig) -> str:
 
     SHA-256 of the bytes of ``case.files`` (and, for a case of several files,
     of their names relative to ``case.root``; so renaming an input file or
-    folder keeps its key), of every field of ``config``, of the bytes of the
+    folder keeps its key), of every field of ``config`` but ``dense_only``, of the bytes of the
     policy weights file when ``config.weights`` is set, and of the slicerecon
     version.
 
@@ -111,7 +111,9 @@ def case_key(case: Case, config: ReconstructConfig) -> str:
     """
     digest = hashlib.sha256()
     digest.update(f"slicerecon {__version__}\0".encode())
-    digest.update(json.dumps(asdict(config), sort_keys=True, default=str).encode() + b"\0")
+    # dense_only changes whether an option is refused or left out, never what is written
+    fields = {k: v for k, v in asdict(config).items() if k != "dense_only"}
+    digest.update(json.dumps(fields, sort_keys=True, default=str).encode() + b"\0")
     digest.update(f"{case.kind}\0".encode())
     if config.weights is not None:
         # A retrained actor at the same path must recompute the cases.

@@ -283,9 +283,9 @@ def case_from_label_map(
     if reading.dense or len(reading.axes) == 1:
         sections, _, cropped = prepare_inputs(
             union,
-            slices=config.slices,
-            every=config.every,
-            axis=config.axis,
+            slices=config.slices if reading.dense else None,
+            every=config.every if reading.dense else None,
+            axis=config.axis if reading.dense else "z",
             projections="auto",
             memory_budget_gb=config.max_memory_gb,
             annotation=stated if reading.dense else tuple(reading.axes),
@@ -374,12 +374,23 @@ def _check_sparse_options(
         ``--slices`` or ``--every`` given, or ``--axis`` naming another axis than the
         annotation's one.
     """
-    if config.slices is not None or config.every is not None:
+    given = [
+        name
+        for name, used in (
+            ("--slices", config.slices is not None),
+            ("--every", config.every is not None),
+            ("--axis", config.axis != "z" and reading.axes != (axis_index(config.axis),)),
+        )
+        if used
+    ]
+    if given and config.dense_only:
+        logger.info("%s left out: this input is already sparse", "/".join(given))
+    elif config.slices is not None or config.every is not None:
         raise OptionError(
             "--slices/--every apply to dense masks; this input is already sparse "
             f"({reading.describe(spacing)})"
         )
-    if config.axis != "z" and reading.axes != (axis_index(config.axis),):
+    elif given:
         raise OptionError(
             f"--axis applies to dense masks; this input is already sparse "
             f"({reading.describe(spacing)}): to read it along {config.axis} only, pass "

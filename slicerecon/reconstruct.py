@@ -100,6 +100,10 @@ class ReconstructConfig(ReconstructOptions):
     """Keep every K-th plane of a dense input instead of ``slices``."""
     axis: str = "z"
     """Grid axis the section planes of a dense input are perpendicular to (x, y or z)."""
+    dense_only: bool = False
+    """``slices``, ``every`` and ``axis`` are meant for the dense inputs among others
+    (a batch mixing dense masks and annotations): an annotation leaves them out with a
+    note instead of refusing them."""
     annotation: str = "auto"
     """How a label map is read: ``auto`` (dense, or annotated on some planes of
     any axes, by the rule of :mod:`slicerecon.plane_detection`), ``dense``, or

@@ -785,3 +785,14 @@ def test_a_case_missing_any_of_its_files_is_computed_again(tmp_path):
     again = run_batch(tmp_path / "in", out, CONFIG, workers=0, report=False)
     assert [c.status for c in again.cases] == ["ok"]
     assert (out / "ball" / "labels.nii.gz").is_file()
+
+
+def test_slices_apply_to_the_dense_cases_of_a_batch_and_leave_annotations_alone(tmp_path):
+    ball = make_shape("sphere", radius=8.0)
+    sparse = ball.mask & (np.arange(ball.mask.shape[2]) % 4 == 0)[None, None, :]
+    write_nifti(ball, tmp_path / "in" / "dense.nii.gz")
+    write_nifti(type(ball)(sparse, ball.affine), tmp_path / "in" / "sparse.nii.gz")
+    config = ReconstructConfig(n_points=5000, slices=6)
+    result = run_batch(tmp_path / "in", tmp_path / "out", config, workers=0, report=False)
+    assert {c.case: c.status for c in result.cases} == {"dense": "ok", "sparse": "ok"}
+    assert {c.case: c.planes for c in result.cases}["dense"] == 6
