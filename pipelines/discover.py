@@ -77,6 +77,7 @@ from typing import NamedTuple
 from slicerecon.errors import InputError
 from slicerecon.io import kind_of_name
 from slicerecon.io.dicom.sniff import DICOM_SUFFIXES, dicom_role
+from slicerecon.results import SUMMARY_COLUMNS, SUMMARY_CSV
 
 __all__ = [
     "CASE_KINDS",
@@ -188,7 +189,7 @@ class Discovery(NamedTuple):
 MESH_REASON = "a mesh: meshes are outputs or ground truths, not batch inputs"
 NOT_INPUT_REASON = "not an input format (NIfTI, NRRD, VTI, contours or DICOM)"
 OTHER_DICOM_REASON = "a DICOM object that is not an image, SEG or RTSTRUCT"
-OUTPUT_REASON = "a reconstruction's outputs (it holds plan.json)"
+OUTPUT_REASON = "a reconstruction's outputs (it holds plan.json, or a batch's summary.csv)"
 
 
 def safe_case_name(relpath: str | os.PathLike[str]) -> str:
@@ -336,7 +337,20 @@ def _within(path: Path, folder: Path) -> bool:
 
 OUTPUT_MARKER = "plan.json"
 """A folder holding this file is a case slicerecon wrote (its ``labels.nii.gz``
-and meshes are outputs): it and its subfolders are not searched for inputs."""
+and meshes are outputs): it and its subfolders are not searched for inputs; nor
+is a batch's results folder (a ``summary.csv`` with the runner's header)."""
+
+
+def _batch_results(folder: Path, names: list[str]) -> bool:
+    """Whether ``folder`` is a batch's results (its ``summary.csv`` has the runner's header)."""
+    if SUMMARY_CSV not in names:
+        return False
+    try:
+        with (folder / SUMMARY_CSV).open(encoding="utf-8") as handle:
+            header = handle.readline().strip()
+    except (OSError, UnicodeDecodeError):
+        return False
+    return header.split(",")[:4] == list(SUMMARY_COLUMNS[:4])
 
 
 def _walk(root: Path, skip: Iterable[Path], *, follow_symlinks: bool) -> list[_Folder]:
@@ -351,7 +365,7 @@ def _walk(root: Path, skip: Iterable[Path], *, follow_symlinks: bool) -> list[_F
 
     for here, dirs, names in os.walk(root, followlinks=True):
         folder = Path(here)
-        if OUTPUT_MARKER in names:  # a case folder slicerecon wrote: outputs, not inputs
+        if OUTPUT_MARKER in names or _batch_results(folder, names):  # outputs, not inputs
             logger.debug("not searching %s: it holds a reconstruction's outputs", folder)
             dirs[:] = []
             out.append(_Folder(folder, [], [], outputs=True))

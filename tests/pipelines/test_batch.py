@@ -796,3 +796,11 @@ def test_slices_apply_to_the_dense_cases_of_a_batch_and_leave_annotations_alone(
     result = run_batch(tmp_path / "in", tmp_path / "out", config, workers=0, report=False)
     assert {c.case: c.status for c in result.cases} == {"dense": "ok", "sparse": "ok"}
     assert {c.case: c.planes for c in result.cases}["dense"] == 6
+
+
+def test_an_earlier_batchs_results_inside_indir_are_not_read_as_inputs(tmp_path):
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "ball.nii.gz")
+    first = run_batch(tmp_path / "in", tmp_path / "in" / "results", CONFIG, workers=0)
+    assert first.n_ok == 1 and (tmp_path / "in" / "results" / "summary.csv").is_file()
+    second = run_batch(tmp_path / "in", tmp_path / "out", CONFIG, workers=0, report=False)
+    assert [c.case for c in second.cases] == ["ball"] and second.ok
