@@ -153,3 +153,19 @@ def test_the_report_says_the_same_after_a_rewrite(batch: Path) -> None:
     before = (batch / "report.html").read_bytes()
     write_report(batch)
     assert (batch / "report.html").read_bytes() == before
+
+
+def test_a_case_mean_says_how_many_of_its_structures_it_covers(tmp_path: Path) -> None:
+    """A structure no kept plane crosses is not scored: the case's mean says it covers 1 of 2."""
+    labels = np.zeros((40, 40, 40), np.uint8)
+    x, y, z = np.meshgrid(*[np.arange(40)] * 3, indexing="ij")
+    labels[(x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 144] = 1
+    labels[30:34, 30:34, 14:16] = 2  # two slices thick, between the kept planes
+    (tmp_path / "in").mkdir()
+    write_label_map(labels, np.eye(4), tmp_path / "in" / "two.nii.gz")
+    config = ReconstructConfig(n_points=5000, slices=4)
+    result = run_batch(tmp_path / "in", tmp_path / "out", config, workers=0)
+    statuses = {s.label: s.status for s in result.cases[0].structures}
+    assert statuses["1"] == "reconstructed" and statuses["2"] != "reconstructed"
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert "2 structures, mean of 1: 1 not scored" in page
