@@ -10,8 +10,9 @@ order, skipping hidden files and folders) and finds:
   VTK images (``*.vti``), contour files (``*.json``, ``*.csv``);
 * DICOM SEG files: one case each;
 * DICOM RTSTRUCT files: one case each. When the RTSTRUCT lies in a folder that
-  also holds an image series, the contours are read on that series' voxel grid
-  (the images are its reference, not a case of their own);
+  also holds an image series, or whose one subfolder holding images does
+  (``pat1/RS.dcm`` beside ``pat1/CT/``), the contours are read on that series'
+  voxel grid (the images are its reference, not a case of their own);
 * DICOM image series: a folder of image files of one series (a mask stored as
   DICOM) is one case, unless the folder also holds an RTSTRUCT or a SEG (then
   the images are the reference those were drawn on);
@@ -312,6 +313,31 @@ def _folder_cases(
     return found, skipped
 
 
+def _pair_series_below(found: list[tuple[str, Case]]) -> list[tuple[str, Case]]:
+    """An RTSTRUCT in a folder without images takes the one image series in a subfolder
+    of it (``pat1/RS.dcm`` beside ``pat1/CT/``), as ``slicerecon run pat1`` does; that
+    series is then its reference, not a case of its own."""
+    out = list(found)
+    claimed: set[int] = set()
+    for n, (base, case) in enumerate(found):
+        if case.kind != "rtstruct" or case.image_dir is not None:
+            continue
+        below = [
+            m
+            for m, (_, other) in enumerate(found)
+            if other.kind == "dicom-series"
+            and other.path.parent == case.path.parent
+            and m not in claimed
+        ]
+        if len(below) != 1:
+            continue
+        images = found[below[0]][1]
+        claimed.add(below[0])
+        files = (case.path, *images.files)
+        out[n] = (base, dataclasses.replace(case, files=files, image_dir=images.path))
+    return [item for n, item in enumerate(out) if n not in claimed]
+
+
 @dataclass(frozen=True)
 class _Link:
     """A symbolic link that was not followed: ``kind`` is file, folder or broken."""
@@ -517,6 +543,7 @@ def discover(
         )
         found.extend(cases_here)
         skipped.extend(skipped_here)
+    found = _pair_series_below(found)
     found.sort(key=lambda item: item[1].relpath)
     cases: list[Case] = []
     taken: set[str] = {name.casefold() for name in RESERVED_NAMES}

@@ -107,6 +107,18 @@ def kind_of_name(name: str) -> tuple[str, str] | None:
     return None
 
 
+def _series_below(folder: Path) -> Path | None:
+    """The one subfolder of ``folder`` holding DICOM images (an RTSTRUCT beside ``CT/``)."""
+    from .dicom import dicom_modality
+
+    found = []
+    for sub in sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".")):
+        first = next((f for f in sorted(sub.iterdir()) if f.is_file()), None)
+        if first is not None and dicom_modality(first) not in (None, "RTSTRUCT", "SEG"):
+            found.append(sub)
+    return found[0] if len(found) == 1 else None
+
+
 def detect_kind(path: str | os.PathLike[str]) -> InputKind:
     """Tell what kind of input ``path`` is, without reading pixel data.
 
@@ -127,9 +139,11 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         files = sorted(f for f in p.iterdir() if f.is_file() and not f.name.startswith("."))
         if not files:
             raise InputError(f"directory {p} is empty: expected a DICOM series")
-        rtstructs = [f for f in files if dicom_modality(f) == "RTSTRUCT"]
+        modalities = {f: dicom_modality(f) for f in files}
+        rtstructs = [f for f in files if modalities[f] == "RTSTRUCT"]
         if len(rtstructs) == 1:
-            return InputKind("rtstruct", rtstructs[0], image_dir=p)
+            images = [f for f, m in modalities.items() if m not in (None, "RTSTRUCT", "SEG")]
+            return InputKind("rtstruct", rtstructs[0], image_dir=p if images else _series_below(p))
         if len(rtstructs) > 1:
             raise InputError(
                 f"directory {p} holds {len(rtstructs)} RTSTRUCT files; pass one of them"

@@ -186,6 +186,11 @@ def write_label_outputs(
     if series is None:
         if rtstruct is not None:
             result.skipped["rtstruct"] = "the RTSTRUCT's image series was not found beside it"
+            logger.warning(
+                "%s: rtstruct.dcm and seg.dcm not written: its image series was not found "
+                "beside it (pass the folder that holds both, or the series in one subfolder)",
+                rtstruct,
+            )
         return result
     lps = np.asarray(affine, dtype=np.float64)
     if coordinates == "RAS":

@@ -196,6 +196,28 @@ def test_dicom_series_and_rtstruct_beside_its_images_reconstruct(tmp_path):
         assert trimesh.load(tmp_path / "out" / case / "mesh.stl").is_watertight
 
 
+def test_an_rtstruct_beside_its_series_in_a_subfolder_is_read_on_that_series(tmp_path):
+    """pat1/RS.dcm beside pat1/CT/: one case on the CT's grid, with its DICOM outputs."""
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 2], [0, 0, 0])
+    patient = tmp_path / "in" / "pat1"
+    factory.write_series(patient / "CT", np.zeros((40, 40, 12), np.uint16), affine, modality="CT")
+    rings = [
+        factory.contour_item(factory.circle(8.0 - abs(k - 6), (20.0, 20.0), 2.0 * k))
+        for k in range(3, 10)
+    ]
+    factory.write_rtstruct(patient / "RS.dcm", {(1, "Lesion"): rings}, on_series=patient / "CT")
+    result = run_batch(
+        tmp_path / "in", tmp_path / "out", ReconstructConfig(n_points=5000), workers=0, report=False
+    )
+    assert [(c.case, c.kind, c.status) for c in result.cases] == [("pat1__RS", "rtstruct", "ok")]
+    folder = tmp_path / "out" / "pat1__RS"
+    assert (folder / "rtstruct.dcm").is_file() and (folder / "seg.dcm").is_file()
+    plan = json.loads((folder / "plan.json").read_text())
+    assert plan["sections"]["plane_indices"] == list(range(3, 10))  # on the CT's slice grid
+    assert main(["run", str(patient), "-o", str(tmp_path / "run"), "-q"]) == 0
+    assert (tmp_path / "run" / "rtstruct.dcm").is_file()
+
+
 # ------------------------------------------------------------------ batch on Dask
 @pytest.fixture(scope="module")
 def first_run(tmp_path_factory):
