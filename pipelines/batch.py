@@ -181,7 +181,8 @@ class BatchResult:
 
 
 def _write_report(outdir: Path) -> tuple[Path | None, str]:
-    """Call ``slicerecon.report.write_report(outdir)``; never raise."""
+    """Call ``slicerecon.report.write_report(outdir)`` (the cases of ``summary.csv``, this
+    run's); never raise."""
     try:
         from slicerecon.report import write_report
 

@@ -7,6 +7,7 @@ import logging
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 from ..errors import InputError, OptionError
@@ -89,12 +90,28 @@ def _renders(
     return rendered, note
 
 
+def _summary_cases(root: Path) -> list[str] | None:
+    """The case column of a batch's ``summary.csv`` in ``root``, or None without one."""
+    import csv
+
+    path = ResultsLayout(root).summary_csv
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            rows = list(csv.DictReader(handle))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return None
+    if not rows or "case" not in rows[0]:
+        return None
+    return [row["case"] for row in rows]
+
+
 def write_report(
     results_dir: str | os.PathLike[str],
     *,
     title: str | None = None,
     renders: bool = True,
     max_renders: int | None = 100,
+    only: Sequence[str] | None = None,
 ) -> Path:
     """Write ``metrics.csv``, ``summary.json``, ``report.html`` and ``report_assets/``.
 
@@ -115,6 +132,11 @@ def write_report(
     max_renders : int or None
         Render at most this many finished cases (the first ones by name);
         None renders all.
+    only : sequence of str, optional
+        Report only these case folders; the others are named in one log line.
+        Default: the cases of the folder's ``summary.csv`` when a batch wrote
+        one (its last run's, so that a folder an earlier run left for an
+        input that is gone is not counted), else every case folder.
 
     Returns
     -------
@@ -136,6 +158,19 @@ def write_report(
     if max_renders is not None and max_renders < 0:
         raise OptionError(f"max_renders must be >= 0 or None (got {max_renders})")
     cases = collect_results(results_dir)
+    if only is None:
+        only = _summary_cases(Path(results_dir))
+    if only is not None:
+        wanted = set(only)
+        left = [c.case for c in cases if c.case not in wanted]
+        cases = [c for c in cases if c.case in wanted]
+        if left:
+            logger.warning(
+                "%s: not in the report, the case folders of an earlier run whose input is not "
+                "among this run's cases: %s",
+                results_dir,
+                ", ".join(left),
+            )
     layout = ResultsLayout(Path(results_dir))
     root = layout.root
     if not cases:

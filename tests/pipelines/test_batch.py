@@ -826,3 +826,14 @@ def test_an_earlier_batchs_results_inside_indir_are_not_read_as_inputs(tmp_path)
     assert first.n_ok == 1 and (tmp_path / "in" / "results" / "summary.csv").is_file()
     second = run_batch(tmp_path / "in", tmp_path / "out", CONFIG, workers=0, report=False)
     assert [c.case for c in second.cases] == ["ball"] and second.ok
+
+
+def test_the_report_of_a_batch_counts_only_the_cases_of_its_run(tmp_path):
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "a.nii.gz")
+    write_nifti(make_shape("sphere", radius=6.0), tmp_path / "in" / "b.nii.gz")
+    out = tmp_path / "out"
+    assert run_batch(tmp_path / "in", out, CONFIG, workers=0).n_ok == 2
+    (tmp_path / "in" / "b.nii.gz").unlink()  # its folder stays, from the earlier run
+    again = run_batch(tmp_path / "in", out, CONFIG, workers=0)
+    assert [c.case for c in again.cases] == ["a"] and (out / "b").is_dir()
+    assert json.loads((out / "summary.json").read_text())["n_cases"] == 1
