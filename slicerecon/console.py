@@ -130,10 +130,12 @@ def print_run_summary(summary: dict[str, Any], outdir: Path) -> None:
 
     console = Console()
     if summary.get("annotation"):
-        console.print(f"read as: {summary['annotation']}", highlight=False)
+        # one line, however narrow the terminal or the pipe (grep finds it whole)
+        console.print(f"read as: {summary['annotation']}", highlight=False, soft_wrap=True)
     console.print(
         f"[bold]{summary['parts']}[/] part(s) from [bold]{summary['planes']}[/] planes -> "
-        f"{summary['mesh']} (watertight: {summary['watertight']})"
+        f"{summary['mesh']} (watertight: {summary['watertight']})",
+        soft_wrap=True,
     )
     structures = summary.get("structures") or []
     if len(structures) > 1:

@@ -198,3 +198,17 @@ def test_weights_need_the_policy_planner(
 ) -> None:
     assert main(["run", str(chair_nii), "--weights", "w.safetensors", "-o", str(tmp_path)]) == 2
     assert "policy" in _one_error_line(capsys)
+
+
+def test_the_read_as_line_is_one_line_when_piped(tmp_path, capsys):
+    """However long, the line saying how the input was read is not wrapped (grep finds it)."""
+    import nibabel as nib
+    import numpy as np
+
+    x, y, z = np.meshgrid(*[np.arange(40)] * 3, indexing="ij")
+    ball = ((x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 144) & (z % 3 == 0)
+    ball |= ((x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 144) & np.isin(x, [14, 26])
+    nib.save(nib.Nifti1Image(ball.astype(np.uint8), np.eye(4)), tmp_path / "views.nii.gz")
+    assert main(["run", str(tmp_path / "views.nii.gz"), "-o", str(tmp_path / "out")]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("read as:")]
+    assert len(lines) == 1 and len(lines[0]) > 80 and lines[0].rstrip().endswith("mm")

@@ -349,7 +349,12 @@ def _print_left_out(console: Any, skipped: Any) -> None:
         highlight=False,
     )
     for item in skipped[:MAX_LEFT_OUT_LINES]:
-        console.print(f"  left out {item.relpath}: {item.reason}", markup=False, highlight=False)
+        console.print(
+            f"  left out {item.relpath}: {item.reason}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
     if len(skipped) > MAX_LEFT_OUT_LINES:
         console.print(
             f"  ... and {len(skipped) - MAX_LEFT_OUT_LINES} more (slicerecon -v batch lists them)",
