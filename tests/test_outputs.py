@@ -226,7 +226,6 @@ def test_a_series_without_type_2_patient_and_study_attributes_still_gets_its_seg
     assert "PatientBirthDate" in seg and seg.PatientBirthDate == ""
 
 
-
 def test_a_run_into_an_earlier_runs_folder_leaves_nothing_of_it(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -109,9 +109,7 @@ def test_hole_is_empty_and_ring_area_is_analytic(tmp_path):
         (_circle(10.0, (0.0, 0.0, 5.0)), "are the same contour"),  # it cancels out
     ],
 )
-def test_contours_that_cross_or_repeat_on_a_plane_are_warned_about(
-    tmp_path, capsys, second, words
-):
+def test_contours_that_cross_or_repeat_on_a_plane_are_warned_about(tmp_path, capsys, second, words):
     from slicerecon.cli import main
 
     first = _circle(10.0, (0.0, 0.0, 5.0))
