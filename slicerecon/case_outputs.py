@@ -193,14 +193,6 @@ def write_case(
         if item.metrics is not None:
             record["metrics"] = item.metrics
         records.append(record)
-    if result.overlap_voxels:
-        logger.warning(
-            "%s: structures overlap on %d voxels; labels.nii.gz holds one structure per voxel "
-            "(the smallest on top); the meshes, labels.seg.nrrd (in layers) and the DICOM "
-            "outputs keep each whole",
-            case.input_path,
-            result.overlap_voxels,
-        )
     kind = case.kind
     outputs = write_label_outputs(
         outdir,
@@ -216,6 +208,16 @@ def write_case(
         source=kind.path if kind.kind == "nifti" else None,
         layers=result.layers,
     )
+    if result.overlap_voxels:
+        whole = ["the meshes", "labels.seg.nrrd (in layers)"]
+        whole += [f"{name}.dcm" for name in ("seg", "rtstruct") if name in outputs.written]
+        logger.warning(
+            "%s: structures overlap on %d voxels; labels.nii.gz holds one structure per voxel "
+            "(the smallest on top); %s keep each whole",
+            case.input_path,
+            result.overlap_voxels,
+            ", ".join(whole),
+        )
     write_json(
         outdir / STRUCTURES_FILE,
         {
