@@ -457,7 +457,11 @@ def run_batch(
     check_dirs(src, out)
     cases, skipped = discover(src, exclude=[out], follow_symlinks=follow_symlinks)
     if not cases:
-        left_out = f"; {len(skipped)} entries are not inputs" if skipped else ""
+        left_out = ""
+        if skipped:
+            first = skipped[0]
+            more = f" (and {len(skipped) - 1} more, listed with -v)" if len(skipped) > 1 else ""
+            left_out = f"; left out: {first.relpath}: {first.reason}{more}"
         raise InputError(
             f"no cases found in {src}: expected label maps (.nii/.nii.gz, .nrrd/.seg.nrrd, "
             ".vti), contour files (.json/.csv), DICOM series folders, DICOM SEG or RTSTRUCT "
