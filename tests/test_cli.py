@@ -212,3 +212,50 @@ def test_the_read_as_line_is_one_line_when_piped(tmp_path, capsys):
     assert main(["run", str(tmp_path / "views.nii.gz"), "-o", str(tmp_path / "out")]) == 0
     lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("read as:")]
     assert len(lines) == 1 and len(lines[0]) > 80 and lines[0].rstrip().endswith("mm")
+
+
+def _documented_warning_inputs(root: Path) -> dict[str, tuple[list[str], str]]:
+    """Inputs that give each warning docs/formats.md promises, with the words it says."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+    import nibabel as nib
+
+    x, y, z = np.meshgrid(*[np.arange(32)] * 3, indexing="ij")
+    ball = (x - 16) ** 2 + (y - 16) ** 2 + (z - 16) ** 2 < 100
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [0.0, 0.0, 0.0]
+    )
+    flat = np.zeros((20, 20, 9), bool)
+    flat[5:15, 5:15, 4] = True
+    one_frame = factory.write_seg(root / "one.dcm", {1: flat}, affine, labels={1: "Flat"})
+    both = factory.write_seg(
+        root / "nested.dcm",
+        {1: ball, 2: (x - 16) ** 2 + (y - 16) ** 2 + (z - 16) ** 2 < 25},
+        affine,
+        labels={1: "Organ", 2: "Lesion"},
+    )
+    thin = ball.astype(np.uint8)
+    thin[2:5, 2:5, 14:16] = 2  # two slices between the kept planes
+    nib.save(nib.Nifti1Image(thin, np.eye(4)), root / "thin.nii.gz")
+    ring = [factory.contour_item(factory.circle(8.0, (0.0, 0.0), z)) for z in (0.0, 4.0, 8.0)]
+    alone = factory.write_rtstruct(root / "rs.dcm", {(1, "Ball"): ring})
+    return {
+        "one plane": ([str(one_frame)], "one plane"),
+        "no plane crosses it": ([str(root / "thin.nii.gz"), "--slices", "4"], "between"),
+        "overlapping segments": ([str(both)], "overlap on"),
+        "DICOM output skipped": ([str(alone)], "rtstruct.dcm and seg.dcm not written"),
+    }
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["one plane", "no plane crosses it", "overlapping segments", "DICOM output skipped"],
+)
+def test_every_documented_warning_reaches_stderr_without_v(
+    name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv, words = _documented_warning_inputs(tmp_path)[name]
+    assert main(["run", *argv, "-o", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert any(line.startswith("warning: ") and words in line for line in err), err
+    assert main(["run", *argv, "-o", str(tmp_path / "quiet"), "-q"]) == 0
+    assert capsys.readouterr().err == ""  # -q silences them
