@@ -45,7 +45,7 @@ from .annotated_planes import MAX_VIEW_DISAGREEMENT, views_disagreement
 from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
-from .errors import OptionError
+from .errors import InputError, OptionError
 from .evaluation import mean_metrics
 from .inputs import axis_upsample
 from .io.projections import read_projection_files
@@ -719,6 +719,12 @@ def reconstruct_structures(
         if isinstance(source, LabelMap):
             label_map = source
         else:
+            if not isinstance(source, tuple | list) or len(source) != 2:
+                raise InputError(
+                    "reconstruct_structures takes a path, a LabelMap, or (array, affine) "
+                    f"(got {type(source).__name__}"
+                    + (f" of {len(source)} items)" if isinstance(source, tuple | list) else ")")
+                )
             array, affine = source
             check_label_values(
                 np.asarray(array), source="the array", chosen=config.union or bool(config.selectors)

@@ -78,8 +78,10 @@ def prepare_inputs(
     ``slices`` / ``every`` planes and kept as ground truth. A volume annotated
     on some planes of one axis (:func:`slicerecon.plane_detection.detect_planes`,
     or as ``annotation`` states) and contour inputs are used as they are,
-    without ground truth. A volume annotated along several axes is refused
-    here: :func:`slicerecon.case.reconstruct_structures` reconstructs it.
+    without ground truth: ``slices`` / ``every`` are refused for them, and
+    ``axis`` (the axis dense masks are cut along) is not used. A volume
+    annotated along several axes is refused here:
+    :func:`slicerecon.case.reconstruct_structures` reconstructs it.
 
     ``projections`` is ``"gt"`` (from the dense mask), ``"sections"``
     (derived from the sections), ``"auto"`` (``gt`` when there is a dense
@@ -128,6 +130,12 @@ def prepare_inputs(
                 )
             logger.info("the mask is a %s", reading.describe(volume.spacing))
             (only,) = reading.axes
+            if slices is not None or every is not None:
+                raise OptionError(
+                    "--slices/--every apply to dense masks; this input is already sparse "
+                    f"({reading.describe(volume.spacing)})"
+                )
+
             sections = sparse_sections(volume, only, reading.planes[only])
         else:
             spanned = int(volume.occupied_planes(ax).size)

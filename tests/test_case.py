@@ -142,3 +142,24 @@ def test_an_unwritable_output_is_refused_before_any_work(
     assert len(err) == 1 and err[0].startswith("error:") and "is a file" in err[0]
     assert main(["run", str(path), "-o", str(target / "below")]) == 2
     assert "is a file" in capsys.readouterr().err
+
+
+def test_a_malformed_source_is_one_input_error() -> None:
+    from slicerecon.errors import InputError
+
+    labels = np.zeros((8, 8, 8), np.uint8)
+    for source in (labels, (labels, np.eye(4), 1)):
+        with pytest.raises(InputError, match=r"a path, a LabelMap, or \(array, affine\)"):
+            reconstruct_structures(source)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("option", [{"slices": 6}, {"every": 2}])
+def test_prepare_inputs_refuses_plane_options_for_an_annotation(option: dict) -> None:
+    """Asked for 6 planes of a mask annotated on every 4th slice, it says so, not ignores it."""
+    from slicerecon.inputs import prepare_inputs
+    from slicerecon.sections import Volume
+
+    x, y, z = np.meshgrid(*[np.arange(40)] * 3, indexing="ij")
+    sparse = ((x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 144) & (z % 4 == 0)
+    with pytest.raises(OptionError, match="apply to dense masks"):
+        prepare_inputs(Volume(sparse, np.eye(4)), **option)
