@@ -169,3 +169,19 @@ def test_a_case_mean_says_how_many_of_its_structures_it_covers(tmp_path: Path) -
     assert statuses["1"] == "reconstructed" and statuses["2"] != "reconstructed"
     page = (tmp_path / "out" / "report.html").read_text()
     assert "2 structures, mean of 1: 1 not scored" in page
+
+
+def test_metrics_csv_gives_each_structure_the_planes_that_hold_it(tmp_path: Path) -> None:
+    labels = np.zeros((40, 40, 40), np.uint8)
+    x, y, z = np.meshgrid(*[np.arange(40)] * 3, indexing="ij")
+    labels[(x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 144] = 1
+    labels[28:34, 28:34, 16:26] = 2  # a smaller structure: fewer of the kept planes
+    (tmp_path / "in").mkdir()
+    write_label_map(labels, np.eye(4), tmp_path / "in" / "two.nii.gz")
+    config = ReconstructConfig(n_points=5000, slices=8)
+    result = run_batch(tmp_path / "in", tmp_path / "out", config, workers=0)
+    own = {s.label: s.planes for s in result.cases[0].structures}
+    assert own["2"] < own["1"]
+    with (tmp_path / "out" / "metrics.csv").open(newline="") as handle:
+        rows = {r["structure"]: r for r in csv.DictReader(handle)}
+    assert int(rows["1"]["planes"]) == own["1"] and int(rows["2"]["planes"]) == own["2"]

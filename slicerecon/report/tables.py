@@ -179,8 +179,9 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
         ``failed``), every metric (full precision, empty when absent),
         ``seconds`` (the sum of the stage timings), ``error``. A case with
         several structures has one row per structure (``structure`` is its
-        ``<value>_<name>``) and a row of their ``mean``; other cases one row
-        with an empty ``structure``.
+        ``<value>_<name>``, ``planes`` the planes holding it) and a row of
+        their ``mean`` (``planes``: the case's); other cases one row with an
+        empty ``structure``.
     """
     names = metric_names(cases)
     buffer = io.StringIO()
@@ -193,14 +194,16 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
         rows = [("", c.metrics or {})]
         if c.structure_metrics:  # one row per structure, then their mean
             rows = [*sorted(c.structure_metrics.items()), ("mean", c.metrics or {})]
+        own_planes = {s.label: s.planes for s in c.structures}
         for structure, metrics in rows:
+            planes = own_planes.get(structure, c.planes) if structure else c.planes
             writer.writerow(
                 [
                     c.case,
                     structure,
                     c.method or "",
                     c.planner or "",
-                    "" if c.planes is None else c.planes,
+                    "" if planes is None else planes,
                     "ok" if c.ok else "failed",
                     *(repr(metrics[n]) if n in metrics else "" for n in names),
                     "" if seconds is None else repr(round(seconds, 4)),
