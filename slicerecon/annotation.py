@@ -315,20 +315,20 @@ class Annotation:
         return (origins @ inverse[:3, :3].T + inverse[:3, 3])[:, axis]
 
     def main_axis(self) -> int:
-        """The grid axis most planes are perpendicular to.
+        """The grid axis most planes are slices of (on the grid's voxels, :meth:`grid_shift`).
 
         Raises
         ------
         GeometryError
-            No plane is perpendicular to a grid axis.
+            No plane is a slice of the grid.
         """
         counts = [0, 0, 0]
         for plane in self.planes:
             axis = self._axis_of(plane.pose)
-            if axis is not None:
+            if axis is not None and self.grid_shift(plane.pose, axis) is not None:
                 counts[axis] += 1
         if not any(counts):
-            raise GeometryError("no annotated plane is perpendicular to an axis of the grid")
+            raise GeometryError("no annotated plane is a slice of the grid")
         return int(np.argmax(counts))
 
     def axis_of(self, pose: PlanePose) -> int | None:
@@ -430,8 +430,8 @@ class Annotation:
             towards = "normal (" + ", ".join(f"{c:.2f}" for c in normal + 0.0) + ")"
             if axis is None:
                 where = towards
-            elif np.max(np.abs(normal)) > 1 - ANGLE_TOLERANCE:
-                where = f"along {AXIS_NAMES[axis]}"
+            elif np.max(np.abs(normal)) > 1 - ANGLE_TOLERANCE:  # a world axis: name it
+                where = f"along {AXIS_NAMES[int(np.argmax(np.abs(normal)))]}"
             else:  # a grid axis that is no world axis (a grid built on oblique planes)
                 where = f"along the grid's {AXIS_NAMES[axis]}, {towards}"
             parts.append(f"{len(members)} plane{'s' * (len(members) != 1)} {where}{spacing}")

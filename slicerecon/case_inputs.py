@@ -26,6 +26,7 @@ from .annotated_planes import covering_grid, merge_repeated_planes, planes_of_ea
 from .annotation import (
     AnnotatedPlane,
     Annotation,
+    PlanePose,
     annotation_from_sections,
     plane_pose,
 )
@@ -38,7 +39,7 @@ from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
-from .labels import LabelMap, Structure, StructureMasks
+from .labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks
 from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
 from .reconstruct import ReconstructConfig
 from .sections import AXIS_NAMES, CrossSections, Volume, axis_index
@@ -624,6 +625,9 @@ def combine_cases(
                 match = replace(structure, value=value)
                 structures.append(match)
             remap[structure.value] = match.value
+        # world mm of the first input's frame: LPS (DICOM, Slicer) and RAS (NIfTI) differ
+        # by the sign of x and y
+        flip = case.annotation.coordinates != first.annotation.coordinates
         for plane in case.annotation.planes:
             masks = {remap[v]: m for v, m in plane.masks.items()}
             own = (
@@ -631,7 +635,10 @@ def combine_cases(
                 if plane.structures is None
                 else frozenset(remap[v] for v in plane.structures)
             )
-            planes.append(AnnotatedPlane(plane.pose, masks, own))
+            pose = (
+                PlanePose(LPS_TO_RAS @ plane.pose.affine, plane.pose.shape) if flip else plane.pose
+            )
+            planes.append(AnnotatedPlane(pose, masks, own))
     exclusive = all(c.annotation.exclusive for c in cases)
     origins = [str(c.input_path) for c in cases for _ in c.annotation.planes]
     affine = first.annotation.affine

@@ -639,3 +639,34 @@ def test_views_that_disagree_where_they_meet_are_warned_about(
     assert main([*run, str(tmp_path / "disagree.nii.gz"), "-o", str(tmp_path / "o2")]) == 0
     err = [line for line in capsys.readouterr().err.splitlines() if "drawn differently" in line]
     assert len(err) == 1 and "axial.nii.gz: structure 1" in err[0]
+
+
+@pytest.mark.parametrize("nifti_first", [True, False])
+def test_a_nifti_and_an_rtstruct_of_one_study_meet_in_one_frame(
+    tmp_path: Path, nifti_first: bool
+) -> None:
+    """RAS (NIfTI) and LPS (DICOM) coordinates are reconciled: the two drawings coincide."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    truth = _ellipsoid()  # centre (24, 22, 30) mm in RAS, AFFINE's frame
+    axial = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(axial, AFFINE), tmp_path / "axial.nii.gz")
+    t = np.linspace(0.0, 2.0 * np.pi, 90, endpoint=False)
+    items = []
+    for x in (18.0, 30.0):  # sagittal planes, RAS x; the ellipse of the ellipsoid there
+        scale = np.sqrt(1 - ((x - 24) / 17) ** 2)
+        y = 22 + 13 * scale * np.cos(t)
+        z = 30 + 22 * scale * np.sin(t)
+        items.append(factory.contour_item(np.c_[np.full(t.size, -x), -y, z]))  # in LPS
+    factory.write_rtstruct(tmp_path / "rs.dcm", {(1, "Organ"): items})
+    paths = [str(tmp_path / "axial.nii.gz"), str(tmp_path / "rs.dcm")]
+    out = tmp_path / "out"
+    assert main(["run", *(paths if nifti_first else paths[::-1]), "-o", str(out), "-q"]) == 0
+    records = json.loads((out / "structures.json").read_text())
+    centres = [trimesh.load(out / r["mesh"]).bounds.mean(axis=0) for r in records["structures"]]
+    assert len(centres) == 2
+    np.testing.assert_allclose(centres[0], centres[1], atol=3.0)  # one place, one frame
+    expected = np.array([24.0, 22.0, 30.0]) * (
+        1 if records["coordinates"] == "RAS" else [-1, -1, 1]
+    )
+    np.testing.assert_allclose(centres[0], expected, atol=3.0)
