@@ -179,6 +179,7 @@ def write_case(
     import time
 
     times = dict(timings or {})
+    earlier_run = (outdir / PLAN_FILE).is_file()  # a folder slicerecon wrote before
     start = time.perf_counter()
     several = len(case.annotation.structures) > 1
     records = []
@@ -251,7 +252,9 @@ def write_case(
     files += [Path(p) for p in outputs.written.values()]
     if metrics is not None:
         files.append(outdir / METRICS_FILE)
-    _remove_stale(outdir, files)
+    if earlier_run:
+        inputs = [case.input_path, case.kind.path]
+        _remove_stale(outdir, files + [Path(p) for p in inputs])
     mesh_path = (
         outdir / mesh_file(result.results[0].structure.label, config.mesh_format, several=False)
         if not several
@@ -273,9 +276,11 @@ def write_case(
 def _remove_stale(outdir: Path, written: list[Path]) -> None:
     """Remove what an earlier run left in a case folder that this run did not write.
 
-    Only the names a case writes are looked at (``plan.json``, ``metrics.json``,
-    meshes, label maps, DICOM outputs, ...); any other file stays. Said in one
-    line: a results folder never mixes two runs.
+    Only for a folder that held an earlier run's ``plan.json``, and only the
+    names a case writes (``plan.json``, ``metrics.json``, meshes, label maps,
+    DICOM outputs, ...), never a file in ``written`` (this run's, and its
+    inputs); any other file stays. Said in one line: a results folder never
+    mixes two runs.
     """
     keep = {p.resolve() for p in written}
     names = [PLAN_FILE, METRICS_FILE, PREVIEW_FILE, STRUCTURES_FILE, *LABEL_OUTPUT_FILES]

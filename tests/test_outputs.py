@@ -249,3 +249,18 @@ def test_a_run_into_an_earlier_runs_folder_leaves_nothing_of_it(
     assert len(err) == 1 and "metrics.json" in err[0] and "meshes/5.stl" in err[0]
     assert not (out / "metrics.json").exists() and not (out / "meshes").exists()
     assert (out / "mesh.stl").is_file() and (out / "notes.txt").read_text() == "mine"
+
+
+def test_an_input_in_the_output_folder_is_never_removed(tmp_path: Path) -> None:
+    """A SEG named seg.dcm, reconstructed into its own folder twice: the input stays."""
+    x, y, z = np.meshgrid(*[np.arange(24)] * 3, indexing="ij")
+    ball = (x - 12) ** 2 + (y - 12) ** 2 + (z - 12) ** 2 < 64
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 1.0], [0.0, 0.0, 0.0]
+    )
+    study = tmp_path / "study"
+    study.mkdir()
+    seg = factory.write_seg(study / "seg.dcm", {1: ball}, affine, labels={1: "Ball"})
+    for _ in range(2):  # the second run finds the first one's plan.json
+        assert main(["run", str(seg), "-o", str(study), "-q"]) == 0
+        assert seg.is_file() and (study / "mesh.stl").is_file()
