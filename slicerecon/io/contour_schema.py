@@ -81,6 +81,13 @@ class Parsed:
     structures: list[Structure] = field(default_factory=list)
     owners: list[int] = field(default_factory=list)  # each polygon's structure value
 
+    def structure_polygons(self) -> list[list[NDArray[np.float64]]]:
+        """Each structure's polygons, in the order of :attr:`structures` (possibly none)."""
+        return [
+            [poly for poly, owner in zip(self.polygons, self.owners, strict=True) if owner == value]
+            for value in (s.value for s in self.structures)
+        ]
+
 
 def fail(path: Path, where: str, message: str) -> FormatError:
     return FormatError(f"{path}: {where}: {message}" if where else f"{path}: {message}")

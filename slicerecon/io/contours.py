@@ -150,7 +150,13 @@ def read_contours(
             "read_contour_annotation, or choose one with --label (slicerecon run reads "
             "every one)"
         )
+    return _parallel_sections(p, parsed, pixel_spacing, memory_budget_gb)
 
+
+def _parallel_sections(
+    p: Path, parsed: Parsed, pixel_spacing: float | None, memory_budget_gb: float
+) -> CrossSections:
+    """One structure's parsed polygons on parallel planes, rasterized (:func:`read_contours`)."""
     reference = parsed.grid if pixel_spacing is None else None
     if parsed.grid is not None and pixel_spacing is not None:
         logger.info("%s: pixel_spacing given, so the file's grid is not used", p)
@@ -221,9 +227,7 @@ def _read_contour_annotation(
     simple = len(parsed.structures) == 1 and orientation_count(parsed.polygons) <= 1
     if simple or parsed.version == 1:  # version 1: one structure on parallel planes
         try:
-            sections = read_contours(
-                p, pixel_spacing=pixel_spacing, memory_budget_gb=memory_budget_gb
-            )
+            sections = _parallel_sections(p, parsed, pixel_spacing, memory_budget_gb)
         except GeometryError as exc:
             if "parallel" not in str(exc):
                 raise
@@ -233,18 +237,10 @@ def _read_contour_annotation(
         return annotation_from_sections(
             parsed.structures, [sections], shared=True, coordinates="RAS", exclusive=True
         )
-    groups = [
-        [
-            poly
-            for poly, owner in zip(parsed.polygons, parsed.owners, strict=True)
-            if owner == s.value
-        ]
-        for s in parsed.structures
-    ]
     try:
         return annotation_from_polygons(
             parsed.structures,
-            groups,
+            parsed.structure_polygons(),
             reference=reference,
             pixel_spacing=pixel_spacing,
             coordinates="RAS",
@@ -279,17 +275,7 @@ def contour_structures(
     p = Path(path)
     with reading(p):
         parsed = _read_parsed(p)
-    return [
-        (
-            s,
-            [
-                poly
-                for poly, owner in zip(parsed.polygons, parsed.owners, strict=True)
-                if owner == s.value
-            ],
-        )
-        for s in parsed.structures
-    ]
+    return list(zip(parsed.structures, parsed.structure_polygons(), strict=True))
 
 
 def _read_parsed(p: Path) -> Parsed:
