@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import GeometryError, InputError, LabelError
 from .labels import Structure
 from .sections import AXIS_NAMES, CrossSections, check_affine, in_plane_axes
-from .selection import choose_structure, parse_selector
+from .selection import choose_structures
 
 __all__ = [
     "AnnotatedPlane",
@@ -283,13 +283,9 @@ class Annotation:
             A selector names no structure (the message lists them).
         """
         names = {s.value: s.name for s in self.structures}
-        chosen: list[Structure] = []
-        for selector in selectors:
-            value = choose_structure(names, parse_selector(selector), kind="label", source=source)
-            found = self.structure(value)
-            if found not in chosen:
-                chosen.append(found)
-        keep = {s.value for s in chosen}
+        values = choose_structures(names, selectors, source=source)
+        chosen = [self.structure(v) for v in values]
+        keep = set(values)
         planes = []
         for plane in self.planes:
             annotated = keep if plane.structures is None else keep & plane.structures

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import LabelError
 from .sections import Volume, check_affine
-from .selection import choose_structure, parse_selector
+from .selection import choose_structures
 
 __all__ = [
     "DEFAULT_COLOURS",
@@ -241,12 +241,8 @@ class LabelMap:
             A selector names no structure (the message lists them).
         """
         names = {s.value: s.name for s in self.structures}
-        chosen: list[Structure] = []
-        for selector in selectors:
-            value = choose_structure(names, parse_selector(selector), kind="label", source=source)
-            found = next(s for s in self.structures if s.value == value)
-            if found not in chosen:
-                chosen.append(found)
+        by_value = {s.value: s for s in self.structures}
+        chosen = [by_value[v] for v in choose_structures(names, selectors, source=source)]
         keep = np.isin(self.labels, [s.value for s in chosen])
         labels = np.where(keep, self.labels, 0).astype(self.labels.dtype, copy=False)
         return LabelMap(labels, self.affine, tuple(chosen), self.coordinates)
@@ -320,11 +316,7 @@ class StructureMasks:
             A selector names no structure (the message lists them).
         """
         names = {s.value: s.name for s in self.structures}
-        chosen: list[int] = []
-        for selector in selectors:
-            value = choose_structure(names, parse_selector(selector), kind="label", source=source)
-            if value not in chosen:
-                chosen.append(value)
+        chosen = choose_structures(names, selectors, source=source)
         order = [next(n for n, s in enumerate(self.structures) if s.value == v) for v in chosen]
         return StructureMasks(
             tuple(self.masks[n] for n in order),

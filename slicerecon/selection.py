@@ -8,14 +8,15 @@ place that matches it, so that every format answers the same way.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from .errors import LabelError, OptionError
 
-__all__ = ["choose_structure", "parse_selector"]
+__all__ = ["choose_structure", "choose_structures", "parse_selector"]
 
 
 def parse_selector(value: int | str | None) -> int | str | None:
@@ -126,3 +127,24 @@ def choose_structure(
     raise LabelError(
         f"{kind} {selector!r} is not in {source}; its {kind}s are: {_listing(structures)}"
     )
+
+
+def choose_structures(
+    structures: Mapping[int, str], selectors: Sequence[int | str], *, source: Any
+) -> list[int]:
+    """The numbers of the structures ``selectors`` pick (``--label A,B``), in the order given.
+
+    Each selector as :func:`choose_structure` reads it (``kind="label"``); a
+    structure picked twice is kept once.
+
+    Raises
+    ------
+    LabelError
+        A selector names no structure (the message lists them).
+    """
+    chosen: list[int] = []
+    for selector in selectors:
+        value = choose_structure(structures, parse_selector(selector), kind="label", source=source)
+        if value not in chosen:
+            chosen.append(value)
+    return chosen
