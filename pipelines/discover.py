@@ -76,7 +76,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import NamedTuple
 
 from slicerecon.errors import InputError
-from slicerecon.io import kind_of_name
+from slicerecon.io import kind_of_name, series_below
 from slicerecon.io.dicom.sniff import DICOM_SUFFIXES, dicom_role
 from slicerecon.results import SUMMARY_COLUMNS, SUMMARY_CSV
 
@@ -315,24 +315,26 @@ def _folder_cases(
 
 def _pair_series_below(found: list[tuple[str, Case]]) -> list[tuple[str, Case]]:
     """An RTSTRUCT in a folder without images takes the one image series in a subfolder
-    of it (``pat1/RS.dcm`` beside ``pat1/CT/``), as ``slicerecon run pat1`` does; that
-    series is then its reference, not a case of its own."""
+    of it (``pat1/RS.dcm`` beside ``pat1/CT/``: :func:`slicerecon.io.series_below`, as
+    ``slicerecon run pat1`` reads it); that series is then its reference, not a case."""
     out = list(found)
     claimed: set[int] = set()
     for n, (base, case) in enumerate(found):
         if case.kind != "rtstruct" or case.image_dir is not None:
             continue
-        below = [
-            m
-            for m, (_, other) in enumerate(found)
-            if other.kind == "dicom-series"
-            and other.path.parent == case.path.parent
-            and m not in claimed
-        ]
-        if len(below) != 1:
+        below = series_below(case.path.parent)
+        m = next(
+            (
+                m
+                for m, (_, other) in enumerate(found)
+                if other.kind == "dicom-series" and other.path == below and m not in claimed
+            ),
+            None,
+        )
+        if m is None:
             continue
-        images = found[below[0]][1]
-        claimed.add(below[0])
+        claimed.add(m)
+        images = found[m][1]
         files = (case.path, *images.files)
         out[n] = (base, dataclasses.replace(case, files=files, image_dir=images.path))
     return [item for n, item in enumerate(out) if n not in claimed]

@@ -37,6 +37,7 @@ __all__ = [
     "kind_of_name",
     "load_ground_truth",
     "load_input",
+    "series_below",
 ]
 
 logger = logging.getLogger(__name__)
@@ -107,8 +108,9 @@ def kind_of_name(name: str) -> tuple[str, str] | None:
     return None
 
 
-def _series_below(folder: Path) -> Path | None:
-    """The one subfolder of ``folder`` holding DICOM images (an RTSTRUCT beside ``CT/``)."""
+def series_below(folder: Path) -> Path | None:
+    """The one subfolder of ``folder`` holding DICOM images (an RTSTRUCT beside ``CT/``), or
+    None when there is none or several; the rule ``run`` and batch discovery share."""
     from .dicom import dicom_modality
 
     found = []
@@ -143,7 +145,7 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         rtstructs = [f for f in files if modalities[f] == "RTSTRUCT"]
         if len(rtstructs) == 1:
             images = [f for f, m in modalities.items() if m not in (None, "RTSTRUCT", "SEG")]
-            return InputKind("rtstruct", rtstructs[0], image_dir=p if images else _series_below(p))
+            return InputKind("rtstruct", rtstructs[0], image_dir=p if images else series_below(p))
         if len(rtstructs) > 1:
             raise InputError(
                 f"directory {p} holds {len(rtstructs)} RTSTRUCT files; pass one of them"
