@@ -160,11 +160,17 @@ def merge_repeated_planes(
         A structure drawn on one plane by two inputs, differently.
     """
     kept: dict[Any, tuple[AnnotatedPlane, str]] = {}
+    indices = {axis: annotation.plane_indices(axis) for axis in range(3)}
+    everything = frozenset(annotation.values)
+
+    def speaks(p: AnnotatedPlane) -> frozenset[int]:
+        return everything if p.structures is None else p.structures
+
     for number, (plane, origin) in enumerate(zip(annotation.planes, origins, strict=True)):
         axis = annotation.axis_of(plane.pose)
         shift = None if axis is None else annotation.grid_shift(plane.pose, axis)
         if axis is not None and shift is not None:
-            index = float(annotation.plane_indices(axis)[number])
+            index = float(indices[axis][number])
             key: Any = ("slice", axis, round(index, 3))
         else:
             key = ("pose", plane.pose.shape, tuple(np.round(plane.pose.affine, 3).ravel()))
@@ -172,9 +178,7 @@ def merge_repeated_planes(
             kept[key] = (plane, origin)
             continue
         other, first_origin = kept[key]
-        common = (other.structures or frozenset(annotation.values)) & (
-            plane.structures or frozenset(annotation.values)
-        )
+        common = speaks(other) & speaks(plane)
         on_grid = key[0] == "slice"
         where = (
             f"slice {key[2] + first_voxel[key[1]]:g} along {AXIS_NAMES[key[1]]}"
@@ -202,10 +206,7 @@ def merge_repeated_planes(
             }
         else:
             pose, masks = other.pose, {**plane.masks, **other.masks}
-        speaks = (other.structures or frozenset(annotation.values)) | (
-            plane.structures or frozenset(annotation.values)
-        )
-        kept[key] = (AnnotatedPlane(pose, masks, speaks), first_origin)
+        kept[key] = (AnnotatedPlane(pose, masks, speaks(other) | speaks(plane)), first_origin)
     if len(kept) == len(annotation.planes):
         return annotation
     return replace(annotation, planes=tuple(p for p, _ in kept.values()))
