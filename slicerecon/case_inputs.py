@@ -31,7 +31,7 @@ from .annotation import (
     plane_pose,
 )
 from .errors import EmptyMaskError, OptionError
-from .inputs import axis_upsample, prepare_inputs
+from .inputs import axis_upsample, prepare_inputs, refuse_plane_options
 from .io import InputKind, detect_kind, load_ground_truth, load_input
 from .io.contours import read_contour_annotation
 from .io.dicom import dicom_info
@@ -386,12 +386,11 @@ def _check_sparse_options(
     ]
     if given and config.dense_only:
         logger.info("%s left out: this input is already sparse", "/".join(given))
-    elif config.slices is not None or config.every is not None:
-        raise OptionError(
-            "--slices/--every apply to dense masks; this input is already sparse "
-            f"({reading.describe(spacing)})"
-        )
-    elif given:
+        return
+    refuse_plane_options(
+        config.slices, config.every, f"this input is already sparse ({reading.describe(spacing)})"
+    )
+    if given:  # --axis
         raise OptionError(
             f"--axis applies to dense masks; this input is already sparse "
             f"({reading.describe(spacing)}): to read it along {config.axis} only, pass "
@@ -429,8 +428,7 @@ def _load_rtstruct(
     """Every chosen ROI of an RTSTRUCT on its own contour planes, of any orientation."""
     if config.union:
         raise OptionError("--union applies to label maps; choose RTSTRUCT ROIs with --label")
-    if config.slices is not None or config.every is not None:
-        raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
+    refuse_plane_options(config.slices, config.every, "contours are already sparse")
     annotation, missing = read_rtstruct_annotation(
         kind.path,
         rois=config.selectors,
@@ -450,8 +448,7 @@ def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         raise OptionError(
             "--union applies to label maps; choose a contour file's structures with --label"
         )
-    if config.slices is not None or config.every is not None:
-        raise OptionError("--slices/--every apply to dense masks; contours are already sparse")
+    refuse_plane_options(config.slices, config.every, "contours are already sparse")
     annotation = read_contour_annotation(
         kind.path, pixel_spacing=config.pixel_spacing, memory_budget_gb=config.max_memory_gb
     )

@@ -32,6 +32,7 @@ __all__ = [
     "axis_upsample",
     "looks_sparse",
     "prepare_inputs",
+    "refuse_plane_options",
     "sparse_sections",
 ]
 
@@ -60,6 +61,19 @@ def looks_sparse(volume: Volume, axis: int) -> bool:
     """
     reading = detect_planes(volume.mask)
     return not reading.dense and reading.axes == (axis_index(axis),)
+
+
+def refuse_plane_options(slices: int | None, every: int | None, why: str) -> None:
+    """Refuse ``--slices`` / ``--every`` (the planes of a dense mask) for an input that
+    already holds its planes; ``why`` says what it is.
+
+    Raises
+    ------
+    OptionError
+        ``slices`` or ``every`` given.
+    """
+    if slices is not None or every is not None:
+        raise OptionError(f"--slices/--every apply to dense masks; {why}")
 
 
 def prepare_inputs(
@@ -130,11 +144,9 @@ def prepare_inputs(
                 )
             logger.info("the mask is a %s", reading.describe(volume.spacing))
             (only,) = reading.axes
-            if slices is not None or every is not None:
-                raise OptionError(
-                    "--slices/--every apply to dense masks; this input is already sparse "
-                    f"({reading.describe(volume.spacing)})"
-                )
+            refuse_plane_options(
+                slices, every, f"this input is already sparse ({reading.describe(volume.spacing)})"
+            )
 
             sections = sparse_sections(volume, only, reading.planes[only])
         else:
@@ -157,8 +169,7 @@ def prepare_inputs(
             truth = volume
     else:
         sections = data
-        if slices is not None or every is not None:
-            raise OptionError("--slices/--every apply to dense masks; this input is already sparse")
+        refuse_plane_options(slices, every, "this input is already sparse")
     sections.require_foreground()
     samples = list(sections.grid_shape)
     samples[sections.axis] *= axis_upsample(sections)  # the sdf surface's field samples
