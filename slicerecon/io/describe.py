@@ -26,7 +26,7 @@ from .contours import contour_structures
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, reading
 from .nrrd import nrrd_info, read_nrrd_label_map
-from .plane_groups import orientation_count
+from .plane_groups import orientation_count, plane_count
 from .polygons import polygon_normal
 from .rtstruct import roi_contours
 from .vti import read_vti
@@ -182,14 +182,7 @@ def _polygon_record(
         "max": _round(points.max(axis=0), 3),
     }
     if orientation_count(polygons) > 1:  # planes of several orientations (a radial set)
-        planes: list[tuple[NDArray[np.float64], float]] = []
-        for polygon in polygons:
-            own, _ = polygon_normal(polygon)
-            own = own if own[np.argmax(np.abs(own))] > 0 else -own
-            at = float(polygon.mean(axis=0) @ own)
-            if not any(abs(n @ own) > 1 - 1e-6 and abs(o - at) < 0.01 for n, o in planes):
-                planes.append((own, at))
-        record["planes"] = len(planes)
+        record["planes"] = plane_count(polygons)
         record["orientations"] = orientation_count(polygons)
     elif normal is not None:
         positions = np.array([float(p.mean(axis=0) @ normal) for p in polygons])

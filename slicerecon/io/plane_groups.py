@@ -54,7 +54,7 @@ from .polygons import (
     warn_crossing,
 )
 
-__all__ = ["ANGLE_TOLERANCE_DEG", "annotation_from_polygons", "orientation_count"]
+__all__ = ["ANGLE_TOLERANCE_DEG", "annotation_from_polygons", "orientation_count", "plane_count"]
 
 logger = logging.getLogger(__name__)
 
@@ -80,14 +80,33 @@ def _groups(normals: list[NDArray[np.float64]]) -> list[tuple[NDArray[np.float64
     return groups
 
 
-def orientation_count(polygons: Sequence[ArrayLike]) -> int:
-    """How many plane orientations a set of polygons has (0 when none has an area)."""
-    normals = []
+def _oriented(
+    polygons: Sequence[ArrayLike],
+) -> tuple[list[NDArray[np.float64]], list[tuple[NDArray[np.float64], list[int]]]]:
+    """The polygons that have an area, and their orientations (:func:`_groups`)."""
+    kept, normals = [], []
     for points in polygons:
         normal, area = polygon_normal(points)
         if area > 0:
+            kept.append(np.asarray(points, dtype=np.float64))
             normals.append(normal)
-    return len(_groups(normals))
+    return kept, _groups(normals)
+
+
+def orientation_count(polygons: Sequence[ArrayLike]) -> int:
+    """How many plane orientations a set of polygons has (0 when none has an area)."""
+    return len(_oriented(polygons)[1])
+
+
+def plane_count(polygons: Sequence[ArrayLike], plane_tolerance_mm: float = 0.01) -> int:
+    """How many planes a set of polygons lies on, as :func:`annotation_from_polygons` groups
+    them: by orientation, then by offset along the normal (``plane_tolerance_mm``)."""
+    kept, groups = _oriented(polygons)
+    count = 0
+    for normal, members in groups:
+        offsets = np.sort([float(kept[m].mean(axis=0) @ normal) for m in members])
+        count += 1 + int(np.count_nonzero(np.diff(offsets) > plane_tolerance_mm))
+    return count
 
 
 def _built_reference(
