@@ -53,7 +53,8 @@ if TYPE_CHECKING:
 
 __all__ = ["LABEL_OUTPUT_FILES", "LabelOutputs", "dicom_image_series", "write_label_outputs"]
 
-LABEL_OUTPUT_FILES = ("labels.nii.gz", "labels.seg.nrrd", "seg.dcm", "rtstruct.dcm")
+_NIFTI, _SEG_NRRD, _SEG, _RTSTRUCT = "labels.nii.gz", "labels.seg.nrrd", "seg.dcm", "rtstruct.dcm"
+LABEL_OUTPUT_FILES = (_NIFTI, _SEG_NRRD, _SEG, _RTSTRUCT)
 """The names :func:`write_label_outputs` may write in a case folder."""
 
 logger = logging.getLogger(__name__)
@@ -177,11 +178,11 @@ def write_label_outputs(
         ras = np.asarray(affine, dtype=np.float64)
         codes = nifti_xform_codes(source, affine=LPS_TO_RAS @ ras if coordinates == "LPS" else ras)
     result.written["labels"] = write_label_map(
-        labels, affine, out / "labels.nii.gz", coordinates=coordinates, xform_codes=codes
+        labels, affine, out / _NIFTI, coordinates=coordinates, xform_codes=codes
     )
     whole = labels if layers is None else layers
     result.written["seg_nrrd"] = write_seg_nrrd(
-        whole, affine, list(structures), out / "labels.seg.nrrd", coordinates=coordinates
+        whole, affine, list(structures), out / _SEG_NRRD, coordinates=coordinates
     )
     if series is None:
         if rtstruct is not None:
@@ -209,20 +210,20 @@ def write_label_outputs(
         return result
 
     try:
-        with writing(out / "seg.dcm"):
-            result.written["seg"] = write_seg(whole, lps, chosen, images, out / "seg.dcm")
+        with writing(out / _SEG):
+            result.written["seg"] = write_seg(whole, lps, chosen, images, out / _SEG)
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)
     if rtstruct is not None:
         try:
-            with writing(out / "rtstruct.dcm"):
+            with writing(out / _RTSTRUCT):
                 result.written["rtstruct"] = write_rtstruct(
                     whole,
                     lps,
                     list(structures),
                     images,
-                    out / "rtstruct.dcm",
+                    out / _RTSTRUCT,
                     reference=rtstruct,
                 )
         except SlicereconError as exc:
