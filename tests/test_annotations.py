@@ -120,6 +120,29 @@ def test_several_views_are_used_at_once_and_every_drawn_plane_is_kept() -> None:
             assert np.count_nonzero(drawn ^ made) <= 0.02 * np.count_nonzero(drawn)
 
 
+@pytest.mark.parametrize("step", [4, 6])
+def test_extra_views_correct_the_axial_interpolation_without_extruding_their_sections(
+    step: int,
+) -> None:
+    """A bean whose axial sections drift sideways: 2 sagittal and 2 coronal planes
+    cut its flanks obliquely. Extruded along their normals they would lower the result
+    (0.953 against 0.974 at every 4th slice, before they corrected it instead)."""
+    x, y, z = np.meshgrid(
+        *[np.arange(n) * s for n, s in zip((48, 44, 30), SPACING, strict=True)], indexing="ij"
+    )
+    centre = 24 + 6 * np.sin((z - 30) / 22 * np.pi / 2) ** 2 * np.sign(z - 30)
+    truth = ((x - centre) / 15) ** 2 + ((y - 22) / 12) ** 2 + ((z - 30) / 26) ** 2 < 1
+    occupied = np.flatnonzero(truth.any(axis=(0, 1)))
+    axial = sorted({*range(int(occupied[0]), int(occupied[-1]) + 1, step), int(occupied[-1])})
+    planes = {2: axial, 0: [17, 31], 1: [16, 28]}
+    views = reconstruct_structures((_keep(truth, planes).astype(np.uint8), AFFINE)).labels > 0
+    alone = reconstruct_structures((_keep(truth, {2: axial}).astype(np.uint8), AFFINE))
+    gain = _iou(views, truth) - _iou(alone.labels > 0, truth)
+    assert gain >= -0.005
+    if step == 6:  # sparse axial planes: the other views help
+        assert gain >= 0.005
+
+
 def test_the_reading_can_be_stated_and_a_bad_one_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -1,30 +1,41 @@
 """Reconstruction from planes along several axes: every drawn view used at once.
 
 An annotator may draw a structure on a few axial slices and on one or two
-sagittal and coronal ones. Each **view** (the planes of one orientation) is
-interpolated across its own planes as shape-based interpolation does
-(:func:`slicerecon.surface.across_planes.fill_between`: the in-plane signed
-distances, linear or monotone cubic along the view's normal), and the views are
-blended voxel by voxel with weights ``(D_min / D) ** p``, ``D`` the distance
-to the view's nearest plane and ``D_min`` the nearest view's (inverse-distance
-weighting, Shepard 1968; ``p`` = :data:`VIEW_WEIGHT_EXPONENT`):
+sagittal and coronal ones. The planes of one orientation form a **view**. The
+view with the most planes (when it has two or more, or is the only view) is
+**complete**: it is interpolated across its planes as shape-based
+interpolation does (:func:`slicerecon.surface.across_planes.fill_between`: the
+in-plane signed distances, linear or monotone cubic along the view's normal),
+and the structure ends beyond its outer planes by half a voxel (a label map's
+slice) or half the plane spacing (contours, each standing for the slab half-way
+to its neighbours).
+
+Every other view **corrects** that interpolation: on each of its planes the
+*residual* is the drawn in-plane signed distance less the complete view's
+field there, and the view's field is the complete one plus the residual of its
+nearest plane, carried along its normal. The views are blended voxel by voxel
+with weights ``(D_min / D) ** p``, ``D`` the distance to the view's nearest
+plane and ``D_min`` the nearest view's (inverse-distance weighting, Shepard
+1968; ``p`` = :data:`VIEW_WEIGHT_EXPONENT`), so the result is the complete
+view's interpolation moved, near each other plane, by what that plane shows it
+got wrong:
 
 * on a drawn plane its own view has ``D = 0``, so the result's section there is
   the drawn mask (the zero level lies half-way between pixel centres, as in
   every signed-distance surface here);
-* between the axial planes the axial view dominates, near a sagittal plane the
-  sagittal view, and where the axial stack ends, a sagittal plane that shows
-  the structure going on takes over;
-* the view with the most planes (when it has two or more, or is the only
-  view) is taken to cover the structure along its normal: the structure ends beyond its
-  outer planes by half a voxel (a label map's slice) or half the plane spacing
-  (contours, each standing for the slab half-way to its neighbours); another
-  view of one or two planes is extruded beyond them and weighs only near them.
+* between the complete view's planes it dominates, near a sagittal plane the
+  sagittal correction does, and where the complete view ends, a sagittal plane
+  that shows the structure going on moves the end.
 
-Between two planes of one view and nothing else, the result is that view's own
-interpolation: a single-axis annotation gives shape-based interpolation.
-This is not a union of per-axis results (ITK's morphological contour
-interpolation takes one), and every view constrains every point.
+With no complete view (a radial set of single planes through one axis) each
+view is its own interpolation, extruded beyond its outer planes, where it weighs
+:data:`BEYOND_PENALTY` times less. Between two planes of one view and nothing
+else, the result is that view's own interpolation: a single-axis annotation
+gives shape-based interpolation. This is not a union of per-axis results (ITK's
+morphological contour interpolation takes one), and every view constrains
+every point. Measured choices (``benchmarks/annotations.py --half dev``):
+carrying the nearest plane's residual beats interpolating the residuals between
+the view's planes, and beats blending the views' own interpolations.
 """
 
 from __future__ import annotations
@@ -55,8 +66,11 @@ END_REACH = 0.5
 reference grid: a drawn slice stands for its own voxels (a label map's slice; a contour
 on its image slice, or on the grid built on the contours' smallest gap)."""
 BEYOND_PENALTY = 2.0
-"""Factor on the distance of a sample beyond the outer planes of a view of one or two
-planes, which is extruded there (chosen on the development shapes)."""
+"""Factor on the distance of a sample beyond the outer planes of a view that is
+extruded there (no complete view to correct; chosen on the development shapes)."""
+RESIDUAL_BAND = 6.0
+"""How far (pixels of the plane) a plane's residual reaches around where the plane and the
+complete view disagree on inside and outside (chosen on the development shapes)."""
 CROP_PAD = 3
 """Voxels kept around the drawn foreground."""
 _EPS_MM = 1e-3
@@ -78,7 +92,7 @@ class ViewsSurface:
     """
 
     mesh: object
-    occupancy: Volume
+    occupancy: Volume | None
     field: SdfField
 
 
@@ -235,27 +249,42 @@ def views_field(
     # sample positions along the main axis, in voxel index units (planes stay on samples)
     positions = lo[along] - 0.5 + (np.arange(size[along]) + 0.5) / upsample
     far = np.float32(np.linalg.norm(np.asarray(hi - lo) * spacing) + spacing.max())
+    # the complete view first: every other view corrects its field near their planes
+    keys = sorted(counts, key=lambda key: key != main)
+    base = None
     fields, distances = [], []
-    for axis, planes in views.items():
-        own, distance = _view(
-            planes,
-            axis,
-            lo,
-            hi,
-            spacing,
-            far,
-            interpolation,
-            join_drift,
-            reach[axis],
-            along,
-            positions,
-        )
-        fields.append(own)
-        distances.append(distance)
-    for view, extent in zip(oblique, oblique_reach, strict=True):
-        own, distance = _oblique_view(
-            view, annotation.affine, lo, size, along, positions, far, extent
-        )
+    for key in keys:
+        if key >= 0:
+            own, distance = _view(
+                views[key],
+                key,
+                lo,
+                hi,
+                spacing,
+                far,
+                interpolation,
+                join_drift,
+                reach[key],
+                along,
+                positions,
+                base,
+                upsample,
+            )
+        else:
+            own, distance = _oblique_view(
+                oblique[-1 - key],
+                annotation.affine,
+                lo,
+                size,
+                along,
+                positions,
+                far,
+                oblique_reach[-1 - key],
+                base,
+                upsample,
+            )
+        if key == main and complete(main):
+            base = own
         fields.append(own)
         distances.append(distance)
     # weights relative to the nearest view's distance: (D_min / D) ** p, never overflowing
@@ -289,13 +318,18 @@ def _view(
     reach: float | None,
     along: int,
     positions: NDArray[np.float64],
+    base: NDArray[np.float32] | None = None,
+    upsample: int = 1,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """One view's interpolated field and each sample's distance (mm) to its nearest plane.
+    """One view's field and each sample's distance (mm) to its nearest plane.
 
     Both on the crop in grid axis order, sampled at ``positions`` (voxel index
     units) along axis ``along`` and at the voxels along the others. ``reach``:
     how far (index units) a complete view's structure goes on beyond its outer
-    planes; None: an incomplete view, extruded beyond them.
+    planes; None: an incomplete view, extruded beyond them. Without ``base`` the
+    field is the view's interpolation across its planes; with ``base`` (the
+    complete view's field, on the same samples) it is ``base`` corrected by the
+    nearest plane's residual (:func:`_corrected`).
     """
     a, b = in_plane_axes(axis)
     pixel = spacing[[a, b]]
@@ -305,6 +339,17 @@ def _view(
         for n, (_, mask) in enumerate(planes)
     }
     samples = positions if axis == along else np.arange(lo[axis], hi[axis], dtype=np.float64)
+    penalised = reach is None and base is None
+    nearest = _nearest_mm(samples, indices, float(spacing[axis]), penalised=penalised)
+    distance = np.broadcast_to(
+        np.expand_dims(nearest, tuple(d for d in range(3) if d != axis)),
+        tuple(len(positions) if d == along else int(hi[d] - lo[d]) for d in range(3)),
+    )
+    if base is not None:
+        field = _corrected(
+            distances, indices, pixel, axis, lo, far, base, along, positions, upsample
+        )
+        return field, distance
     field = np.full((samples.size, hi[a] - lo[a], hi[b] - lo[b]), far, dtype=np.float32)
     used = np.arange(len(planes))
     fill_between(field, samples, indices, used, distances, interpolation)
@@ -316,7 +361,7 @@ def _view(
     for n, index in enumerate(indices):  # a plane's own samples hold its distances
         field[np.isclose(samples, index, atol=1e-9)] = np.minimum(distances[n], far)
     for side, n in ((0, 0), (1, len(planes) - 1)):
-        base = np.minimum(distances[n], far)
+        base_n = np.minimum(distances[n], far)
         if reach is not None:
             # at and beyond the outer plane the structure ends ``reach`` beyond it:
             # max(d, distance past the end), which keeps the plane's own section
@@ -324,24 +369,63 @@ def _view(
             gap = (np.abs(samples[beyond] - indices[n]) - reach).astype(np.float32) * np.float32(
                 spacing[axis]
             )
-            field[beyond] = np.maximum(base[None], gap[:, None, None])
+            field[beyond] = np.maximum(base_n[None], gap[:, None, None])
         else:
             beyond = samples < indices[n] if side == 0 else samples > indices[n]
-            field[beyond] = base[None]
-    field = np.minimum(np.nan_to_num(field, posinf=far), far)
-    nearest = np.min(np.abs(samples[:, None] - indices[None, :]), axis=1) * spacing[axis]
-    if reach is None:  # an incomplete view weighs less beyond its outer planes
-        outside = (samples < indices[0]) | (samples > indices[-1])
-        nearest[outside] *= BEYOND_PENALTY
+            field[beyond] = base_n[None]
+    field = np.minimum(np.nan_to_num(field, posinf=float(far)), far)
     out = np.moveaxis(field, 0, axis)
-    distance = np.broadcast_to(
-        np.expand_dims(nearest.astype(np.float32), tuple(d for d in range(3) if d != axis)),
-        out.shape,
-    )
     if axis != along:  # from the voxels along ``along`` to its samples, linearly
         out = _resample(out, along, lo[along], positions)
-        distance = np.broadcast_to(np.take(distance, [0], axis=along), out.shape)
     return out, distance
+
+
+def _nearest_mm(
+    samples: NDArray[np.float64], indices: NDArray[np.float64], step: float, *, penalised: bool
+) -> NDArray[np.float32]:
+    """Each sample's distance (mm) to a view's nearest plane; ``penalised`` (an incomplete
+    view extruded, not correcting a complete one): :data:`BEYOND_PENALTY` times beyond its
+    outer planes."""
+    nearest = np.min(np.abs(samples[:, None] - indices[None, :]), axis=1) * step
+    if penalised:  # an extruded view weighs less beyond its outer planes
+        outside = (samples < indices.min()) | (samples > indices.max())
+        nearest[outside] *= BEYOND_PENALTY
+    return nearest.astype(np.float32)
+
+
+def _corrected(
+    distances: dict[int, NDArray[np.float32]],
+    indices: NDArray[np.float64],
+    pixel: NDArray[np.float64],
+    axis: int,
+    lo: NDArray[np.int64],
+    far: np.float32,
+    base: NDArray[np.float32],
+    along: int,
+    positions: NDArray[np.float64],
+    upsample: int,
+) -> NDArray[np.float32]:
+    """An incomplete view's field as a correction of the complete view's ``base``.
+
+    On each of the view's planes the **residual** (:func:`_residual`) is what
+    turns ``base`` there into the drawn section; every sample takes ``base``
+    plus the residual of the view's nearest plane, carried along the view's
+    normal: the complete view's interpolation moved by what the plane showed it
+    got wrong.
+    """
+    # ``base`` at the voxel centres along ``along`` (an odd upsampling: a voxel's middle sample)
+    voxels = np.take(base, np.arange((upsample - 1) // 2, base.shape[along], upsample), axis=along)
+    residuals = []
+    for n, index in enumerate(indices):
+        layer = int(np.clip(round(index) - lo[axis], 0, voxels.shape[axis] - 1))
+        drawn = np.minimum(np.nan_to_num(distances[n], posinf=float(far)), far)
+        residuals.append(_residual(drawn, np.take(voxels, layer, axis=axis), pixel))
+    samples = positions if axis == along else np.arange(lo[axis], lo[axis] + base.shape[axis])
+    nearest = np.argmin(np.abs(samples[:, None] - indices[None, :]), axis=1)
+    carried = np.moveaxis(np.stack(residuals)[nearest], 0, axis)
+    if axis != along:
+        carried = _resample(carried, along, lo[along], positions)
+    return np.minimum(base + carried, far)
 
 
 def _resample(
@@ -376,13 +460,18 @@ def _oblique_view(
     positions: NDArray[np.float64],
     far: np.float32,
     reach_mm: float | None,
+    base: NDArray[np.float32] | None = None,
+    upsample: int = 1,
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """One oblique view's field and distances (mm) on the crop's samples, slab by slab.
 
     A sample between two planes of the view takes their in-plane signed
     distances at its projections onto them (bilinear), blended linearly along
     the normal; beyond the outer planes the view ends ``reach_mm`` past them
-    (a complete view) or is extruded (None).
+    (a complete view) or is extruded (None). With ``base`` (the complete view's
+    field on the same samples) a sample takes ``base`` plus the residual of the
+    view's nearest plane at its projection (:func:`_corrected`, the drawn
+    distance less ``base`` on the plane; none beyond the plane's pixels).
     """
     from scipy import ndimage
 
@@ -399,6 +488,12 @@ def _oblique_view(
     other = [d for d in range(3) if d != along]
     mesh_a, mesh_b = np.meshgrid(grids[other[0]], grids[other[1]], indexing="ij")
 
+    residuals = (
+        None
+        if base is None
+        else _oblique_residuals(view, images, base, affine, lo, along, upsample, far)
+    )
+
     def sample(n: int, world: NDArray[np.float64]) -> NDArray[np.float32]:
         if images[n] is None:
             return np.full(world.shape[0], far, dtype=np.float32)
@@ -408,6 +503,44 @@ def _oblique_view(
         )
         return np.minimum(values, far).astype(np.float32)
 
+    def interpolated(world: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float32]:
+        values = np.empty(u.size, dtype=np.float32)
+        slot = np.searchsorted(offsets, u)  # planes slot - 1 and slot bracket u
+        for j in np.unique(slot):
+            sel = np.flatnonzero(slot == j)
+            if j == 0 or j == len(offsets):
+                n = 0 if j == 0 else len(offsets) - 1
+                outer = sample(n, world[sel])
+                if reach_mm is None:
+                    values[sel] = outer
+                else:
+                    past = (np.abs(u[sel] - offsets[n]) - reach_mm).astype(np.float32)
+                    values[sel] = np.maximum(outer, past)
+                continue
+            t = ((u[sel] - offsets[j - 1]) / (offsets[j] - offsets[j - 1])).astype(np.float32)
+            values[sel] = (1 - t) * sample(j - 1, world[sel]) + t * sample(j, world[sel])
+        return values
+
+    def carried(
+        world: NDArray[np.float64],
+        u: NDArray[np.float64],
+        below: NDArray[np.float32],
+        residuals: list[NDArray[np.float32] | None],
+    ) -> NDArray[np.float32]:
+        values = below.astype(np.float32, copy=True)
+        closest = np.argmin(np.abs(u[:, None] - offsets[None, :]), axis=1)
+        for n in np.unique(closest):
+            sel = np.flatnonzero(closest == n)
+            image = residuals[n]
+            if image is None:  # the structure is absent from that plane
+                values[sel] = far
+                continue
+            pix = world[sel] @ to_pixels[n][:3, :3].T + to_pixels[n][:3, 3]
+            values[sel] += ndimage.map_coordinates(
+                image, [pix[:, 0], pix[:, 1]], order=1, mode="constant", cval=0.0
+            )
+        return values
+
     for k, position in enumerate(grids[along]):
         index = np.empty((mesh_a.size, 3))
         index[:, other[0]] = mesh_a.ravel()
@@ -415,30 +548,70 @@ def _oblique_view(
         index[:, along] = position
         world = index @ affine[:3, :3].T + affine[:3, 3]
         u = world @ view.normal
-        values = np.empty(u.size, dtype=np.float32)
-        slot = np.searchsorted(offsets, u)  # planes slot - 1 and slot bracket u
-        for j in np.unique(slot):
-            sel = np.flatnonzero(slot == j)
-            if j == 0 or j == len(offsets):
-                n = 0 if j == 0 else len(offsets) - 1
-                base = sample(n, world[sel])
-                if reach_mm is None:
-                    values[sel] = base
-                else:
-                    past = (np.abs(u[sel] - offsets[n]) - reach_mm).astype(np.float32)
-                    values[sel] = np.maximum(base, past)
-                continue
-            t = ((u[sel] - offsets[j - 1]) / (offsets[j] - offsets[j - 1])).astype(np.float32)
-            values[sel] = (1 - t) * sample(j - 1, world[sel]) + t * sample(j, world[sel])
-        nearest = np.min(np.abs(u[:, None] - offsets[None, :]), axis=1)
-        if reach_mm is None:
-            outside = (u < offsets[0]) | (u > offsets[-1])
-            nearest[outside] *= BEYOND_PENALTY
         block = [slice(None)] * 3
         block[along] = k
+        if base is None or residuals is None:
+            values = interpolated(world, u)
+        else:
+            values = carried(world, u, base[tuple(block)].ravel(), residuals)
+        nearest = _nearest_mm(u, offsets, 1.0, penalised=reach_mm is None and base is None)
         field[tuple(block)] = values.reshape(mesh_a.shape)
-        distance[tuple(block)] = nearest.reshape(mesh_a.shape).astype(np.float32)
-    return field, distance
+        distance[tuple(block)] = nearest.reshape(mesh_a.shape)
+    return np.minimum(field, far), distance
+
+
+def _residual(
+    drawn: NDArray[np.float32], below: NDArray[np.float32], pixel: NDArray[np.float64]
+) -> NDArray[np.float32]:
+    """What a plane's drawn signed distance says the complete view's ``below`` got wrong.
+
+    ``drawn − below`` where the two disagree on inside and outside, fading to
+    zero over :data:`RESIDUAL_BAND` pixels around there. ``below + residual``
+    has the drawn section's sign everywhere on the plane (where they agree it is
+    a blend of two values of one sign), and the two fields' different metrics
+    (in-plane distances of planes of two orientations) are not carried where
+    the plane only confirms the complete view: carried in full, the residual
+    extrudes the plane's section along its normal.
+    """
+    from scipy import ndimage
+
+    disagree = (drawn < 0) != (below < 0)
+    if not disagree.any():
+        return np.zeros(drawn.shape, dtype=np.float32)
+    apart = ndimage.distance_transform_edt(~disagree, sampling=pixel)
+    fade = np.clip(1.0 - apart / (RESIDUAL_BAND * float(np.min(pixel))), 0.0, 1.0)
+    return ((drawn - below) * fade).astype(np.float32)
+
+
+def _oblique_residuals(
+    view: _Oblique,
+    images: list[NDArray[np.float32] | None],
+    base: NDArray[np.float32],
+    affine: NDArray[np.float64],
+    lo: NDArray[np.int64],
+    along: int,
+    upsample: int,
+    far: np.float32,
+) -> list[NDArray[np.float32] | None]:
+    """Each oblique plane's residual image (:func:`_residual`) against ``base`` (on the
+    crop's samples) at its pixels; None for a plane where the structure is absent."""
+    from scipy import ndimage
+
+    to_voxel = np.linalg.inv(affine)
+    out: list[NDArray[np.float32] | None] = []
+    for (_, pose, _), image in zip(view.planes, images, strict=True):
+        if image is None:
+            out.append(None)
+            continue
+        rows, cols = np.indices(image.shape)
+        world = pose.to_world(np.column_stack([rows.ravel(), cols.ravel()]).astype(np.float64))
+        index = world @ to_voxel[:3, :3].T + to_voxel[:3, 3] - lo
+        index[:, along] = (index[:, along] + 0.5) * upsample - 0.5  # voxel → sample
+        here = ndimage.map_coordinates(base, index.T, order=1, mode="nearest")
+        drawn = np.minimum(image, far).astype(np.float32)
+        below = here.reshape(image.shape).astype(np.float32)
+        out.append(_residual(drawn, below, pose.pixel_spacing))
+    return out
 
 
 def views_upsample(annotation: Annotation) -> int:
