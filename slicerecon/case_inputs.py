@@ -38,6 +38,7 @@ from .io.dicom import dicom_info
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
+from .io.outputs import dicom_image_series
 from .io.rtstruct import read_rtstruct_annotation
 from .labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks
 from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
@@ -566,14 +567,20 @@ def combine_cases(
 ) -> CaseInput:
     """Several sparse inputs of one study as one annotation, in world mm.
 
-    The first input's voxel lattice is the reference grid (the label map is
-    written on it), extended to hold every input's drawn pixels; the others'
-    planes keep their poses in world mm (a plane that is not a slice of that
-    grid is sampled through its projection). Structures are matched by name
-    (case and spaces ignored), unnamed ones by value; a structure new to the
-    first input keeps its value, or takes the next free one. The structures
-    form a partition only when every input is a label map. A structure drawn
-    on one plane in two inputs is kept once when both drawings agree.
+    The **reference** input is, whatever the order, the one with the most
+    planes among those drawn on an image (a label map, or contours with their
+    image series; contours without one when no input has an image), the first
+    of them on a tie: its voxel lattice is the reference grid,
+    extended to hold every input's drawn pixels, and the label map is written
+    on its output grid, extended the same way (unless DICOM outputs refer to
+    its image series: then a warning says what lies beyond the series). The
+    others' planes keep their poses in world mm (a plane that is not a slice
+    of that grid is sampled through its projection). Structures are matched
+    by name (case and spaces ignored), unnamed ones by value; a structure new
+    to the reference keeps its value, or takes the next free one. The
+    structures form a partition only when every input is a label map. A
+    structure drawn on one plane in two inputs is kept once when both
+    drawings agree.
 
     Raises
     ------
@@ -590,6 +597,12 @@ def combine_cases(
                 f"{case.input_path} is a dense mask: several inputs combine sparse annotations "
                 "of one study; reconstruct a dense mask on its own"
             )
+    given = list(cases)
+    reference = max(
+        range(len(given)),
+        key=lambda n: (_on_an_image(given[n]), len(given[n].annotation.planes), -n),
+    )
+    cases = [given[reference], *(c for n, c in enumerate(given) if n != reference)]
     first = cases[0]
     structures: list[Structure] = list(first.annotation.structures)
     # each input's planes speak for that input's structures only
@@ -653,11 +666,59 @@ def combine_cases(
         exclusive,
     )
     annotation = merge_repeated_planes(annotation, origins, first.crop_lo + lo)
-    names = ", ".join(str(c.input_path) for c in cases)
+    names = ", ".join(str(c.input_path) for c in given)
     annotation = replace(
         annotation,
         source=f"{len(cases)} inputs ({names}), {len(structures)} structure(s): "
         f"{annotation.describe()}",
     )
     missing = tuple(s for c in cases for s in c.missing)
-    return replace(first, annotation=annotation, missing=missing, crop_lo=first.crop_lo + lo)
+    output = _output_holding(first, first.crop_lo + lo, size, memory_budget_gb)
+    return replace(first, annotation=annotation, missing=missing, **output)
+
+
+def _on_an_image(case: CaseInput) -> bool:
+    """Whether an input's grid is an image's (not one made for its contours)."""
+    kind = case.kind
+    return kind.kind in LABEL_MAP_KINDS or (
+        dicom_image_series(kind.kind, kind.path, kind.image_dir) is not None
+    )
+
+
+def _output_holding(
+    reference: CaseInput,
+    crop_lo: NDArray[np.int64],
+    size: tuple[int, int, int],
+    memory_budget_gb: float,
+) -> dict[str, Any]:
+    """The reference input's output grid extended to hold the combined grid (starting at
+    ``crop_lo`` on it, ``size`` voxels): ``output_affine``, ``output_shape``, ``crop_lo``.
+
+    DICOM outputs refer to the slices of an image series, whose grid cannot grow: a
+    warning then says that the label maps hold only the series' extent.
+    """
+    shape = np.asarray(reference.output_shape, dtype=np.int64)
+    start = np.minimum(crop_lo, 0)
+    stop = np.maximum(shape, crop_lo + np.asarray(size, dtype=np.int64))
+    kept = {
+        "output_affine": reference.output_affine,
+        "output_shape": reference.output_shape,
+        "crop_lo": crop_lo,
+    }
+    if not np.any(start < 0) and not np.any(stop > shape):
+        return kept
+    kind = reference.kind
+    if dicom_image_series(kind.kind, kind.path, kind.image_dir) is not None:
+        logger.warning(
+            "%s: the inputs' drawings reach beyond its image series: the label maps and DICOM "
+            "outputs hold the series' extent only, the meshes everything",
+            reference.input_path,
+        )
+        return kept
+    grown = tuple(int(v) for v in stop - start)
+    check_grid(
+        grown, what="the output grid of the inputs together", memory_budget_gb=memory_budget_gb
+    )
+    affine = reference.output_affine.copy()
+    affine[:3, 3] = affine[:3, :3] @ start + affine[:3, 3]
+    return {"output_affine": affine, "output_shape": grown, "crop_lo": crop_lo - start}

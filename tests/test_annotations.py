@@ -521,6 +521,90 @@ def test_inputs_combine_in_any_order_on_a_grid_holding_them_all(
     assert volumes[0] == pytest.approx(truth.sum() * np.prod(SPACING), rel=0.05)
 
 
+def test_the_label_map_holds_every_input_whatever_the_reference(tmp_path: Path) -> None:
+    """A grid-free contour file given first used to set the written grid: a label map's
+    structure outside its extent was left out of labels.nii.gz (exit 0). The reference is
+    the input with the most planes; the written grid grows to hold the others."""
+    truth = _ellipsoid()
+    labels = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(labels, AFFINE), tmp_path / "axial.nii.gz")
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    scale = np.sqrt(1 - (8 / 17) ** 2)  # the ellipsoid's section at x = 16 mm
+    ring = np.stack(
+        [np.full_like(t, 16.0), 22 + 13 * scale * np.cos(t), 30 + 22 * scale * np.sin(t)], 1
+    )
+    sagittal = {
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "planes": [{"normal": [1, 0, 0], "polygons": [ring.tolist()]}],
+    }
+    (tmp_path / "sagittal.json").write_text(json.dumps(sagittal))
+    far_away = {  # 8 axial rings of a second structure beyond the label map's image
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "structures": [{"value": 2, "name": "far"}],
+        "planes": [
+            {
+                "structure": 2,
+                "polygons": [
+                    (
+                        np.array(
+                            [
+                                [np.cos(t), np.sin(t), 0]
+                                for t in np.linspace(0, 2 * np.pi, 24, endpoint=False)
+                            ]
+                        )
+                        * [6, 6, 0]
+                        + [90, 20, z]
+                    ).tolist()
+                ],
+            }
+            for z in np.linspace(20, 34, 8)
+        ],
+    }
+    (tmp_path / "far.json").write_text(json.dumps(far_away))
+    written = []
+    for n, order in enumerate(
+        (("sagittal.json", "axial.nii.gz"), ("axial.nii.gz", "sagittal.json"))
+    ):
+        out = tmp_path / f"out{n}"
+        assert main(["run", *[str(tmp_path / n) for n in order], "-o", str(out), "-q"]) == 0
+        image = nib.load(out / "labels.nii.gz")
+        written.append(np.asanyarray(image.dataobj))
+        assert image.shape == truth.shape  # the label map's grid: it has the most planes
+    assert np.array_equal(written[0], written[1])
+    assert _iou(written[0] > 0, truth) > 0.9
+    out = tmp_path / "far"
+    assert (
+        main(
+            [
+                "run",
+                str(tmp_path / "far.json"),
+                str(tmp_path / "axial.nii.gz"),
+                "-o",
+                str(out),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    image = nib.load(out / "labels.nii.gz")
+    held = np.asanyarray(image.dataobj)
+    voxel = abs(np.linalg.det(image.affine[:3, :3]))
+    records = {
+        r["value"]: r for r in json.loads((out / "structures.json").read_text())["structures"]
+    }
+    for value in (1, 2):  # both structures, whole, in the written label map
+        assert np.count_nonzero(held == value) * voxel == pytest.approx(
+            records[value]["volume_mm3"], rel=0.05
+        )
+    assert np.count_nonzero(held == 1) * voxel == pytest.approx(
+        truth.sum() * np.prod(SPACING), rel=0.1
+    )
+
+
 def test_a_structure_of_another_input_is_not_cut_by_its_planes(tmp_path: Path) -> None:
     """A second input's planes speak for its own structures, not for the first input's."""
     truth = _ellipsoid()
