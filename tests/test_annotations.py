@@ -143,6 +143,28 @@ def test_extra_views_correct_the_axial_interpolation_without_extruding_their_sec
         assert gain >= 0.005
 
 
+def test_a_structure_ending_between_planes_gets_no_island_from_the_extra_views() -> None:
+    """A short structure ends 2 mm above an axial plane; the next plane, 6 mm higher,
+    holds only a taller neighbour. The coronal plane's correction met that empty plane's
+    stand-in distance and left a detached island above the short one (exit 0)."""
+    spacing = np.array([0.7, 0.7, 3.0])
+    affine = np.diag([*spacing, 1.0])
+    affine[:3, 3] = [-45, -45, -60]
+    x, y, z = (
+        a * s + o
+        for a, s, o in zip(np.indices((130, 130, 41)), spacing, affine[:3, 3], strict=True)
+    )
+    labels = np.zeros((130, 130, 41), np.uint8)
+    labels[((x + 20) / 15) ** 2 + (y / 15) ** 2 + (z / 35) ** 2 <= 1] = 1  # top at z = 35
+    labels[(np.abs(x) <= 5) & (y >= -40) & (y <= -25) & (z >= -10) & (z <= 40)] = 2
+    axial = [9, 11, 13, 16, 18, 20, 22, 24, 26, 29, 31, 33]  # z = 33 holds 1, z = 39 only 2
+    sparse = _keep(labels, {2: axial, 0: [48, 81], 1: [36, 64]})
+    result = reconstruct_structures((sparse, affine))
+    mesh = next(r.mesh for r in result.reconstructed if r.structure.value == 1)
+    assert len(mesh.split(only_watertight=False)) == 1
+    assert mesh.bounds[1, 2] <= 35 + 1.0
+
+
 def test_the_reading_can_be_stated_and_a_bad_one_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

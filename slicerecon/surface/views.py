@@ -565,8 +565,11 @@ def _residual(
 ) -> NDArray[np.float32]:
     """What a plane's drawn signed distance says the complete view's ``below`` got wrong.
 
-    ``drawn − below`` where the two disagree on inside and outside, fading to
-    zero over :data:`RESIDUAL_BAND` pixels around there. ``below + residual``
+    ``drawn − below`` where the two disagree on inside and outside; around there
+    the same difference of both clipped to the band, fading to zero over
+    :data:`RESIDUAL_BAND` pixels (clipped: an empty plane of the complete view
+    holds a large stand-in distance, which carried along the normal made
+    islands). ``below + residual``
     has the drawn section's sign everywhere on the plane (where they agree it is
     a blend of two values of one sign), and the two fields' different metrics
     (in-plane distances of planes of two orientations) are not carried where
@@ -578,9 +581,11 @@ def _residual(
     disagree = (drawn < 0) != (below < 0)
     if not disagree.any():
         return np.zeros(drawn.shape, dtype=np.float32)
+    band = RESIDUAL_BAND * float(np.min(pixel))
     apart = ndimage.distance_transform_edt(~disagree, sampling=pixel)
-    fade = np.clip(1.0 - apart / (RESIDUAL_BAND * float(np.min(pixel))), 0.0, 1.0)
-    return ((drawn - below) * fade).astype(np.float32)
+    fade = np.clip(1.0 - apart / band, 0.0, 1.0)
+    agreed = np.clip(drawn, -band, band) - np.clip(below, -band, band)
+    return np.where(disagree, drawn - below, agreed * fade).astype(np.float32)
 
 
 def _oblique_residuals(
