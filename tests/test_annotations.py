@@ -202,6 +202,18 @@ def test_info_and_run_say_how_a_label_map_was_read(
     )
 
 
+def test_info_counts_the_planes_a_structure_is_drawn_on(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Not every z slice the sagittal and coronal planes cross (23 for 6 + 2 + 2 before)."""
+    path = tmp_path / "views.nii.gz"
+    sparse = _keep(_ellipsoid(), {2: [5, 9, 13, 17, 21, 25], 0: [16, 32], 1: [15, 29]})
+    nib.save(nib.Nifti1Image(sparse.astype(np.uint8), AFFINE), path)
+    assert main(["info", str(path), "--json"]) == 0
+    (record,) = json.loads(capsys.readouterr().out)["structures"]
+    assert record["planes"] == {"drawn": {"z": 6, "y": 2, "x": 2}}
+
+
 def test_nested_rois_are_each_reconstructed_whole(tmp_path: Path) -> None:
     """BODY ⊃ Liver ⊃ GTV: an ROI inside another is never given away, in any output."""
     import dicom_factory as factory  # tests/io, on pytest's pythonpath

@@ -112,6 +112,8 @@ def _cell(value: Any) -> str:
     if isinstance(value, dict) and {"min", "max"} <= value.keys():
         lo, hi = value["min"], value["max"]
         return " ".join(f"{a:g}..{b:g}" for a, b in zip(lo, hi, strict=True))
+    if isinstance(value, dict) and isinstance(value.get("drawn"), dict):
+        return ", ".join(f"{n} along {axis}" for axis, n in value["drawn"].items())
     if isinstance(value, dict) and {"count", "first", "last"} <= value.keys():
         return f"{value['count']} ({value.get('axis', '')} {value['first']}..{value['last']})"
     if isinstance(value, dict) and {"first", "last"} <= value.keys():

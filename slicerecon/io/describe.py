@@ -80,12 +80,17 @@ def describe_label_map(
     -------
     list of dict
         ``value``, ``name``, ``voxels``, ``volume_mm3``, ``planes`` (the number
-        of planes along ``axis`` holding the label, and the first and last),
+        of planes along ``axis`` holding the label, and the first and last; for
+        a label map read as a sparse annotation, ``{"drawn": {axis name: the
+        number of annotated planes holding the label}}``),
         ``extent_mm`` (``min`` / ``max`` of the voxel centres, world mm).
     """
+    from ..plane_detection import detect_planes
+
     voxel = float(abs(np.linalg.det(affine[:3, :3])))
     data = np.asarray(values)
     present, counts = np.unique(data[data != 0], return_counts=True)
+    reading = detect_planes(data != 0) if present.size else None
     out: list[dict[str, Any]] = []
     for value, count in zip(present.tolist(), counts.tolist(), strict=True):
         mask = data == value
@@ -94,19 +99,28 @@ def describe_label_map(
         lo = np.array([s.start for s in box])
         hi = np.array([s.stop for s in box])
         other = tuple(a for a in range(3) if a != axis)
-        planes = np.flatnonzero(mask[box].any(axis=other)) + lo[axis]
+        planes: dict[str, Any]
+        if reading is None or reading.dense:
+            held = np.flatnonzero(mask[box].any(axis=other)) + lo[axis]
+            planes = {
+                "axis": AXIS_NAMES[axis],
+                "count": int(held.size),
+                "first": int(held[0]),
+                "last": int(held[-1]),
+            }
+        else:  # a sparse annotation: the planes it is drawn on, along each axis
+            planes = {"drawn": {}}
+            for along, indices in sorted(reading.planes.items(), key=lambda item: -item[0]):
+                drawn = [k for k in indices if np.take(mask, int(k), axis=along).any()]
+                if drawn:
+                    planes["drawn"][AXIS_NAMES[along]] = len(drawn)
         out.append(
             {
                 "value": int(value),
                 "name": (names or {}).get(int(value), ""),
                 "voxels": int(count),
                 "volume_mm3": round(count * voxel, 3),
-                "planes": {
-                    "axis": AXIS_NAMES[axis],
-                    "count": int(planes.size),
-                    "first": int(planes[0]),
-                    "last": int(planes[-1]),
-                },
+                "planes": planes,
                 "extent_mm": _box_mm(affine, lo, hi),
             }
         )
