@@ -576,9 +576,8 @@ def combine_cases(
     its image series: then a warning says what lies beyond the series). The
     others' planes keep their poses in world mm (a plane that is not a slice
     of that grid is sampled through its projection). Structures are matched
-    by name (case and spaces ignored), by value when one of the two is unnamed
-    (taking the name); a structure new to the reference keeps its value, or
-    takes the next free one. The
+    by name (case and spaces ignored), unnamed ones by value; a structure new
+    to the reference keeps its value, or takes the next free one. The
     structures form a partition only when every input is a label map. A
     structure drawn on one plane in two inputs is kept once when both
     drawings agree.
@@ -620,14 +619,10 @@ def combine_cases(
                     s
                     for s in structures
                     if (structure.name and s.name and _key(s) == _key(structure))
-                    or ((not structure.name or not s.name) and s.value == structure.value)
+                    or (not structure.name and not s.name and s.value == structure.value)
                 ),
                 None,
             )
-            if match is not None and structure.name and not match.name:
-                named = replace(match, name=structure.name)
-                structures[structures.index(match)] = named
-                match = named
             if match is None:
                 clash = next((s for s in structures if s.value == structure.value), None)
                 if clash is not None and clash.name and structure.name:
