@@ -613,6 +613,7 @@ def combine_cases(
     ]
     for case in cases[1:]:
         remap: dict[int, int] = {}
+        apart: list[str] = []
         for structure in case.annotation.structures:
             match = next(
                 (
@@ -631,10 +632,21 @@ def combine_cases(
                         f"and {structure.name!r} in {case.input_path}: name the structures "
                         "alike in both, or choose them with --label"
                     )
+                if clash is not None:  # one named, one not: kept apart, and said so
+                    apart.append(f"{structure.value} ({clash.name or structure.name!r})")
                 value = structure.value if clash is None else max(s.value for s in structures) + 1
                 match = replace(structure, value=value)
                 structures.append(match)
             remap[structure.value] = match.value
+        if apart:
+            logger.warning(
+                "%s and %s both hold structure(s) %s, named in one and not in the other: "
+                "they are kept as separate structures; name them alike in both (or in "
+                "neither) to combine them",
+                first.input_path,
+                case.input_path,
+                ", ".join(apart),
+            )
         # world mm of the first input's frame: LPS (DICOM, Slicer) and RAS (NIfTI) differ
         # by the sign of x and y
         flip = case.annotation.coordinates != first.annotation.coordinates

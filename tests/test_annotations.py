@@ -639,6 +639,38 @@ def test_the_label_map_holds_every_input_whatever_the_reference(tmp_path: Path) 
     )
 
 
+def test_an_unnamed_label_and_a_named_structure_of_one_value_are_kept_apart_aloud(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A NIfTI's label 1 (no names) and a contour file's structure 1 "liver": two
+    structures (ROI numbers and label values need not mean the same), and one line says
+    so with what to do."""
+    truth = _ellipsoid()
+    labels = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(labels, AFFINE), tmp_path / "axial.nii.gz")
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    scale = np.sqrt(1 - (8 / 17) ** 2)
+    ring = np.stack(
+        [np.full_like(t, 16.0), 22 + 13 * scale * np.cos(t), 30 + 22 * scale * np.sin(t)], 1
+    )
+    doc = {
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "structures": [{"value": 1, "name": "liver"}],
+        "planes": [{"structure": 1, "normal": [1, 0, 0], "polygons": [ring.tolist()]}],
+    }
+    (tmp_path / "sagittal.json").write_text(json.dumps(doc))
+    out = tmp_path / "out"
+    paths = [str(tmp_path / "axial.nii.gz"), str(tmp_path / "sagittal.json")]
+    assert main(["run", *paths, "-o", str(out), "-q"]) == 0
+    records = json.loads((out / "structures.json").read_text())["structures"]
+    assert sorted(r["name"] for r in records) == ["", "liver"]
+    assert main(["run", *paths, "-o", str(tmp_path / "again")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "named in one" in line]
+    assert len(said) == 1 and "1 ('liver')" in said[0] and "name them alike" in said[0]
+
+
 def test_a_structure_of_another_input_is_not_cut_by_its_planes(tmp_path: Path) -> None:
     """A second input's planes speak for its own structures, not for the first input's."""
     truth = _ellipsoid()
