@@ -671,6 +671,34 @@ def test_an_unnamed_label_and_a_named_structure_of_one_value_are_kept_apart_alou
     assert len(said) == 1 and "1 ('liver')" in said[0] and "name them alike" in said[0]
 
 
+def test_drawings_beyond_the_series_of_dicom_outputs_are_said(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The reference is an RTSTRUCT on its CT series (DICOM outputs refer to its slices, so
+    its grid cannot grow); a NIfTI draws a structure above the series: one line says the
+    label maps hold the series' extent only."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    affine = factory.affine_from_geometry(
+        [1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [-31.5, -31.5, 0.0]
+    )
+    factory.write_series(tmp_path / "ct", np.zeros((64, 64, 31), np.uint16), affine, modality="CT")
+    rings = [factory.contour_item(factory.circle(10.0, (0, 0), z)) for z in range(10, 30, 2)]
+    factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm", {(1, "Organ"): rings}, on_series=tmp_path / "ct"
+    )
+    above = np.zeros((40, 40, 20), np.uint8)  # RAS, z 64..102 mm: above the series' 0..60
+    above[10:30, 10:30, [4, 12]] = 1
+    nifti_affine = np.diag([1.0, 1.0, 2.0, 1.0])
+    nifti_affine[:3, 3] = [-20, -20, 64]
+    nib.save(nib.Nifti1Image(above, nifti_affine), tmp_path / "above.nii.gz")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), str(tmp_path / "above.nii.gz"), "-o", str(out)]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "image series" in line]
+    assert len(said) == 1 and "hold the series' extent only" in said[0]
+    assert (out / "seg.dcm").is_file()
+
+
 def test_a_structure_of_another_input_is_not_cut_by_its_planes(tmp_path: Path) -> None:
     """A second input's planes speak for its own structures, not for the first input's."""
     truth = _ellipsoid()
