@@ -40,6 +40,25 @@ def _keep(mask: np.ndarray, planes: dict[int, list[int]]) -> np.ndarray:
     return out
 
 
+def _axial_and_sagittal_files(tmp_path: Path, structure: dict | None = None) -> None:
+    """``axial.nii.gz``: the ellipsoid on 6 axial slices; ``sagittal.json``: a version 2
+    contour file with its section at x = 16 mm (of ``structure``, when given)."""
+    labels = _keep(_ellipsoid(), {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(labels, AFFINE), tmp_path / "axial.nii.gz")
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    scale = np.sqrt(1 - (8 / 17) ** 2)  # the ellipsoid's section at x = 16 mm
+    ring = np.stack(
+        [np.full_like(t, 16.0), 22 + 13 * scale * np.cos(t), 30 + 22 * scale * np.sin(t)], 1
+    )
+    plane: dict = {"normal": [1, 0, 0], "polygons": [ring.tolist()]}
+    doc: dict = {"format": "slicerecon-contours", "version": 2, "units": "mm"}
+    if structure is not None:
+        doc["structures"] = [structure]
+        plane["structure"] = structure["value"]
+    doc["planes"] = [plane]
+    (tmp_path / "sagittal.json").write_text(json.dumps(doc))
+
+
 def _plain_sdf_iou(truth: np.ndarray, planes: list[int]) -> float:
     """Linear shape-based interpolation between the axial planes (independent of slicerecon)."""
     from scipy import ndimage
@@ -560,20 +579,7 @@ def test_the_label_map_holds_every_input_whatever_the_reference(tmp_path: Path) 
     structure outside its extent was left out of labels.nii.gz (exit 0). The reference is
     the input with the most planes; the written grid grows to hold the others."""
     truth = _ellipsoid()
-    labels = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
-    nib.save(nib.Nifti1Image(labels, AFFINE), tmp_path / "axial.nii.gz")
-    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
-    scale = np.sqrt(1 - (8 / 17) ** 2)  # the ellipsoid's section at x = 16 mm
-    ring = np.stack(
-        [np.full_like(t, 16.0), 22 + 13 * scale * np.cos(t), 30 + 22 * scale * np.sin(t)], 1
-    )
-    sagittal = {
-        "format": "slicerecon-contours",
-        "version": 2,
-        "units": "mm",
-        "planes": [{"normal": [1, 0, 0], "polygons": [ring.tolist()]}],
-    }
-    (tmp_path / "sagittal.json").write_text(json.dumps(sagittal))
+    _axial_and_sagittal_files(tmp_path)
     far_away = {  # 8 axial rings of a second structure beyond the label map's image
         "format": "slicerecon-contours",
         "version": 2,
@@ -611,19 +617,8 @@ def test_the_label_map_holds_every_input_whatever_the_reference(tmp_path: Path) 
     assert np.array_equal(written[0], written[1])
     assert _iou(written[0] > 0, truth) > 0.9
     out = tmp_path / "far"
-    assert (
-        main(
-            [
-                "run",
-                str(tmp_path / "far.json"),
-                str(tmp_path / "axial.nii.gz"),
-                "-o",
-                str(out),
-                "-q",
-            ]
-        )
-        == 0
-    )
+    paths = [str(tmp_path / "far.json"), str(tmp_path / "axial.nii.gz")]
+    assert main(["run", *paths, "-o", str(out), "-q"]) == 0
     image = nib.load(out / "labels.nii.gz")
     held = np.asanyarray(image.dataobj)
     voxel = abs(np.linalg.det(image.affine[:3, :3]))
@@ -645,22 +640,7 @@ def test_an_unnamed_label_and_a_named_structure_of_one_value_are_kept_apart_alou
     """A NIfTI's label 1 (no names) and a contour file's structure 1 "liver": two
     structures (ROI numbers and label values need not mean the same), and one line says
     so with what to do."""
-    truth = _ellipsoid()
-    labels = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
-    nib.save(nib.Nifti1Image(labels, AFFINE), tmp_path / "axial.nii.gz")
-    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
-    scale = np.sqrt(1 - (8 / 17) ** 2)
-    ring = np.stack(
-        [np.full_like(t, 16.0), 22 + 13 * scale * np.cos(t), 30 + 22 * scale * np.sin(t)], 1
-    )
-    doc = {
-        "format": "slicerecon-contours",
-        "version": 2,
-        "units": "mm",
-        "structures": [{"value": 1, "name": "liver"}],
-        "planes": [{"structure": 1, "normal": [1, 0, 0], "polygons": [ring.tolist()]}],
-    }
-    (tmp_path / "sagittal.json").write_text(json.dumps(doc))
+    _axial_and_sagittal_files(tmp_path, {"value": 1, "name": "liver"})
     out = tmp_path / "out"
     paths = [str(tmp_path / "axial.nii.gz"), str(tmp_path / "sagittal.json")]
     assert main(["run", *paths, "-o", str(out), "-q"]) == 0
