@@ -25,6 +25,7 @@ from .sections import AXIS_NAMES, in_plane_axes
 __all__ = [
     "COMBINED_PAD",
     "MAX_VIEW_DISAGREEMENT",
+    "check_drawings_meet",
     "covering_grid",
     "merge_repeated_planes",
     "planes_of_each_structure",
@@ -123,26 +124,96 @@ def _between(pose: PlanePose, own: Sequence[PlanePose]) -> bool:
 
 
 def covering_grid(
-    planes: Sequence[AnnotatedPlane], affine: NDArray[np.float64], shape: Sequence[int]
+    planes: Sequence[AnnotatedPlane],
+    affine: NDArray[np.float64],
+    shape: Sequence[int],
+    *,
+    pad: int = COMBINED_PAD,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """The index range ``[lo, hi)`` of the lattice of ``affine`` that holds ``shape`` and every
-    plane's drawn pixels with :data:`COMBINED_PAD` voxels around them."""
+    plane's drawn pixels with ``pad`` voxels around them."""
     inverse = np.linalg.inv(affine)
     lo = np.zeros(3, dtype=np.int64)
     hi = np.asarray(shape, dtype=np.int64).copy()
     for plane in planes:
-        if not plane.masks:
+        box = _drawn_corners(plane)
+        if box is None:
             continue
-        drawn = np.logical_or.reduce(list(plane.masks.values()))
-        rows = np.flatnonzero(drawn.any(axis=1))
-        cols = np.flatnonzero(drawn.any(axis=0))
-        corners = [
-            [r, c] for r in (rows[0] - 0.5, rows[-1] + 0.5) for c in (cols[0] - 0.5, cols[-1] + 0.5)
-        ]
-        index = plane.pose.to_world(corners) @ inverse[:3, :3].T + inverse[:3, 3]
-        lo = np.minimum(lo, np.floor(index.min(axis=0)).astype(np.int64) - COMBINED_PAD)
-        hi = np.maximum(hi, np.ceil(index.max(axis=0)).astype(np.int64) + 1 + COMBINED_PAD)
+        index = box @ inverse[:3, :3].T + inverse[:3, 3]
+        lo = np.minimum(lo, np.floor(index.min(axis=0)).astype(np.int64) - pad)
+        hi = np.maximum(hi, np.ceil(index.max(axis=0)).astype(np.int64) + 1 + pad)
     return lo, hi
+
+
+def _drawn_corners(plane: AnnotatedPlane, value: int | None = None) -> NDArray[np.float64] | None:
+    """World mm of the corners of the box of a plane's drawn pixels (of structure ``value``,
+    or of all), pixel edges included; None when nothing is drawn."""
+    masks = list(plane.masks.values()) if value is None else [plane.masks.get(value)]
+    masks = [m for m in masks if m is not None and m.any()]
+    if not masks:
+        return None
+    drawn = np.logical_or.reduce(masks)
+    rows = np.flatnonzero(drawn.any(axis=1))
+    cols = np.flatnonzero(drawn.any(axis=0))
+    corners = [
+        [r, c] for r in (rows[0] - 0.5, rows[-1] + 0.5) for c in (cols[0] - 0.5, cols[-1] + 0.5)
+    ]
+    return plane.pose.to_world(np.asarray(corners, dtype=np.float64))
+
+
+def check_drawings_meet(
+    planes: Sequence[AnnotatedPlane], origins: Sequence[str], labels: dict[int, str]
+) -> None:
+    """Refuse a structure whose drawings in two inputs lie far apart; warn when they do not meet.
+
+    For each structure drawn by several inputs, the world-mm boxes of each input's
+    drawing: two views of one structure overlap. Boxes further apart than the larger
+    one's diagonal cannot be one study in one frame (refused); a smaller gap (more than
+    one pixel) is warned about.
+
+    Raises
+    ------
+    OptionError
+        A structure's drawings in two inputs lie further apart than their size.
+    """
+    boxes: dict[int, dict[str, tuple[NDArray[np.float64], NDArray[np.float64], float]]] = {}
+    for plane, origin in zip(planes, origins, strict=True):
+        pixel = float(np.max(plane.pose.pixel_spacing))
+        for value in plane.masks:
+            corners = _drawn_corners(plane, value)
+            if corners is None:
+                continue
+            lo, hi, step = boxes.setdefault(value, {}).get(
+                origin, (np.full(3, np.inf), np.full(3, -np.inf), 0.0)
+            )
+            boxes[value][origin] = (
+                np.minimum(lo, corners.min(axis=0)),
+                np.maximum(hi, corners.max(axis=0)),
+                max(step, pixel),
+            )
+    for value, by_input in boxes.items():
+        names = sorted(by_input)
+        for n, a in enumerate(names):
+            for b in names[n + 1 :]:
+                (alo, ahi, astep), (blo, bhi, bstep) = by_input[a], by_input[b]
+                gap = float(np.linalg.norm(np.maximum(0.0, np.maximum(alo - bhi, blo - ahi))))
+                size = max(float(np.linalg.norm(ahi - alo)), float(np.linalg.norm(bhi - blo)))
+                if gap > size:
+                    raise OptionError(
+                        f"structure {labels.get(value, value)} is drawn {gap:.0f} mm apart in "
+                        f"{a} and {b}, further than its size ({size:.0f} mm): they are not "
+                        "views of one structure in one frame; check that the files belong "
+                        "to one study, or give them another structure name"
+                    )
+                if gap > max(astep, bstep):
+                    logger.warning(
+                        "structure %s: its drawings in %s and %s do not meet (%.1f mm apart); "
+                        "check that the files belong to one study and frame",
+                        labels.get(value, value),
+                        a,
+                        b,
+                        gap,
+                    )
 
 
 def merge_repeated_planes(

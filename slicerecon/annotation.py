@@ -434,30 +434,30 @@ class Annotation:
         return "; ".join(parts) if parts else "no plane"
 
 
-def window(mask: NDArray[np.bool_], lo: ArrayLike, hi: ArrayLike) -> NDArray[np.bool_]:
-    """``mask[lo[0]:hi[0], lo[1]:hi[1]]``, background where the window leaves the mask.
+def window(mask: NDArray[Any], lo: ArrayLike, hi: ArrayLike) -> NDArray[Any]:
+    """``mask[lo[0]:hi[0], lo[1]:hi[1], ...]``, zero where the window leaves the array.
 
     Parameters
     ----------
-    mask : ndarray of shape (M, N), bool
-    lo, hi : array-like of 2 int
-        The window's first and one-past-last pixel along rows and columns (may
-        lie outside the mask).
+    mask : ndarray of shape (M, N) or (M, N, K), any dtype
+    lo, hi : array-like of ``mask.ndim`` int
+        The window's first and one-past-last index along each axis (may lie
+        outside the array).
 
     Returns
     -------
-    ndarray of shape (hi[0] - lo[0], hi[1] - lo[1]), bool
+    ndarray of shape ``hi - lo``, ``mask``'s dtype
     """
     lo = np.asarray(lo, dtype=np.int64)
     hi = np.asarray(hi, dtype=np.int64)
-    out = np.zeros((int(hi[0] - lo[0]), int(hi[1] - lo[1])), dtype=bool)
+    out = np.zeros(tuple(int(v) for v in hi - lo), dtype=mask.dtype)
     src_lo = np.maximum(lo, 0)
     src_hi = np.minimum(hi, mask.shape)
     if np.all(src_hi > src_lo):
         dst = src_lo - lo
-        out[dst[0] : dst[0] + src_hi[0] - src_lo[0], dst[1] : dst[1] + src_hi[1] - src_lo[1]] = (
-            mask[src_lo[0] : src_hi[0], src_lo[1] : src_hi[1]]
-        )
+        out[tuple(slice(d, d + h - s) for d, s, h in zip(dst, src_lo, src_hi, strict=True))] = mask[
+            tuple(slice(s, h) for s, h in zip(src_lo, src_hi, strict=True))
+        ]
     return out
 
 

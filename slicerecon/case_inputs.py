@@ -22,7 +22,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .annotated_planes import covering_grid, merge_repeated_planes, planes_of_each_structure
+from .annotated_planes import (
+    check_drawings_meet,
+    covering_grid,
+    merge_repeated_planes,
+    planes_of_each_structure,
+)
 from .annotation import (
     AnnotatedPlane,
     Annotation,
@@ -567,27 +572,31 @@ def combine_cases(
 ) -> CaseInput:
     """Several sparse inputs of one study as one annotation, in world mm.
 
-    The **reference** input is, whatever the order, the one with the most
-    planes among those drawn on an image (a label map, or contours with their
-    image series; contours without one when no input has an image), the first
-    of them on a tie: its voxel lattice is the reference grid,
-    extended to hold every input's drawn pixels, and the label map is written
-    on its output grid, extended the same way (unless DICOM outputs refer to
-    its image series: then a warning says what lies beyond the series). The
-    others' planes keep their poses in world mm (a plane that is not a slice
-    of that grid is sampled through its projection). Structures are matched
-    by name (case and spaces ignored), unnamed ones by value; a structure new
-    to the reference keeps its value, or takes the next free one. The
-    structures form a partition only when every input is a label map. A
-    structure drawn on one plane in two inputs is kept once when both
-    drawings agree.
+    The **reference** input is the one with the most planes among those drawn
+    on an image (a label map, or contours with their image series; contours
+    without one when no input has an image); on a tie, the one with the
+    smallest voxels, then by file name. The others are taken by file name, so
+    the result is the same in any order. The reference's voxel lattice is the
+    reference grid, extended to hold every input's drawn pixels, and the label
+    map is written on its output grid, extended only where another input's
+    drawing lies beyond it (unless DICOM outputs refer to its image series: then
+    a warning says what lies beyond the series). The others' planes keep their
+    poses in world mm (a plane that is not a slice of that grid is sampled
+    through its projection). Structures are matched by name (case and spaces
+    ignored), unnamed ones by value; one named in one input and unnamed in
+    another is kept apart, with a warning; a structure new to the reference
+    keeps its value, or takes the next free one. The structures form a
+    partition only when every input is a label map. A structure drawn on one
+    plane in two inputs is kept once when both drawings agree; drawn by two
+    inputs in places that do not meet, it is warned about, or refused when they
+    lie further apart than its size (:func:`check_drawings_meet`).
 
     Raises
     ------
     OptionError
         A dense input among several (a dense mask is its own case), one value
-        named differently in two inputs, or one structure drawn differently on
-        one plane in two inputs.
+        named differently in two inputs, one structure drawn differently on one
+        plane in two inputs, or drawn far apart by two inputs.
     MemoryBudgetError
         The grid holding every input exceeds ``memory_budget_gb``.
     """
@@ -597,14 +606,13 @@ def combine_cases(
                 f"{case.input_path} is a dense mask: several inputs combine sparse annotations "
                 "of one study; reconstruct a dense mask on its own"
             )
+    # the reference first, the others by file name: the same result in any order
     given = list(cases)
-    reference = max(
-        range(len(given)),
-        key=lambda n: (_on_an_image(given[n]), len(given[n].annotation.planes), -n),
-    )
-    cases = [given[reference], *(c for n, c in enumerate(given) if n != reference)]
+    cases = sorted(given, key=_reference_rank)
+    cases = [cases[0], *sorted(cases[1:], key=lambda c: str(c.input_path))]
     first = cases[0]
     structures: list[Structure] = list(first.annotation.structures)
+    origin = {s.value: first.input_path for s in structures}
     # each input's planes speak for that input's structures only
     own_first = frozenset(first.annotation.values)
     planes: list[AnnotatedPlane] = [
@@ -612,40 +620,47 @@ def combine_cases(
         for p in first.annotation.planes
     ]
     for case in cases[1:]:
+        earlier = list(structures)
+        taken = {s.value for s in earlier} | set(case.annotation.values)
         remap: dict[int, int] = {}
-        apart: list[str] = []
+        apart: dict[Path, list[str]] = {}
         for structure in case.annotation.structures:
             match = next(
                 (
                     s
-                    for s in structures
+                    for s in earlier
                     if (structure.name and s.name and _key(s) == _key(structure))
                     or (not structure.name and not s.name and s.value == structure.value)
                 ),
                 None,
             )
             if match is None:
-                clash = next((s for s in structures if s.value == structure.value), None)
+                clash = next((s for s in earlier if s.value == structure.value), None)
                 if clash is not None and clash.name and structure.name:
                     raise OptionError(
-                        f"structure {structure.value} is {clash.name!r} in {first.input_path} "
-                        f"and {structure.name!r} in {case.input_path}: name the structures "
-                        "alike in both, or choose them with --label"
+                        f"structure {structure.value} is {clash.name!r} in "
+                        f"{origin[clash.value]} and {structure.name!r} in {case.input_path}: "
+                        "give it one name in both files, or the two structures different values"
                     )
+                value = structure.value
                 if clash is not None:  # one named, one not: kept apart, and said so
-                    apart.append(f"{structure.value} ({clash.name or structure.name!r})")
-                value = structure.value if clash is None else max(s.value for s in structures) + 1
+                    apart.setdefault(origin[clash.value], []).append(
+                        f"{structure.value} ({clash.name or structure.name!r})"
+                    )
+                    value = max(taken) + 1
+                    taken.add(value)
                 match = replace(structure, value=value)
                 structures.append(match)
+                origin[value] = case.input_path
             remap[structure.value] = match.value
-        if apart:
+        for other, listed in apart.items():
             logger.warning(
                 "%s and %s both hold structure(s) %s, named in one and not in the other: "
                 "they are kept as separate structures; name them alike in both (or in "
                 "neither) to combine them",
-                first.input_path,
+                other,
                 case.input_path,
-                ", ".join(apart),
+                ", ".join(listed),
             )
         # world mm of the first input's frame: LPS (DICOM, Slicer) and RAS (NIfTI) differ
         # by the sign of x and y
@@ -663,6 +678,7 @@ def combine_cases(
             planes.append(AnnotatedPlane(pose, masks, own))
     exclusive = all(c.annotation.exclusive for c in cases)
     origins = [str(c.input_path) for c in cases for _ in c.annotation.planes]
+    check_drawings_meet(planes, origins, {s.value: s.label for s in structures})
     affine = first.annotation.affine
     lo, hi = covering_grid(planes, affine, first.annotation.grid_shape)
     size = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), int(hi[2] - lo[2]))
@@ -685,8 +701,17 @@ def combine_cases(
         f"{annotation.describe()}",
     )
     missing = tuple(s for c in cases for s in c.missing)
-    output = _output_holding(first, first.crop_lo + lo, size, memory_budget_gb)
+    # the written grid grows only where a drawing lies beyond it, not by the padding
+    drawn_lo, drawn_hi = covering_grid(planes, affine, first.annotation.grid_shape, pad=0)
+    output = _output_holding(first, first.crop_lo + drawn_lo, drawn_hi - drawn_lo, memory_budget_gb)
+    output["crop_lo"] = output["crop_lo"] + (lo - drawn_lo)
     return replace(first, annotation=annotation, missing=missing, **output)
+
+
+def _reference_rank(case: CaseInput) -> tuple[bool, int, float, str]:
+    """Sorts the reference first: drawn on an image, most planes, smallest voxels, name."""
+    voxel = float(abs(np.linalg.det(case.annotation.affine[:3, :3])))
+    return (not _on_an_image(case), -len(case.annotation.planes), voxel, str(case.input_path))
 
 
 def _on_an_image(case: CaseInput) -> bool:
@@ -700,7 +725,7 @@ def _on_an_image(case: CaseInput) -> bool:
 def _output_holding(
     reference: CaseInput,
     crop_lo: NDArray[np.int64],
-    size: tuple[int, int, int],
+    size: Sequence[int] | NDArray[np.int64],
     memory_budget_gb: float,
 ) -> dict[str, Any]:
     """The reference input's output grid extended to hold the combined grid (starting at

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .annotation import AnnotatedPlane, Annotation
+from .annotation import AnnotatedPlane, Annotation, window
 from .errors import OptionError
 from .io.atomic import write_json
 from .io.mesh import mesh_file_closed, write_mesh
@@ -307,7 +307,7 @@ def _planes_in_words(annotation: Annotation) -> str:
     n = len(annotation.planes)
     axis = annotation.grid_axis()
     if axis is not None:
-        return f"{n} planes along {AXIS_NAMES[axis]}"
+        return f"{n} plane{'s' * (n != 1)} along {AXIS_NAMES[axis]}"
     return f"{n} planes in {len(annotation.orientations())} orientations"
 
 
@@ -317,10 +317,6 @@ def _write_preview(
     """The preview (:mod:`slicerecon.preview`): the result in 3-D beside the annotated planes."""
     sections = result.sections
     annotation = case.annotation
-    region = tuple(
-        slice(int(a), int(a) + n)
-        for a, n in zip(result.crop_lo, annotation.grid_shape, strict=True)
-    )
     planes: list[AnnotatedPlane] = []
     if sections is not None:
         axis = sections.axis
@@ -358,7 +354,10 @@ def _write_preview(
         path,
         structures=structures,
         sections=sections,
-        result=result.labels[region],
+        # the annotation's grid on the output grid (it may reach past the written grid)
+        result=window(
+            result.labels, result.crop_lo, np.asarray(result.crop_lo) + annotation.grid_shape
+        ),
         title=title,
         frame=result.coordinates,
         boxes=one.plan.boxes if one is not None else (),

@@ -110,7 +110,7 @@ class PlaneReading:
         parts = []
         for axis in self.axes:
             planes = self.planes[axis]
-            text = f"{planes.size} planes along {AXIS_NAMES[axis]}"
+            text = f"{planes.size} plane{'s' * (planes.size != 1)} along {AXIS_NAMES[axis]}"
             if planes.size > 1:
                 gaps = np.diff(planes)
                 step = float(np.median(gaps))

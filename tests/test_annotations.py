@@ -679,6 +679,73 @@ def test_drawings_beyond_the_series_of_dicom_outputs_are_said(
     assert (out / "seg.dcm").is_file()
 
 
+def test_inputs_of_as_many_planes_give_one_result_in_any_order(tmp_path: Path) -> None:
+    """A tie on plane counts was broken by the order given (another grid, another result);
+    and the written grid grew by the padding around drawings near the image's border."""
+    truth = _ellipsoid()
+    nib.save(
+        nib.Nifti1Image(_keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8), AFFINE),
+        tmp_path / "a_axial.nii.gz",
+    )
+    fine = np.zeros((48, 44, 60), np.uint8)  # the same shape on 1 mm voxels, 6 sagittal planes
+    x, y, z = np.indices(fine.shape)
+    inside = ((x - 24) / 17) ** 2 + ((y - 22) / 13) ** 2 + ((z - 30) / 22) ** 2 < 1
+    fine[[14, 18, 22, 26, 30, 34]] = inside[[14, 18, 22, 26, 30, 34]]
+    nib.save(nib.Nifti1Image(fine, np.eye(4)), tmp_path / "b_sagittal.nii.gz")
+    written = []
+    for n, order in enumerate((("a_axial", "b_sagittal"), ("b_sagittal", "a_axial"))):
+        out = tmp_path / f"out{n}"
+        paths = [str(tmp_path / f"{name}.nii.gz") for name in order]
+        assert main(["run", *paths, "-o", str(out), "-q"]) == 0
+        image = nib.load(out / "labels.nii.gz")
+        written.append((image.shape, np.asanyarray(image.dataobj)))
+    assert written[0][0] == written[1][0] == fine.shape  # the smaller voxels, not grown
+    assert np.array_equal(written[0][1], written[1][1])
+
+
+def test_a_moved_structure_does_not_take_the_value_of_the_next_one(tmp_path: Path) -> None:
+    """A named 'liver' 1 and a file's unnamed 1 and 2: the unnamed 1, kept apart, moved to
+    the value 2 and merged silently with the file's own unnamed 2."""
+    from slicerecon.io.nrrd_writer import write_seg_nrrd
+    from slicerecon.labels import Structure
+
+    truth = _ellipsoid()
+    axial = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    write_seg_nrrd(axial, AFFINE, [Structure(1, "liver")], tmp_path / "liver.seg.nrrd")
+    two = np.zeros_like(axial)
+    two[[16, 32]] = truth[[16, 32]]
+    two[[16, 32], 2:6, 2:8] = 2  # a second, small structure beside it
+    nib.save(nib.Nifti1Image(two, AFFINE), tmp_path / "unnamed.nii.gz")
+    out = tmp_path / "out"
+    paths = [str(tmp_path / "liver.seg.nrrd"), str(tmp_path / "unnamed.nii.gz")]
+    assert main(["run", *paths, "-o", str(out), "-q"]) == 0
+    records = json.loads((out / "structures.json").read_text())["structures"]
+    assert len(records) == 3 and all(r["status"] == "reconstructed" for r in records)
+
+
+def test_drawings_of_one_structure_far_apart_are_refused_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One structure drawn by two files 20 m apart (another study or frame): accepted
+    before, with a grid of several GiB."""
+    truth = _ellipsoid()
+    nib.save(
+        nib.Nifti1Image(_keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8), AFFINE),
+        tmp_path / "axial.nii.gz",
+    )
+    far = AFFINE.copy()
+    far[0, 3] = 20000.0
+    nib.save(
+        nib.Nifti1Image(_keep(truth, {0: [16, 32]}).astype(np.uint8), far),
+        tmp_path / "sagittal.nii.gz",
+    )
+    paths = [str(tmp_path / "axial.nii.gz"), str(tmp_path / "sagittal.nii.gz")]
+    assert main(["run", *paths, "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "apart" in err[0] and "one study" in err[0]
+    assert not (tmp_path / "out" / "labels.nii.gz").exists()
+
+
 def test_a_structure_of_another_input_is_not_cut_by_its_planes(tmp_path: Path) -> None:
     """A second input's planes speak for its own structures, not for the first input's."""
     truth = _ellipsoid()
