@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from .annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose
 from .errors import OptionError
-from .sections import AXIS_NAMES, in_plane_axes
+from .sections import AXIS_NAMES
 
 __all__ = [
     "COMBINED_PAD",
@@ -284,11 +284,12 @@ def merge_repeated_planes(
 
 
 def views_disagreement(annotation: Annotation, value: int) -> tuple[int, int]:
-    """Where planes of two grid axes meet, how often their drawings of a structure differ.
+    """Where planes of two orientations meet, how often their drawings of a structure differ.
 
-    A plane along one grid axis and a plane along another meet on a line of
-    voxels; both say there whether the structure is present. Planes off the
-    grid's voxels, or between its slices, are left out.
+    Two planes that are not parallel meet on a line; both say there whether the
+    structure is present. The line is sampled at the finer plane's pixel size
+    where it crosses both planes' pixels, and each plane is read at its nearest
+    pixel: planes of any grid, spacing or orientation are compared.
 
     Parameters
     ----------
@@ -299,31 +300,59 @@ def views_disagreement(annotation: Annotation, value: int) -> tuple[int, int]:
     Returns
     -------
     (differ, drawn) : tuple of int
-        Voxels on those lines where the two drawings differ, and where either
+        Samples on those lines where the two drawings differ, and where either
         holds the structure.
     """
-    slices: dict[int, list[tuple[int, NDArray[np.bool_]]]] = {}
-    indices = {axis: annotation.plane_indices(axis) for axis in range(3)}
-    for number, plane in enumerate(annotation.planes):
-        if not plane.annotates(value):
-            continue
-        axis = annotation.axis_of(plane.pose)
-        if axis is None or annotation.grid_shift(plane.pose, axis) is None:
-            continue
-        index = float(indices[axis][number])
-        if abs(index - round(index)) > 1e-6 or not 0 <= round(index) < annotation.grid_shape[axis]:
-            continue
-        slices.setdefault(axis, []).append((round(index), annotation.grid_mask(plane, value, axis)))
+    planes = [p for p in annotation.planes if p.annotates(value)]
+    limit = np.sin(np.radians(0.5))
     differ = drawn = 0
-    axes = sorted(slices)
-    for n, a in enumerate(axes):
-        for b in axes[n + 1 :]:
-            across_a = in_plane_axes(a).index(b)  # where b runs in a's masks
-            across_b = in_plane_axes(b).index(a)
-            for ka, mask_a in slices[a]:
-                for kb, mask_b in slices[b]:
-                    one = np.take(mask_a, kb, axis=across_a)
-                    two = np.take(mask_b, ka, axis=across_b)
-                    differ += int(np.count_nonzero(one != two))
-                    drawn += int(np.count_nonzero(one | two))
+    for n, a in enumerate(planes):
+        for b in planes[n + 1 :]:
+            direction = np.cross(a.pose.normal, b.pose.normal)
+            length = float(np.linalg.norm(direction))
+            if length < limit:
+                continue  # parallel planes do not meet
+            direction /= length
+            point = np.linalg.solve(
+                np.stack([a.pose.normal, b.pose.normal, direction]),
+                [a.pose.offset_mm, b.pose.offset_mm, 0.0],
+            )
+            span = _line_span(a.pose, point, direction)
+            other = _line_span(b.pose, point, direction)
+            lo, hi = max(span[0], other[0]), min(span[1], other[1])
+            if hi <= lo:
+                continue
+            step = float(min(a.pose.pixel_spacing.min(), b.pose.pixel_spacing.min()))
+            world = point + np.arange(lo + step / 2, hi, step)[:, None] * direction
+            one, two = _drawn_at(a, value, world), _drawn_at(b, value, world)
+            differ += int(np.count_nonzero(one != two))
+            drawn += int(np.count_nonzero(one | two))
     return differ, drawn
+
+
+def _line_span(
+    pose: PlanePose, point: NDArray[np.float64], direction: NDArray[np.float64]
+) -> tuple[float, float]:
+    """The range of ``t`` where ``point + t direction`` (a line in the plane) crosses its
+    pixels (their edges included)."""
+    inverse = np.linalg.inv(pose.affine)
+    start = inverse[:2, :3] @ point + inverse[:2, 3]
+    slope = inverse[:2, :3] @ direction
+    lo, hi = -np.inf, np.inf
+    for axis in range(2):
+        edges = np.array([-0.5, pose.shape[axis] - 0.5]) - start[axis]
+        if abs(slope[axis]) < 1e-12:
+            if not edges[0] <= 0 <= edges[1]:
+                return 0.0, 0.0
+            continue
+        ends = np.sort(edges / slope[axis])
+        lo, hi = max(lo, float(ends[0])), min(hi, float(ends[1]))
+    return lo, hi
+
+
+def _drawn_at(plane: AnnotatedPlane, value: int, world: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Whether structure ``value`` is drawn at the plane's pixel nearest each world point."""
+    inverse = np.linalg.inv(plane.pose.affine)
+    pixels = np.rint(world @ inverse[:2, :3].T + inverse[:2, 3]).astype(np.int64)
+    pixels = np.clip(pixels, 0, np.asarray(plane.pose.shape) - 1)
+    return plane.mask(value)[pixels[:, 0], pixels[:, 1]]

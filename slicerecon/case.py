@@ -443,7 +443,7 @@ def _from_views(
     if drawn and differ > MAX_VIEW_DISAGREEMENT * drawn:
         logger.warning(
             "%s: structure %s is drawn differently by its views where their planes meet "
-            "(%d of %d voxels on those lines differ): the result blends the drawings "
+            "(%d of %d points on those lines differ): the result blends the drawings "
             "between the planes; check that the views belong to one study and frame",
             case.input_path,
             structure.label,

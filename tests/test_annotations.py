@@ -887,6 +887,15 @@ def test_views_that_disagree_where_they_meet_are_warned_about(
     assert main([*run, str(tmp_path / "disagree.nii.gz"), "-o", str(tmp_path / "o2")]) == 0
     err = [line for line in capsys.readouterr().err.splitlines() if "drawn differently" in line]
     assert len(err) == 1 and "axial.nii.gz: structure 1" in err[0]
+    # on a grid of its own (1.3 mm voxels), shifted 8 mm: compared all the same
+    x, y, z = (np.indices((36, 34, 46)).T * 1.3).T
+    shifted = ((x - 32) / 17) ** 2 + ((y - 22) / 13) ** 2 + ((z - 30) / 22) ** 2 < 1
+    sagittal = np.zeros(shifted.shape, np.uint8)
+    sagittal[[12, 24]] = shifted[[12, 24]]
+    nib.save(nib.Nifti1Image(sagittal, np.diag([1.3, 1.3, 1.3, 1])), tmp_path / "own.nii.gz")
+    assert main([*run, str(tmp_path / "own.nii.gz"), "-o", str(tmp_path / "o3")]) == 0
+    err = [line for line in capsys.readouterr().err.splitlines() if "drawn differently" in line]
+    assert len(err) == 1
 
 
 @pytest.mark.parametrize("nifti_first", [True, False])
