@@ -304,15 +304,15 @@ def views_disagreement(annotation: Annotation, value: int) -> tuple[int, int]:
         holds the structure.
     """
     planes = [p for p in annotation.planes if p.annotates(value)]
+    normals = np.array([p.pose.normal for p in planes]).reshape(-1, 3)
     limit = np.sin(np.radians(0.5))
     differ = drawn = 0
     for n, a in enumerate(planes):
-        for b in planes[n + 1 :]:
+        crossing = np.linalg.norm(np.cross(normals[n], normals[n + 1 :]), axis=1) >= limit
+        for m in np.flatnonzero(crossing):  # parallel planes do not meet
+            b = planes[n + 1 + int(m)]
             direction = np.cross(a.pose.normal, b.pose.normal)
-            length = float(np.linalg.norm(direction))
-            if length < limit:
-                continue  # parallel planes do not meet
-            direction /= length
+            direction /= np.linalg.norm(direction)
             point = np.linalg.solve(
                 np.stack([a.pose.normal, b.pose.normal, direction]),
                 [a.pose.offset_mm, b.pose.offset_mm, 0.0],
