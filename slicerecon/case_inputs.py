@@ -703,9 +703,17 @@ def combine_cases(
     missing = tuple(s for c in cases for s in c.missing)
     # the written grid grows only where a drawing lies beyond it, not by the padding
     drawn_lo, drawn_hi = covering_grid(planes, affine, first.annotation.grid_shape, pad=0)
-    output = _output_holding(first, first.crop_lo + drawn_lo, drawn_hi - drawn_lo, memory_budget_gb)
-    output["crop_lo"] = output["crop_lo"] + (lo - drawn_lo)
-    return replace(first, annotation=annotation, missing=missing, **output)
+    output_affine, output_shape, start = _output_holding(
+        first, first.crop_lo + drawn_lo, first.crop_lo + drawn_hi, memory_budget_gb
+    )
+    return replace(
+        first,
+        annotation=annotation,
+        missing=missing,
+        output_affine=output_affine,
+        output_shape=output_shape,
+        crop_lo=first.crop_lo + lo - start,
+    )
 
 
 def _reference_rank(case: CaseInput) -> tuple[bool, int, float, str]:
@@ -716,46 +724,44 @@ def _reference_rank(case: CaseInput) -> tuple[bool, int, float, str]:
 
 def _on_an_image(case: CaseInput) -> bool:
     """Whether an input's grid is an image's (not one made for its contours)."""
+    return case.kind.kind in LABEL_MAP_KINDS or _has_series(case)
+
+
+def _has_series(case: CaseInput) -> bool:
+    """Whether DICOM outputs of the input refer to an image series (its slices fix the grid)."""
     kind = case.kind
-    return kind.kind in LABEL_MAP_KINDS or (
-        dicom_image_series(kind.kind, kind.path, kind.image_dir) is not None
-    )
+    return dicom_image_series(kind.kind, kind.path, kind.image_dir) is not None
 
 
 def _output_holding(
     reference: CaseInput,
-    crop_lo: NDArray[np.int64],
-    size: Sequence[int] | NDArray[np.int64],
+    drawn_lo: NDArray[np.int64],
+    drawn_hi: NDArray[np.int64],
     memory_budget_gb: float,
-) -> dict[str, Any]:
-    """The reference input's output grid extended to hold the combined grid (starting at
-    ``crop_lo`` on it, ``size`` voxels): ``output_affine``, ``output_shape``, ``crop_lo``.
+) -> tuple[NDArray[np.float64], tuple[int, int, int], NDArray[np.int64]]:
+    """The reference input's output grid grown to hold the voxels ``[drawn_lo, drawn_hi)``
+    (indices on it): its affine, its shape, and where the old grid's first voxel moved
+    (``start``; zeros when it did not grow).
 
     DICOM outputs refer to the slices of an image series, whose grid cannot grow: a
     warning then says that the label maps hold only the series' extent.
     """
     shape = np.asarray(reference.output_shape, dtype=np.int64)
-    start = np.minimum(crop_lo, 0)
-    stop = np.maximum(shape, crop_lo + np.asarray(size, dtype=np.int64))
-    kept = {
-        "output_affine": reference.output_affine,
-        "output_shape": reference.output_shape,
-        "crop_lo": crop_lo,
-    }
+    start = np.minimum(drawn_lo, 0)
+    stop = np.maximum(shape, drawn_hi)
     if not np.any(start < 0) and not np.any(stop > shape):
-        return kept
-    kind = reference.kind
-    if dicom_image_series(kind.kind, kind.path, kind.image_dir) is not None:
+        return reference.output_affine, reference.output_shape, start
+    if _has_series(reference):
         logger.warning(
             "%s: the inputs' drawings reach beyond its image series: the label maps and DICOM "
             "outputs hold the series' extent only, the meshes everything",
             reference.input_path,
         )
-        return kept
-    grown = tuple(int(v) for v in stop - start)
+        return reference.output_affine, reference.output_shape, np.zeros(3, dtype=np.int64)
+    grown = (int(stop[0] - start[0]), int(stop[1] - start[1]), int(stop[2] - start[2]))
     check_grid(
         grown, what="the output grid of the inputs together", memory_budget_gb=memory_budget_gb
     )
     affine = reference.output_affine.copy()
     affine[:3, 3] = affine[:3, :3] @ start + affine[:3, 3]
-    return {"output_affine": affine, "output_shape": grown, "crop_lo": crop_lo - start}
+    return affine, grown, start
