@@ -305,42 +305,47 @@ def views_disagreement(annotation: Annotation, value: int) -> tuple[int, int]:
     """
     planes = [p for p in annotation.planes if p.annotates(value)]
     normals = np.array([p.pose.normal for p in planes]).reshape(-1, 3)
+    to_pixels = [np.linalg.inv(p.pose.affine) for p in planes]
     limit = np.sin(np.radians(0.5))
     differ = drawn = 0
     for n, a in enumerate(planes):
         crossing = np.linalg.norm(np.cross(normals[n], normals[n + 1 :]), axis=1) >= limit
         for m in np.flatnonzero(crossing):  # parallel planes do not meet
-            b = planes[n + 1 + int(m)]
+            k = n + 1 + int(m)
+            b = planes[k]
             direction = np.cross(a.pose.normal, b.pose.normal)
             direction /= np.linalg.norm(direction)
             point = np.linalg.solve(
                 np.stack([a.pose.normal, b.pose.normal, direction]),
                 [a.pose.offset_mm, b.pose.offset_mm, 0.0],
             )
-            span = _line_span(a.pose, point, direction)
-            other = _line_span(b.pose, point, direction)
+            span = _line_span(a.pose.shape, to_pixels[n], point, direction)
+            other = _line_span(b.pose.shape, to_pixels[k], point, direction)
             lo, hi = max(span[0], other[0]), min(span[1], other[1])
             if hi <= lo:
                 continue
             step = float(min(a.pose.pixel_spacing.min(), b.pose.pixel_spacing.min()))
             world = point + np.arange(lo + step / 2, hi, step)[:, None] * direction
-            one, two = _drawn_at(a, value, world), _drawn_at(b, value, world)
+            one = _drawn_at(a, value, to_pixels[n], world)
+            two = _drawn_at(b, value, to_pixels[k], world)
             differ += int(np.count_nonzero(one != two))
             drawn += int(np.count_nonzero(one | two))
     return differ, drawn
 
 
 def _line_span(
-    pose: PlanePose, point: NDArray[np.float64], direction: NDArray[np.float64]
+    shape: tuple[int, int],
+    inverse: NDArray[np.float64],
+    point: NDArray[np.float64],
+    direction: NDArray[np.float64],
 ) -> tuple[float, float]:
-    """The range of ``t`` where ``point + t direction`` (a line in the plane) crosses its
-    pixels (their edges included)."""
-    inverse = np.linalg.inv(pose.affine)
+    """The range of ``t`` where ``point + t direction`` (a line in a plane of ``shape``
+    pixels, ``inverse`` its world → pixel affine) crosses its pixels (edges included)."""
     start = inverse[:2, :3] @ point + inverse[:2, 3]
     slope = inverse[:2, :3] @ direction
     lo, hi = -np.inf, np.inf
     for axis in range(2):
-        edges = np.array([-0.5, pose.shape[axis] - 0.5]) - start[axis]
+        edges = np.array([-0.5, shape[axis] - 0.5]) - start[axis]
         if abs(slope[axis]) < 1e-12:
             if not edges[0] <= 0 <= edges[1]:
                 return 0.0, 0.0
@@ -350,9 +355,11 @@ def _line_span(
     return lo, hi
 
 
-def _drawn_at(plane: AnnotatedPlane, value: int, world: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Whether structure ``value`` is drawn at the plane's pixel nearest each world point."""
-    inverse = np.linalg.inv(plane.pose.affine)
+def _drawn_at(
+    plane: AnnotatedPlane, value: int, inverse: NDArray[np.float64], world: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """Whether structure ``value`` is drawn at the plane's pixel nearest each world point
+    (``inverse``: the plane's world → pixel affine)."""
     pixels = np.rint(world @ inverse[:2, :3].T + inverse[:2, 3]).astype(np.int64)
     pixels = np.clip(pixels, 0, np.asarray(plane.pose.shape) - 1)
     return plane.mask(value)[pixels[:, 0], pixels[:, 1]]

@@ -347,7 +347,7 @@ def _view(
     )
     if base is not None:
         field = _corrected(
-            distances, indices, pixel, axis, lo, far, base, along, positions, upsample
+            distances, indices, samples, pixel, axis, lo, far, base, along, positions, upsample
         )
         return field, distance
     field = np.full((samples.size, hi[a] - lo[a], hi[b] - lo[b]), far, dtype=np.float32)
@@ -396,6 +396,7 @@ def _nearest_mm(
 def _corrected(
     distances: dict[int, NDArray[np.float32]],
     indices: NDArray[np.float64],
+    samples: NDArray[np.float64],
     pixel: NDArray[np.float64],
     axis: int,
     lo: NDArray[np.int64],
@@ -420,7 +421,6 @@ def _corrected(
         layer = int(np.clip(round(index) - lo[axis], 0, voxels.shape[axis] - 1))
         drawn = np.minimum(np.nan_to_num(distances[n], posinf=float(far)), far)
         residuals.append(_residual(drawn, np.take(voxels, layer, axis=axis), pixel))
-    samples = positions if axis == along else np.arange(lo[axis], lo[axis] + base.shape[axis])
     nearest = np.argmin(np.abs(samples[:, None] - indices[None, :]), axis=1)
     carried = np.moveaxis(np.stack(residuals)[nearest], 0, axis)
     if axis != along:
