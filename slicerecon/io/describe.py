@@ -90,7 +90,12 @@ def describe_label_map(
     voxel = float(abs(np.linalg.det(affine[:3, :3])))
     data = np.asarray(values)
     present, counts = np.unique(data[data != 0], return_counts=True)
-    reading = detect_planes(data != 0) if present.size else None
+    reading, first = None, np.zeros(3, dtype=np.int64)
+    if present.size:  # read on the box of every structure together, as run reads it
+        union = ndimage.find_objects((data != 0).astype(np.uint8))[0]
+        assert union is not None
+        reading = detect_planes(data[union] != 0)
+        first = np.array([s.start for s in union])
     out: list[dict[str, Any]] = []
     for value, count in zip(present.tolist(), counts.tolist(), strict=True):
         mask = data == value
@@ -111,7 +116,9 @@ def describe_label_map(
         else:  # a sparse annotation: the planes it is drawn on, along each axis
             planes = {"drawn": {}}
             for along, indices in sorted(reading.planes.items(), key=lambda item: -item[0]):
-                drawn = [k for k in indices if np.take(mask, int(k), axis=along).any()]
+                drawn = [
+                    k for k in indices if np.take(mask, int(k) + first[along], axis=along).any()
+                ]
                 if drawn:
                     planes["drawn"][AXIS_NAMES[along]] = len(drawn)
         out.append(
