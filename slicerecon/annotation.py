@@ -180,6 +180,11 @@ class Annotation:
         when structures may overlap or nest (RTSTRUCT ROIs, SEG segments).
     source : str
         How the input was read, in words (for the one line ``run`` and ``info`` print).
+    grids : mapping of int to (ndarray of shape (4, 4), tuple of 3 int)
+        Structures reconstructed on a grid of their own, not the reference
+        grid: ``{value: (affine, shape)}``. Several inputs combined give a
+        structure drawn by one input only that input's grid
+        (:func:`slicerecon.case_inputs.combine_cases`); see :meth:`of_structure`.
     """
 
     planes: tuple[AnnotatedPlane, ...]
@@ -189,6 +194,9 @@ class Annotation:
     coordinates: str = "RAS"
     exclusive: bool = True
     source: str = ""
+    grids: Mapping[int, tuple[NDArray[np.float64], tuple[int, int, int]]] = field(
+        default_factory=dict
+    )
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "planes", tuple(self.planes))
@@ -201,6 +209,13 @@ class Annotation:
         values = [s.value for s in self.structures]
         if len(set(values)) != len(values):
             raise InputError(f"structure values must be unique (got {values})")
+        grids = {
+            int(v): (check_affine(affine), tuple(int(n) for n in shape))
+            for v, (affine, shape) in self.grids.items()
+        }
+        if not set(grids) <= set(values):
+            raise InputError(f"grids for structures the annotation does not hold: {sorted(grids)}")
+        object.__setattr__(self, "grids", grids)
 
     # -- what it holds -------------------------------------------------------------------
     @property
@@ -218,6 +233,36 @@ class Annotation:
     def planes_of(self, value: int) -> tuple[AnnotatedPlane, ...]:
         """The planes that annotate structure ``value`` (holding it or not)."""
         return tuple(p for p in self.planes if p.annotates(value))
+
+    def of_structure(self, value: int) -> Annotation:
+        """Structure ``value`` alone on the grid it is reconstructed on.
+
+        Returns
+        -------
+        Annotation
+            The structure's planes on its own grid (:attr:`grids`) when it has
+            one; otherwise this annotation itself (the reference grid).
+        """
+        if value not in self.grids:
+            return self
+        affine, shape = self.grids[value]
+        planes = tuple(
+            AnnotatedPlane(
+                p.pose,
+                {value: p.mask(value)},
+                frozenset({value}),
+            )
+            for p in self.planes_of(value)
+        )
+        return Annotation(
+            planes,
+            (self.structure(value),),
+            affine,
+            shape,
+            self.coordinates,
+            self.exclusive,
+            self.source,
+        )
 
     def orientations(self) -> list[tuple[NDArray[np.float64], list[int]]]:
         """The planes grouped by orientation: ``[(unit normal, plane numbers), ...]``."""
@@ -301,6 +346,7 @@ class Annotation:
             self.coordinates,
             self.exclusive,
             self.source,
+            {v: g for v, g in self.grids.items() if v in keep},
         )
 
     # -- the parallel case ---------------------------------------------------------------

@@ -437,8 +437,11 @@ def _from_views(
     case: CaseInput, structure: Structure, options: ReconstructOptions, crossed: int
 ) -> StructureResult:
     """A structure drawn in one or several views (:mod:`slicerecon.surface.views`), in one
-    part: its plan records that part's box."""
-    annotation = case.annotation
+    part: its plan records that part's box. A structure with a grid of its own
+    (:meth:`~slicerecon.annotation.Annotation.of_structure`) is reconstructed there; its
+    voxels on the written grid are then its mesh rasterized."""
+    annotation = case.annotation.of_structure(structure.value)
+    own_grid = annotation is not case.annotation
     differ, drawn = views_disagreement(annotation, structure.value)
     if drawn and differ > MAX_VIEW_DISAGREEMENT * drawn:
         logger.warning(
@@ -469,7 +472,7 @@ def _from_views(
         RECONSTRUCTED,
         mesh=mesh,
         planes=crossed,
-        occupancy=None if options.smooth else made.occupancy,
+        occupancy=None if options.smooth or own_grid else made.occupancy,
         plan=Plan("none", (PlanPart(box, None, voxels),), annotation.grid_shape),
         sections=(own := _main_sections(annotation, structure.value)),
         projections=None if own is None else projections_from_sections(own),

@@ -586,7 +586,11 @@ def combine_cases(
     ignored), unnamed ones by value; one named in one input and unnamed in
     another is kept apart, with a warning; a structure new to the reference
     keeps its value, or takes the next free one. The structures form a
-    partition only when every input is a label map. A structure drawn on one
+    partition only when every input is a label map (contours are ROIs, even
+    one structure's). Otherwise a structure drawn by one input only, on another
+    lattice than the reference's, keeps that input's grid
+    (:attr:`Annotation.grids`): it is reconstructed as that input alone would
+    reconstruct it, not on the reference's pixels. A structure drawn on one
     plane in two inputs is kept once when both drawings agree; drawn by two
     inputs in places that do not meet, it is warned about, or refused when they
     lie further apart than its size (:func:`check_drawings_meet`).
@@ -619,7 +623,11 @@ def combine_cases(
         AnnotatedPlane(p.pose, p.masks, own_first if p.structures is None else p.structures)
         for p in first.annotation.planes
     ]
-    for case in cases[1:]:
+    # which inputs draw each structure: one drawn by a single other input keeps that
+    # input's grid (it is reconstructed as that input alone would reconstruct it)
+    drawers: dict[int, set[int]] = {v: {0} for v in own_first}
+    grids: dict[int, tuple[NDArray[np.float64], tuple[int, int, int]]] = {}
+    for n, case in enumerate(cases[1:], start=1):
         earlier = list(structures)
         taken = {s.value for s in earlier} | set(case.annotation.values)
         remap: dict[int, int] = {}
@@ -653,6 +661,7 @@ def combine_cases(
                 structures.append(match)
                 origin[value] = case.input_path
             remap[structure.value] = match.value
+            drawers.setdefault(match.value, set()).add(n)
         for other, listed in apart.items():
             logger.warning(
                 "%s and %s both hold structure(s) %s, named in one and not in the other: "
@@ -665,6 +674,9 @@ def combine_cases(
         # world mm of the first input's frame: LPS (DICOM, Slicer) and RAS (NIfTI) differ
         # by the sign of x and y
         flip = case.annotation.coordinates != first.annotation.coordinates
+        own_affine = LPS_TO_RAS @ case.annotation.affine if flip else case.annotation.affine
+        for value in remap.values():
+            grids[value] = (own_affine, case.annotation.grid_shape)
         for plane in case.annotation.planes:
             masks = {remap[v]: m for v, m in plane.masks.items()}
             own = (
@@ -676,7 +688,17 @@ def combine_cases(
                 PlanePose(LPS_TO_RAS @ plane.pose.affine, plane.pose.shape) if flip else plane.pose
             )
             planes.append(AnnotatedPlane(pose, masks, own))
-    exclusive = all(c.annotation.exclusive for c in cases)
+    # contours are ROIs (they may nest) even when a file holds one structure
+    exclusive = all(c.annotation.exclusive and c.kind.kind in LABEL_MAP_KINDS for c in cases)
+    # a partition is resolved on one grid; elsewhere a structure drawn by one input only,
+    # on another lattice than the reference's, keeps that input's grid
+    grids = {
+        value: grid
+        for value, grid in grids.items()
+        if not exclusive
+        and len(drawers[value]) == 1
+        and not _same_lattice(grid[0], first.annotation.affine)
+    }
     origins = [str(c.input_path) for c in cases for _ in c.annotation.planes]
     check_drawings_meet(planes, origins, {s.value: s.label for s in structures})
     affine = first.annotation.affine
@@ -692,6 +714,7 @@ def combine_cases(
         size,
         first.annotation.coordinates,
         exclusive,
+        grids=grids,
     )
     annotation = merge_repeated_planes(annotation, origins, first.crop_lo + lo)
     names = ", ".join(str(c.input_path) for c in given)
@@ -714,6 +737,14 @@ def combine_cases(
         output_shape=output_shape,
         crop_lo=first.crop_lo + lo - start,
     )
+
+
+def _same_lattice(affine: NDArray[np.float64], reference: NDArray[np.float64]) -> bool:
+    """Whether a grid's voxel centres are voxel centres of the reference grid."""
+    if not np.allclose(affine[:3, :3], reference[:3, :3], atol=1e-6):
+        return False
+    offset = np.linalg.solve(reference[:3, :3], affine[:3, 3] - reference[:3, 3])
+    return bool(np.allclose(offset, np.rint(offset), atol=1e-4))
 
 
 def _reference_rank(case: CaseInput) -> tuple[bool, int, float, str]:

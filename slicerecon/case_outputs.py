@@ -116,7 +116,7 @@ def _plan_record(case: CaseInput, result: CaseReconstruction) -> dict[str, Any]:
         for normal, members in annotation.orientations()
     ]
     planes: dict[str, Any] = {"n_planes": len(annotation.planes), "views": views}
-    if sections is not None and len(views) == 1:
+    if sections is not None and len(views) == 1 and sections.n_planes == len(annotation.planes):
         planes.update(
             axis="xyz"[sections.axis],
             n_planes=sections.n_planes,

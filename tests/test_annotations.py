@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import nibabel as nib
+import nrrd
 import numpy as np
 import pytest
 import trimesh
@@ -927,3 +928,65 @@ def test_a_nifti_and_an_rtstruct_of_one_study_meet_in_one_frame(
         1 if records["coordinates"] == "RAS" else [-1, -1, 1]
     )
     np.testing.assert_allclose(centres[0], expected, atol=3.0)
+
+
+def _oblique_tube_file(path: Path, radius: float = 1.5) -> float:
+    """A thin tube rising obliquely, drawn as an ellipse on every axial mm (a version 2
+    contour file without a grid); returns its true volume between the first and last plane."""
+    start, stop = np.array([55.0, 30.0, 10.0]), np.array([70.0, 70.0, 80.0])
+    direction = (stop - start) / np.linalg.norm(stop - start)
+    across = np.array([direction[0], direction[1], 0.0]) / np.hypot(*direction[:2])
+    side = np.array([-across[1], across[0], 0.0])
+    angles = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    heights = np.arange(12.0, 79.0)
+    planes = []
+    for z in heights:
+        centre = start + (z - start[2]) / direction[2] * direction
+        ring = (
+            centre
+            + np.outer(radius / direction[2] * np.cos(angles), across)
+            + np.outer(radius * np.sin(angles), side)
+        )
+        planes.append({"structure": "vessel", "normal": [0, 0, 1], "polygons": [ring.tolist()]})
+    tube = {
+        "format": "slicerecon-contours",
+        "version": 2,
+        "units": "mm",
+        "structures": [{"value": 5, "name": "vessel"}],
+        "planes": planes,
+    }
+    path.write_text(json.dumps(tube))
+    return float(np.pi * radius**2 * (heights[-1] - heights[0]) / direction[2])
+
+
+def test_a_thin_structure_of_another_input_keeps_the_resolution_it_was_drawn_at(
+    tmp_path: Path,
+) -> None:
+    """A 3 mm tube drawn on every mm in a contour file, combined with an organ's label map
+    of 0.8 x 0.8 x 3 mm voxels, lost 30 % of its mesh volume (exit 0): it was rasterized on
+    the label map's pixels. A structure drawn by one input only is now reconstructed as that
+    input alone would, and as a ROI it is not cut away where it runs through the organ."""
+    affine = np.diag([0.8, 0.8, 3.0, 1.0])
+    centres = np.indices((100, 100, 30)).reshape(3, -1).T * [0.8, 0.8, 3.0]
+    organ = ((((centres - [40, 40, 45]) / [25, 20, 30]) ** 2).sum(axis=1) <= 1).reshape(
+        100, 100, 30
+    )
+    drawn = [z for z in range(30) if organ[:, :, z].any()][::3]
+    nib.save(
+        nib.Nifti1Image(_keep(organ, {2: drawn}).astype(np.uint8), affine),
+        tmp_path / "organ.nii.gz",
+    )
+    true_volume = _oblique_tube_file(tmp_path / "vessel.json")
+    alone, both = tmp_path / "alone", tmp_path / "both"
+    assert main(["run", str(tmp_path / "vessel.json"), "-o", str(alone), "-q"]) == 0
+    paths = [str(tmp_path / "organ.nii.gz"), str(tmp_path / "vessel.json")]
+    assert main(["run", *paths, "-o", str(both), "-q"]) == 0
+    tube = _volume(both / "meshes" / "5_vessel.stl")
+    assert tube == pytest.approx(_volume(alone / "mesh.stl"), rel=0.01)
+    assert tube == pytest.approx(true_volume, rel=0.05)
+    records = json.loads((both / "structures.json").read_text())
+    assert records["overlap"]["exclusive"] is False  # contours are ROIs, not a partition
+    layers = nrrd.read(str(both / "labels.seg.nrrd"))[0]
+    held = (layers == 5).sum() if layers.ndim == 3 else (layers == 5).any(axis=0).sum()
+    assert held * 0.8 * 0.8 * 3.0 == pytest.approx(true_volume, rel=0.15)
+    assert json.loads((both / "plan.json").read_text())["sections"]["n_planes"] == len(drawn) + 67
