@@ -6,6 +6,8 @@ import json
 from pathlib import Path
 
 import dicom_factory as factory  # tests/io, on pytest's pythonpath
+import nibabel as nib
+import nrrd
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -150,3 +152,33 @@ def test_a_ct_series_passed_instead_of_its_mask(tmp_path: Path) -> None:
     details = describe_input(tmp_path / "ct")
     assert details["structures"] == [] and "negative" in details["not_a_label_map"]
     assert details["values"]["min"] < -900
+
+
+@pytest.mark.parametrize("name", ["fractional.nii.gz", "fractional.nrrd", "nan.nii.gz"])
+def test_info_describes_float_images_as_it_describes_negative_ones(
+    name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """info used to exit 0 describing a CT in HU as no label map but fail with exit 2 on a
+    probability map stored as float (0.5) or a NaN image: both are described now."""
+    values = np.zeros((20, 18, 16), dtype=np.float32)
+    values[5:15, 5:12, 4:10] = np.nan if name.startswith("nan") else 0.5
+    affine = np.diag([0.8, 0.8, 2.5, 1.0])
+    path = tmp_path / name
+    if name.endswith(".nrrd"):
+        nrrd.write(
+            str(path),
+            values,
+            {
+                "space": "left-posterior-superior",
+                "space directions": affine[:3, :3],
+                "space origin": np.zeros(3),
+            },
+        )
+    else:
+        nib.save(nib.Nifti1Image(values, affine), path)
+    assert main(["info", str(path), "--json"]) == 0
+    details = json.loads(capsys.readouterr().out)
+    assert details["structures"] == [] and "not a label map" in details["not_a_label_map"]
+    assert details["shape"] == [20, 18, 16] and details["spacing_mm"] == [0.8, 0.8, 2.5]
+    assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1

@@ -148,6 +148,16 @@ def _label_values_refused(details: dict[str, Any], values: NDArray[Any], path: P
     return False
 
 
+def _not_a_label_map(details: dict[str, Any], exc: LabelError) -> dict[str, Any]:
+    """``details`` of a file whose voxels its reader refused as no label map (non-integer
+    or non-finite values): its grid and why, as :func:`_label_values_refused` says it."""
+    if "is not a label map" not in str(exc):
+        raise exc
+    details["not_a_label_map"] = str(exc)
+    details["structures"] = []
+    return details
+
+
 def describe_volume(volume: Volume) -> dict[str, Any]:
     """Grid and foreground of a dense mask (shape, spacing, voxels, planes per axis)."""
     info: dict[str, Any] = {
@@ -302,7 +312,13 @@ def describe_input(
 
             from .nifti import read_label_values
 
-            values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
+            try:
+                values, affine = read_label_values(kind.path, memory_budget_gb=memory_budget_gb)
+            except LabelError as exc:  # float voxels that are no whole numbers: an image
+                header = nib.load(kind.path)
+                details["axcodes"] = "".join(str(c) for c in nib.aff2axcodes(header.affine))
+                details.update(_grid(header.affine, tuple(header.shape[:3])))
+                return _not_a_label_map(details, exc)
             details["axcodes"] = "".join(str(c) for c in nib.aff2axcodes(affine))
             details.update(_grid(affine, values.shape))
             if not _label_values_refused(details, values, kind.path):
@@ -310,7 +326,12 @@ def describe_input(
                 details["labels"] = {str(s["value"]): s["voxels"] for s in details["structures"]}
         elif kind.kind == "nrrd":
             header = nrrd_info(kind.path)
-            label_map = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
+            try:
+                label_map = read_nrrd_label_map(kind.path, memory_budget_gb=memory_budget_gb)
+            except LabelError as exc:  # float voxels that are no whole numbers: an image
+                details["coordinates"] = header.coordinates
+                details.update(_grid(header.affine, header.shape))
+                return _not_a_label_map(details, exc)
             details["coordinates"] = label_map.coordinates
             details.update(_grid(label_map.affine, label_map.shape))
             if not _label_values_refused(details, label_map.labels, kind.path):
