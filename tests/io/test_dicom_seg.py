@@ -342,3 +342,35 @@ def test_seg_grid_over_the_memory_budget_is_refused_before_decoding(tmp_path, mo
 
     with pytest.raises(MemoryBudgetError, match="memory budget"):
         read_dicom_seg(path)
+
+
+@pytest.mark.parametrize("slices", [list(range(2, 30, 2)), [2, 4, 7, 10, 14, 17, 19, 23, 26, 28]])
+def test_a_seg_drawn_on_some_slices_of_its_series_is_an_annotation(tmp_path, capsys, slices):
+    """A SEG drawn on every 2nd CT slice (or on irregular ones) was read on a grid of its
+    frames (5 mm apart) as a dense mask and scored against itself (Dice 1), or refused
+    as "not evenly spaced". Its planes are now the series' slices (SpacingBetweenSlices),
+    the slices between them not annotated, and it is reconstructed as an annotation."""
+    from slicerecon.cli import main
+
+    affine = np.diag([0.8, 0.8, 2.5, 1.0])
+    centres = np.indices((40, 36, 32)).reshape(3, -1).T * [0.8, 0.8, 2.5]
+    truth = ((((centres - [16, 14, 40]) / [10, 9, 33]) ** 2).sum(axis=1) <= 1).reshape(40, 36, 32)
+    drawn = np.zeros_like(truth)
+    drawn[:, :, slices] = truth[:, :, slices]
+    path = factory.write_seg(tmp_path / "seg.dcm", {1: drawn}, affine, labels={1: "Organ"})
+    volume = read_dicom_seg(path)
+    assert np.allclose(np.linalg.norm(volume.affine[:3, :3], axis=0), [0.8, 0.8, 2.5])
+    assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 0
+    said = capsys.readouterr().out
+    assert "read as: sparse annotation" in said and "quality" not in said
+    assert not (tmp_path / "out" / "metrics.json").exists()
+    import json
+
+    import trimesh
+
+    from slicerecon.rasterize import mesh_to_mask
+
+    out = tmp_path / "out"
+    assert json.loads((out / "structures.json").read_text())["coordinates"] == "LPS"
+    result = mesh_to_mask(trimesh.load(out / "mesh.stl"), affine, truth.shape)
+    assert np.count_nonzero(result & truth) / np.count_nonzero(result | truth) > 0.9

@@ -57,6 +57,8 @@ __all__ = ["SEGMENTATION_TYPES", "read_dicom_seg", "seg_info"]
 logger = logging.getLogger(__name__)
 
 SEGMENTATION_TYPES = ("BINARY", "FRACTIONAL")
+MAX_SLICES_BETWEEN_FRAMES = 50
+"""Frames further apart than this many declared slice spacings keep the frame spacing."""
 """SegmentationType values read (LABELMAP is refused)."""
 
 
@@ -186,7 +188,12 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
                 "too close to tell planes apart; check the frame positions"
             )
         direction = line_fit(pos[distinct], t_planes, [f"frame {i + 1}" for i in distinct])
-        if thickness is not None and abs(thickness - step_t) > position_tolerance(step_t):
+        if _drawn_on_some_slices(t_planes, thickness):
+            # frames on some slices of a series (every 2nd, or irregular): the planes are
+            # that series' slices, and those without a frame are not annotated
+            assert thickness is not None
+            step_t = thickness
+        elif thickness is not None and abs(thickness - step_t) > position_tolerance(step_t):
             logger.debug(
                 "%s: SpacingBetweenSlices/SliceThickness %.4g mm differs from the frame "
                 "spacing %.4g mm; using the frame spacing",
@@ -223,6 +230,18 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
     affine[:3, 3] = pos[distinct[0]]
     shape = (columns, rows, int(frame_plane.max()) + 1)
     return _SegGeometry(affine, shape, frame_plane, seg_arr, tol)
+
+
+def _drawn_on_some_slices(t_planes: NDArray[np.float64], spacing: float | None) -> bool:
+    """Whether frames at positions ``t_planes`` (mm along the normal, sorted) lie on slices
+    ``spacing`` mm apart (SpacingBetweenSlices, else SliceThickness) with some slices
+    between them: a segmentation drawn on some slices of its series."""
+    if spacing is None or not spacing > 0:
+        return False
+    gaps = np.diff(t_planes) / spacing
+    if gaps.min() < 1.5 or gaps.max() > MAX_SLICES_BETWEEN_FRAMES:
+        return False
+    return bool(np.all(np.abs(gaps - np.rint(gaps)) * spacing <= position_tolerance(spacing)))
 
 
 def _segmentation_type(ds: Any, path: Path) -> str:
@@ -404,8 +423,10 @@ def read_dicom_seg(
         The planes run from the lowest to the highest frame position of *all*
         segments along ``row_cosine × column_cosine``, so every segment of one
         file is read onto the same grid. The plane step is the smallest gap
-        between frame positions (SpacingBetweenSlices is only a fallback for a
-        single plane); planes whose frames were omitted are empty.
+        between frame positions, or SpacingBetweenSlices (else SliceThickness)
+        for a single plane and when every gap is a whole multiple (2 to 50) of
+        it (frames drawn on some slices of a series); planes whose frames were
+        omitted are empty.
 
     Raises
     ------
