@@ -78,7 +78,10 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
         inside = [
             n
             for n, h in enumerate(holding)
-            if value not in h and h and _between(planes[n].pose, [planes[k].pose for k in own])
+            if value not in h
+            and h
+            and planes[n].annotates(value)
+            and _between(planes[n].pose, [planes[k].pose for k in own])
         ]
         if not inside:
             continue

@@ -48,7 +48,7 @@ from .io.rtstruct import read_rtstruct_annotation
 from .labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks
 from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
 from .reconstruct import ReconstructConfig
-from .sections import AXIS_NAMES, CrossSections, Volume, axis_index
+from .sections import AXIS_NAMES, CrossSections, Volume, axis_index, in_plane_axes
 from .selection import choose_structure
 
 __all__ = ["CaseInput", "case_from_label_map", "combine_cases", "load_case", "reading_of"]
@@ -282,12 +282,25 @@ def case_from_label_map(
     crop = union.crop(pad=3)
     check_grid(crop.shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
     reading = detect_planes(crop.mask, parse_annotation(config.annotation))
+    # structures drawn on every slice beside others drawn on some (a lesion drawn on each
+    # slice, the organs on every 4th): the sparse ones set the planes
+    every_slice: frozenset[int] = frozenset()
+    if reading.dense and not reading.stated and _has_gaps(crop.mask):
+        first = np.rint(
+            np.linalg.solve(label_map.affine[:3, :3], crop.affine[:3, 3] - label_map.affine[:3, 3])
+        ).astype(np.int64)
+        box = tuple(slice(int(a), int(a) + n) for a, n in zip(first, crop.shape, strict=True))
+        mixed = _mixed_reading(
+            {s.value: label_map.mask(s.value).mask[box] for s in label_map.structures}
+        )
+        if mixed is not None:
+            reading, every_slice = mixed
     if not reading.dense:
         _check_sparse_options(reading, config, crop.spacing)
     elif not reading.stated:
         _warn_of_gaps(crop.mask, kind.path)
     stated = "dense" if reading.dense else reading.axes
-    if reading.dense or len(reading.axes) == 1:
+    if not every_slice and (reading.dense or len(reading.axes) == 1):
         sections, _, cropped = prepare_inputs(
             union,
             slices=config.slices if reading.dense else None,
@@ -328,12 +341,15 @@ def case_from_label_map(
         )
     else:
         annotation = _views_annotation(
-            label_map, crops, grid_affine, grid_shape, reading.planes, exclusive
+            label_map, crops, grid_affine, grid_shape, reading.planes, exclusive, every_slice
         )
     dense = cropped is not None
     if not dense:
         annotation = planes_of_each_structure(annotation, kind.path)
     how = "dense mask" if dense else reading.describe(crop.spacing)
+    if every_slice:
+        names = ", ".join(s.label for s in label_map.structures if s.value in every_slice)
+        how += f"; structure(s) {names} drawn on every slice they cross"
     annotation = replace(
         annotation,
         source=f"{how}; {len(label_map.structures)} structure(s): {annotation.describe()}",
@@ -354,6 +370,43 @@ def case_from_label_map(
         label_map.shape,
         crop_lo,
     )
+
+
+def _has_gaps(mask: NDArray[np.bool_]) -> bool:
+    """Whether a mask has :data:`MIN_GAPS_WARNED` runs of empty slices inside it along an
+    axis (what :func:`_warn_of_gaps` says)."""
+    return any(runs >= MIN_GAPS_WARNED for runs in empty_runs_inside(mask).values())
+
+
+def _mixed_reading(
+    masks: dict[int, NDArray[np.bool_]],
+) -> tuple[PlaneReading, frozenset[int]] | None:
+    """A label map read as dense on all its structures together, whose structures are
+    read one by one: some drawn on planes of one axis with slices between them, the others
+    on every slice (a lesion contoured on each slice, the organs on every 4th).
+
+    Returns
+    -------
+    (PlaneReading, frozenset of int) or None
+        The planes of the structures drawn on some slices (read together), and the values
+        drawn on every slice; None when no structure, or every one, reads as sparse, or
+        the sparse ones are not planes of one axis with a slice between two of them.
+    """
+    sparse = [v for v, m in masks.items() if m.any() and not detect_planes(m).dense]
+    if not sparse or len(sparse) == len(masks):
+        return None
+    reading = detect_planes(np.logical_or.reduce([masks[v] for v in sparse]))
+    if reading.dense or len(reading.axes) != 1:
+        return None
+    axis = reading.axes[0]
+    if np.all(np.diff(reading.planes[axis]) <= 1):  # no slice between: not an annotation
+        return None
+    rest = frozenset(masks) - frozenset(sparse)
+    slices = np.flatnonzero(
+        np.logical_or.reduce([masks[v] for v in rest]).any(axis=in_plane_axes(axis))
+    )
+    planes = np.union1d(reading.planes[axis], slices).astype(np.int64)
+    return replace(reading, planes={axis: planes}), rest
 
 
 def _warn_of_gaps(mask: NDArray[np.bool_], source: Any) -> None:
@@ -411,13 +464,21 @@ def _views_annotation(
     shape: tuple[int, int, int],
     planes: dict[int, NDArray[np.int64]],
     exclusive: bool,
+    every_slice: frozenset[int] = frozenset(),
 ) -> Annotation:
-    """A label map annotated along several axes: each annotated slice, every structure."""
+    """A label map annotated along several axes: each annotated slice, every structure.
+
+    With ``every_slice`` (structures drawn on every slice, :func:`_mixed_reading`), a slice
+    that holds only those speaks for them alone: the others were not drawn there.
+    """
     drawn = []
     for axis in sorted(planes):
         for index in planes[axis]:
             masks = {v: np.take(m, int(index), axis=axis) for v, m in crops.items()}
-            drawn.append(AnnotatedPlane(plane_pose(affine, shape, axis, float(index)), masks))
+            held = frozenset(v for v, m in masks.items() if m.any())
+            speaks = every_slice if every_slice and held <= every_slice else None
+            pose = plane_pose(affine, shape, axis, float(index))
+            drawn.append(AnnotatedPlane(pose, masks, speaks))
     return Annotation(
         tuple(drawn),
         label_map.structures,
