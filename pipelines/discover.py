@@ -57,8 +57,11 @@ A case's name is its path relative to ``INDIR`` without the format suffix,
 made safe by :func:`safe_case_name`: ASCII letters, digits, ``-`` and ``_``
 only, folder levels joined by ``__``. A name can therefore never hold a path
 separator, ``..``, a dot or a drive, so ``OUTDIR/<name>/`` always lies directly
-inside ``OUTDIR``. Names that collide (compared case-insensitively) or
-that a batch output uses (:data:`RESERVED_NAMES`) get ``-2``, ``-3``, ... in
+inside ``OUTDIR``. Inputs whose names without the suffix are the same
+(compared case-insensitively: ``liver.nii.gz``, ``liver.csv``) are each named
+with their suffix (``liver_nii_gz``, ``liver_csv``), so that adding or removing
+one never gives another input's name to a case. Names that still collide, or
+that a batch output uses (:data:`RESERVED_NAMES`), get ``-2``, ``-3``, ... in
 sorted input order.
 """
 
@@ -70,6 +73,7 @@ import logging
 import os
 import re
 import unicodedata
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
@@ -549,8 +553,13 @@ def discover(
     found.sort(key=lambda item: item[1].relpath)
     cases: list[Case] = []
     taken: set[str] = {name.casefold() for name in RESERVED_NAMES}
-    for base, case in found:
-        name = safe_case_name(base)
+    names = [safe_case_name(base) for base, _ in found]
+    shared = Counter(name.casefold() for name in names)
+    for (base, case), name in zip(found, names, strict=True):
+        if shared[name.casefold()] > 1:
+            # inputs that differ only in their format (liver.nii.gz, liver.csv) are named
+            # with it, so adding or removing one never renames another
+            name = safe_case_name(case.relpath)
         unique, n = name, 1
         while unique.casefold() in taken:
             n += 1

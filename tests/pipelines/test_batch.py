@@ -162,11 +162,17 @@ def test_discovery_kinds_order_and_unique_names(tmp_path):
     assert len(by_input["p1"].files) == ball.shape[2]
     names = [c.name for c in cases]
     assert len({n.casefold() for n in names}) == len(names)
-    assert by_input["A.nii"].name == "A" and by_input["a.nii.gz"].name == "a-2"
-    assert by_input["x.json"].name == "x" and by_input["x.nii"].name == "x-2"
+    # names alike but for the suffix: each named with it, whatever else INDIR holds
+    assert by_input["A.nii"].name == "A_nii" and by_input["a.nii.gz"].name == "a_nii_gz"
+    assert by_input["x.json"].name == "x_json" and by_input["x.nii"].name == "x_nii"
     assert by_input["report_assets.nii.gz"].name == "report_assets-2"
     assert by_input["p2/rtstruct.dcm"].name == "p2__rtstruct"
     assert discover_cases(indir, exclude=[indir / "out"]) == cases  # stable
+    # a new input of the same name renames no case that was there: "x_json" stays x.json's
+    (indir / "X.csv").write_text("x,y,z\n")
+    again = {c.relpath: c.name for c in discover_cases(indir, exclude=[indir / "out"])}
+    assert again["X.csv"] == "X_csv"
+    assert all(again[c.relpath] == c.name for c in cases)
 
 
 def test_dicom_series_and_rtstruct_beside_its_images_reconstruct(tmp_path):
