@@ -504,8 +504,7 @@ def _load_rtstruct(
         pixel_spacing=config.pixel_spacing,
         memory_budget_gb=config.max_memory_gb,
     )
-    for structure in missing:
-        logger.warning("ROI %s has no contours: nothing to reconstruct", structure.label)
+    # the reader has said which ROIs have no (closed planar) contour, and why
     return _contour_input(annotation, kind, config, missing)
 
 
