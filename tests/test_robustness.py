@@ -341,6 +341,26 @@ def test_contours_between_ct_slices_keep_their_planes(tmp_path: Path) -> None:
     assert meshes["ct"].volume == pytest.approx(meshes["alone"].volume, rel=0.02)
 
 
+def test_contours_on_some_slices_a_little_off_them_give_what_on_them_gives(
+    tmp_path: Path,
+) -> None:
+    """Contours on every 3rd CT slice gave a ball 36 % smaller than the same contours
+    0.5 mm off those slices: off them, the slice axis was rebuilt with the contours' 9 mm
+    gap, so the ends grew by half of it instead of half a slice."""
+    volumes = []
+    for shift in (0.0, 0.5):
+        zs = [12.0 + shift + 9 * k for k in range(5)]
+        folder = tmp_path / f"ct{shift}"
+        _ct(folder)
+        factory.write_rtstruct(folder / "rs.dcm", {(1, "Ball"): _sphere_rings(20.0, 30.0, zs)})
+        assert main(["run", str(folder), "-o", str(tmp_path / f"out{shift}"), "-q"]) == 0
+        mesh = trimesh.load(tmp_path / f"out{shift}" / "mesh.stl")
+        assert mesh.is_watertight
+        assert mesh.bounds[0, 2] == pytest.approx(zs[0] - 1.5, abs=0.25)  # half a slice
+        volumes.append(mesh.volume)
+    assert volumes[1] == pytest.approx(volumes[0], rel=0.03)
+
+
 def test_allow_irregular_reaches_the_series_of_an_rtstruct(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -39,9 +39,10 @@ terminal and, piped, one line per finished case (`progress: case 3/6 ok:
 liver_003`). `run -q` shows neither.
 
 **Planes.** A structure on one plane becomes a slab one slice thick. Contours
-drawn between the slices of their image series keep their exact positions: the
-surface spans the contours plus half a contour spacing at each end, as when the
-contours are read without the image.
+drawn between the slices of their image series keep their exact positions: all
+the same fraction of a slice off, each stands for one slice, as on the slices;
+otherwise the surface spans the contours plus half a contour spacing at each
+end, as when the contours are read without the image.
 """
 
 COMMANDS = [

@@ -488,13 +488,15 @@ def sections_from_polygons(
         GiB (:func:`slicerecon.io.limits.check_grid`), before rasterizing.
     own_planes : bool
         With ``reference``: when the planes lie between the reference's slices
-        (an RTSTRUCT drawn half a slice off its CT), keep the reference's
-        in-plane pixels but rebuild its slice axis on the planes, with the
-        step of a built grid, so that the planes keep their exact positions
-        and the reconstruction ends half a contour spacing beyond the end
-        planes, as without the reference. Off (the default), planes keep
-        fractional indices on the reference grid (a contour file's own grid
-        round-trips exactly).
+        (an RTSTRUCT drawn half a slice off its CT), keep their exact
+        positions. All the same fraction of a slice off: the reference's
+        slices moved by that fraction, so each plane stands for one slice as
+        on the reference's own slices. Otherwise keep the reference's in-plane
+        pixels but rebuild its slice axis on the planes, with the step of a
+        built grid (the reconstruction then ends half a contour spacing
+        beyond the end planes, as without the reference). Off (the default),
+        planes keep fractional indices on the reference grid (a contour
+        file's own grid round-trips exactly).
     one_structure : bool
         The polygons outline one structure: two on one plane that cross or
         repeat are warned about (:func:`rings_that_cross`). False for the
@@ -575,8 +577,17 @@ def sections_from_polygons(
     else:
         indices = _reference_indices(grid, along, plane_pos, plane_tolerance_mm)
         if own_planes and not np.allclose(indices, np.round(indices)):
-            grid = _contour_axis(grid, along, plane_pos, indices, plane_tolerance_mm)
-            indices = _built_indices(plane_pos, plane_tolerance_mm)
+            shift = float(indices[0] - np.round(indices[0]))
+            step = abs(float(np.dot(grid.affine[:3, grid.axis], along)))
+            if np.all(
+                np.abs(indices - shift - np.round(indices - shift)) * step <= plane_tolerance_mm
+            ):
+                # every plane the same fraction of a slice off: the image's slices, moved
+                grid = _moved_axis(grid, shift)
+                indices = np.round(indices - shift)
+            else:
+                grid = _contour_axis(grid, along, plane_pos, indices, plane_tolerance_mm)
+                indices = _built_indices(plane_pos, plane_tolerance_mm)
 
     check_grid(grid.shape, what="the contours", memory_budget_gb=memory_budget_gb)
     masks, crossing = _rasterize_planes(polys, members, grid, one_structure)
@@ -621,6 +632,23 @@ def _reference_indices(
             f"{grid.axis}); the contours do not belong to this image"
         )
     return indices
+
+
+def _moved_axis(grid: _Grid, shift: float) -> _Grid:
+    """The reference grid moved by ``shift`` of a slice along its slice axis.
+
+    Contours drawn the same fraction of a slice off the image's slices (an
+    RTSTRUCT exported half a slice off its CT) keep their positions and the
+    image's slice step, so each stands for one slice, as on the image's own.
+    """
+    affine = grid.affine.copy()
+    affine[:3, 3] = grid.affine[:3, 3] + grid.affine[:3, grid.axis] * shift
+    logger.info(
+        "the contour planes lie %.3g of a slice off the image's slices: they keep their "
+        "positions on the image's slices moved by that much",
+        shift,
+    )
+    return _Grid(affine, grid.shape, grid.axis)
 
 
 def _contour_axis(
