@@ -232,6 +232,7 @@ def render_page(
         "renders": renders,
         "render_note": render_note,
         "failures": [c for c in cases if not c.ok],
+        "warned": [c for c in cases if c.ok and c.warnings],
         "panel_px": PANEL_PX,
     }
     return _environment().get_template(TEMPLATE).render(context)

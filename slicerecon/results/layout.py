@@ -92,8 +92,11 @@ SUMMARY_COLUMNS = (
     "watertight",
     *KEY_METRICS,
     "seconds",
+    "read_as",
+    "warnings",
 )
-"""Columns of ``summary.csv``, in order."""
+"""Columns of ``summary.csv``, in order (``read_as``: how the input was read; ``warnings``:
+the case's warning lines, joined by `` | ``)."""
 
 
 def mesh_file(label: str, mesh_format: str, *, several: bool) -> str:

@@ -215,6 +215,7 @@ def read_case(directory: str | os.PathLike[str], *, name: str | None = None) -> 
         structures=structures,
         coordinates=frame,
         warnings=tuple(str(w) for w in done.get("warnings") or () if isinstance(w, str)),
+        read_as=str(plan.get("annotation") or ""),
     )
 
 

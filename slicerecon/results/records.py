@@ -248,6 +248,9 @@ class CaseResult:
         The world frame of the meshes (``RAS`` or ``LPS``), when recorded.
     warnings : tuple of str
         The warnings the case gave when it ran (one line each).
+    read_as : str
+        How the input was read (``plan.json``'s ``annotation``: dense, or which
+        planes of which axes), the line ``run`` prints; empty when not known.
     """
 
     case: str
@@ -274,6 +277,7 @@ class CaseResult:
     structures: tuple[StructureRecord, ...] = ()
     coordinates: str | None = None
     warnings: tuple[str, ...] = ()
+    read_as: str = ""
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -320,6 +324,8 @@ class CaseResult:
             "planes": "" if self.planes is None else self.planes,
             "watertight": "" if self.watertight is None else str(self.watertight).lower(),
             "seconds": "" if self.seconds is None else f"{self.seconds:.3f}",
+            "read_as": self.read_as,
+            "warnings": " | ".join(w.replace("\n", " ").strip() for w in self.warnings),
         }
         for name in KEY_METRICS:
             value = metrics.get(name)

@@ -429,6 +429,26 @@ def test_report_is_written_and_its_failure_does_not_fail_the_batch(tmp_path, mon
     assert calls == [(tmp_path / "out").resolve()]
 
 
+def test_how_each_input_was_read_and_its_warnings_reach_summary_and_report(tmp_path):
+    """A case read with a warning appeared as a plain "ok" in summary.csv and the report."""
+    import nibabel as nib
+
+    labels = np.zeros((30, 30, 24), np.uint8)
+    labels[6:24, 6:24, 2:22:3] = 1  # an organ on every 3rd slice
+    labels[8:12, 8:12, 12] = 1
+    labels[14:20, 14:20, 13] = 2  # a lesion drawn on one slice only: warned about
+    (tmp_path / "in").mkdir()
+    nib.save(nib.Nifti1Image(labels, np.eye(4)), tmp_path / "in" / "drawn.nii.gz")
+    write_nifti(make_shape("sphere", radius=5.0), tmp_path / "in" / "ball.nii.gz")
+    assert run_batch(tmp_path / "in", tmp_path / "out", CONFIG, workers=0).ok
+    rows = _summary(tmp_path / "out")
+    assert rows["drawn"]["read_as"].startswith("sparse annotation (detected)")
+    assert "one plane only" in rows["drawn"]["warnings"]
+    assert rows["ball"]["read_as"].startswith("dense mask") and rows["ball"]["warnings"] == ""
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert "Warnings (1 case)" in page and "one plane only" in page
+
+
 def test_interrupted_summary_write_leaves_no_partial_file(tmp_path):
     target = tmp_path / "summary.csv"
     good = [CaseResult("a", "a.nii.gz", "nifti", "ok", parts=2, planes=8, watertight=True)]
