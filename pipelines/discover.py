@@ -8,11 +8,12 @@ order, skipping hidden files and folders) and finds:
   (:data:`slicerecon.io.INPUT_SUFFIXES`): NIfTI (``*.nii``, ``*.nii.gz``),
   NRRD label maps and 3D Slicer segmentations (``*.nrrd``, ``*.seg.nrrd``),
   VTK images (``*.vti``), contour files (``*.json``, ``*.csv``);
-* DICOM SEG files: one case each;
-* DICOM RTSTRUCT files: one case each. When the RTSTRUCT lies in a folder that
+* DICOM SEG and RTSTRUCT files: one case each. When one lies in a folder that
   also holds an image series, or whose one subfolder holding images does
-  (``pat1/RS.dcm`` beside ``pat1/CT/``), the contours are read on that series'
-  voxel grid (the images are its reference, not a case of their own);
+  (``pat1/RS.dcm`` beside ``pat1/CT/``), or, alone in its folder, beside one
+  folder holding images (``pat1/RTSTRUCT/RS.dcm`` beside ``pat1/CT/``), it is
+  read on that series' voxel grid (the images are its reference, not a case of
+  their own), unless their FrameOfReferenceUIDs differ;
 * DICOM image series: a folder of image files of one series (a mask stored as
   DICOM) is one case, unless the folder also holds an RTSTRUCT or a SEG (then
   the images are the reference those were drawn on);
@@ -80,7 +81,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import NamedTuple
 
 from slicerecon.errors import InputError
-from slicerecon.io import kind_of_name, series_below
+from slicerecon.io import kind_of_name, same_frame, series_below
 from slicerecon.io.dicom.sniff import DICOM_SUFFIXES, dicom_role
 from slicerecon.results import SUMMARY_COLUMNS, SUMMARY_CSV
 
@@ -306,10 +307,11 @@ def _folder_cases(
         skipped += [
             SkippedInput(_relpath(f, root), OTHER_DICOM_REASON) for f in dicom.get("other", [])
         ]
+    reference = tuple(sorted(images + dicom.get("unreadable", []))) if images else ()
     for f in dicom.get("seg", []):
         rel = _relpath(f, root)
-        found.append((_strip_suffix(rel), Case("", f, "dicom-seg", rel, (f,), folder)))
-    reference = tuple(sorted(images + dicom.get("unreadable", []))) if images else ()
+        case = Case("", f, "dicom-seg", rel, (f, *reference), folder, folder if images else None)
+        found.append((_strip_suffix(rel), case))
     for f in dicom.get("rtstruct", []):
         rel = _relpath(f, root)
         case = Case("", f, "rtstruct", rel, (f, *reference), folder, folder if images else None)
@@ -317,16 +319,25 @@ def _folder_cases(
     return found, skipped
 
 
-def _pair_series_below(found: list[tuple[str, Case]]) -> list[tuple[str, Case]]:
-    """An RTSTRUCT in a folder without images takes the one image series in a subfolder
-    of it (``pat1/RS.dcm`` beside ``pat1/CT/``: :func:`slicerecon.io.series_below`, as
-    ``slicerecon run pat1`` reads it); that series is then its reference, not a case."""
+def _pair_series_below(found: list[tuple[str, Case]], root: Path) -> list[tuple[str, Case]]:
+    """An RTSTRUCT or SEG in a folder without images takes the one image series in a
+    subfolder of it (``pat1/RS.dcm`` beside ``pat1/CT/``: :func:`slicerecon.io.series_below`,
+    as ``slicerecon run pat1`` reads it), or, alone in its folder, the one series in a
+    folder beside it (``pat1/RTSTRUCT/RS.dcm`` beside ``pat1/CT/``, as PACS exports a
+    study); that series is then its reference, not a case."""
     out = list(found)
     claimed: set[int] = set()
+    drawings = [case.path for _, case in found if case.kind in ("rtstruct", "dicom-seg")]
     for n, (base, case) in enumerate(found):
-        if case.kind != "rtstruct" or case.image_dir is not None:
+        if case.kind not in ("rtstruct", "dicom-seg") or case.image_dir is not None:
             continue
-        below = series_below(case.path.parent)
+        folder = case.path.parent
+        below = series_below(folder)
+        alone = sum(p.parent == folder for p in drawings) == 1
+        if below is None and alone and folder != root and _within(folder.parent, root):
+            below = series_below(folder.parent)
+        if below is not None and not same_frame(case.path, below):
+            continue  # another study's images
         m = next(
             (
                 m
@@ -549,7 +560,7 @@ def discover(
         )
         found.extend(cases_here)
         skipped.extend(skipped_here)
-    found = _pair_series_below(found)
+    found = _pair_series_below(found, root)
     found.sort(key=lambda item: item[1].relpath)
     cases: list[Case] = []
     taken: set[str] = {name.casefold() for name in RESERVED_NAMES}

@@ -39,7 +39,7 @@ from .errors import EmptyMaskError, OptionError
 from .inputs import axis_upsample, prepare_inputs, refuse_plane_options
 from .io import InputKind, detect_kind, load_ground_truth, load_input
 from .io.contours import read_contour_annotation
-from .io.dicom import dicom_info
+from .io.dicom import dicom_info, dicom_series_geometry
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
@@ -168,9 +168,10 @@ def load_case(
         logger.info("%s", case.annotation.source)
         return case
     kind = detect_kind(input_path)
-    if image_dir is not None and kind.kind != "rtstruct":
+    if image_dir is not None and kind.kind not in ("rtstruct", "dicom-seg"):
         raise OptionError(
-            f"an image series applies to RTSTRUCT inputs only; {input_path} is a {kind.kind} input"
+            f"an image series applies to RTSTRUCT and SEG inputs only; {input_path} is a "
+            f"{kind.kind} input"
         )
     if kind.kind == "rtstruct":
         case = _load_rtstruct(kind, config, image_dir)
@@ -178,6 +179,9 @@ def load_case(
         case = _load_contours(kind, config)
     else:
         case = _load_label_map(kind, config)
+        series = image_dir if image_dir is not None else kind.image_dir
+        if kind.kind == "dicom-seg" and series is not None:
+            case = _on_series(case, Path(series), config, given=image_dir is not None)
     if ground_truth is not None:
         case = _with_ground_truth(case, ground_truth, config)
     logger.info("%s: %s", kind.path, case.annotation.source)
@@ -226,6 +230,54 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
     )
     assert label_map is not None
     return case_from_label_map(label_map, config, kind=kind)
+
+
+def _on_series(
+    case: CaseInput, series: Path, config: ReconstructConfig, *, given: bool
+) -> CaseInput:
+    """A SEG's case written on the grid of the image series it was drawn on.
+
+    The SEG's grid spans its frames only; its label maps and DICOM outputs go on
+    the series' grid, which holds it voxel for voxel. A series it does not fit
+    (other voxels, or frames beyond its slices) is refused in one line when it
+    was given (``image_dir``), and left aside with a warning when it was only
+    found beside the SEG (the outputs then keep the SEG's grid, without DICOM
+    outputs).
+
+    Raises
+    ------
+    OptionError
+        ``given`` and the SEG's grid is not a part of the series'.
+    """
+    affine, shape, _ = dicom_series_geometry(series, allow_irregular=config.allow_irregular)
+    own = case.output_affine
+    offset = np.linalg.solve(affine[:3, :3], own[:3, 3] - affine[:3, 3])
+    start = np.rint(offset).astype(np.int64)
+    fits = (
+        np.allclose(own[:3, :3], affine[:3, :3], atol=1e-3)
+        and np.allclose(offset, start, atol=1e-2)
+        and bool(np.all(start >= 0))
+        and bool(np.all(start + np.asarray(case.output_shape) <= np.asarray(shape)))
+    )
+    if not fits:
+        message = (
+            f"{case.input_path}: its frames are not slices of the image series {series} "
+            "(other voxels, or beyond its slices)"
+        )
+        if given:
+            raise OptionError(f"{message}; pass the series the SEG was drawn on, or the SEG alone")
+        logger.warning(
+            "%s: the outputs keep the SEG's grid, and no DICOM output refers to the series",
+            message,
+        )
+        return replace(case, kind=replace(case.kind, image_dir=None))
+    return replace(
+        case,
+        kind=replace(case.kind, image_dir=series),
+        output_affine=affine,
+        output_shape=(int(shape[0]), int(shape[1]), int(shape[2])),
+        crop_lo=case.crop_lo + start,
+    )
 
 
 def _layered_nrrd(kind: InputKind) -> bool:

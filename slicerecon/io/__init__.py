@@ -37,6 +37,7 @@ __all__ = [
     "kind_of_name",
     "load_ground_truth",
     "load_input",
+    "same_frame",
     "series_below",
 ]
 
@@ -121,6 +122,51 @@ def series_below(folder: Path) -> Path | None:
     return found[0] if len(found) == 1 else None
 
 
+def same_frame(drawing: Path, series: Path) -> bool:
+    """Whether an RTSTRUCT or SEG and the first image of a series folder name one
+    FrameOfReferenceUID (True when either does not say: nothing tells them apart)."""
+    from .dicom.sniff import read_dicom_header
+
+    def frame(path: Path) -> str:
+        try:
+            ds = read_dicom_header(path)
+        except Exception:  # noqa: BLE001 - an unreadable file names no frame
+            return ""
+        uid = str(ds.get("FrameOfReferenceUID", "") or "")
+        if not uid and "ReferencedFrameOfReferenceSequence" in ds:
+            items = ds.ReferencedFrameOfReferenceSequence
+            uid = str(items[0].get("FrameOfReferenceUID", "") or "") if len(items) else ""
+        return uid
+
+    first = next(
+        (f for f in sorted(series.iterdir()) if f.is_file() and not f.name.startswith(".")), None
+    )
+    own, theirs = frame(drawing), "" if first is None else frame(first)
+    return not own or not theirs or own == theirs
+
+
+def _drawing_below(folder: Path) -> InputKind | None:
+    """A folder of subfolders only, as PACS exports a study (``CT/`` beside
+    ``RTSTRUCT/``): its one RTSTRUCT or SEG in a subfolder, with the one image
+    series of another subfolder (:func:`series_below`); None when there is not
+    exactly one of each."""
+    from .dicom import dicom_modality
+
+    images = series_below(folder)
+    found = []
+    for sub in sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".")):
+        if sub == images:
+            continue
+        for f in sorted(f for f in sub.iterdir() if f.is_file() and not f.name.startswith(".")):
+            modality = dicom_modality(f)
+            if modality in ("RTSTRUCT", "SEG"):
+                found.append((f, modality))
+    if images is None or len(found) != 1 or not same_frame(found[0][0], images):
+        return None
+    path, modality = found[0]
+    return InputKind("rtstruct" if modality == "RTSTRUCT" else "dicom-seg", path, image_dir=images)
+
+
 def detect_kind(path: str | os.PathLike[str]) -> InputKind:
     """Tell what kind of input ``path`` is, without reading pixel data.
 
@@ -140,15 +186,23 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
     if p.is_dir():
         files = sorted(f for f in p.iterdir() if f.is_file() and not f.name.startswith("."))
         if not files:
-            raise InputError(f"directory {p} is empty: expected a DICOM series")
-        modalities = {f: dicom_modality(f) for f in files}
-        rtstructs = [f for f in files if modalities[f] == "RTSTRUCT"]
-        if len(rtstructs) == 1:
-            images = [f for f, m in modalities.items() if m not in (None, "RTSTRUCT", "SEG")]
-            return InputKind("rtstruct", rtstructs[0], image_dir=p if images else series_below(p))
-        if len(rtstructs) > 1:
+            below = _drawing_below(p)
+            if below is not None:
+                return below
             raise InputError(
-                f"directory {p} holds {len(rtstructs)} RTSTRUCT files; pass one of them"
+                f"directory {p} holds no file: expected a DICOM series, or an RTSTRUCT or SEG "
+                "beside it (in one folder, or in two folders side by side)"
+            )
+        modalities = {f: dicom_modality(f) for f in files}
+        drawings = [f for f in files if modalities[f] in ("RTSTRUCT", "SEG")]
+        if len(drawings) == 1:
+            images = [f for f, m in modalities.items() if m not in (None, "RTSTRUCT", "SEG")]
+            kind = "rtstruct" if modalities[drawings[0]] == "RTSTRUCT" else "dicom-seg"
+            return InputKind(kind, drawings[0], image_dir=p if images else series_below(p))
+        if len(drawings) > 1:
+            raise InputError(
+                f"directory {p} holds {len(drawings)} RTSTRUCT or SEG files "
+                f"({', '.join(f.name for f in drawings[:4])}); pass one of them"
             )
         return InputKind("dicom-series", p)
     named = kind_of_name(p.name)

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import dicom_factory as factory  # tests/io, on pytest's pythonpath
+import nibabel as nib
 import numpy as np
 import pytest
 import trimesh
@@ -222,6 +223,49 @@ def test_an_rtstruct_beside_its_series_in_a_subfolder_is_read_on_that_series(tmp
     assert plan["sections"]["plane_indices"] == list(range(3, 10))  # on the CT's slice grid
     assert main(["run", str(patient), "-o", str(tmp_path / "run"), "-q"]) == 0
     assert (tmp_path / "run" / "rtstruct.dcm").is_file()
+
+
+def test_a_seg_beside_its_series_and_a_pacs_export_are_read_on_the_series(tmp_path):
+    """A folder of CT images and a SEG drawn on every 2nd slice: ``run`` read the CT
+    ("not a label map: negative values"), batch the SEG on its own 5 mm grid without
+    seg.dcm. A study exported as CT/ beside RTSTRUCT/: "directory is empty", and the
+    RTSTRUCT without its series in a batch. Each is now one case on the CT's grid."""
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 2], [0, 0, 0])
+    ct = np.full((40, 40, 16), -1000, np.int16)
+    x, y, z = np.meshgrid(np.arange(40), np.arange(40), np.arange(16) * 2.0, indexing="ij")
+    ball = (x - 20) ** 2 + (y - 20) ** 2 + (z - 15) ** 2 < 9**2
+    drawn = np.zeros(ball.shape, bool)
+    drawn[:, :, ::2] = ball[:, :, ::2]
+    seg_study = tmp_path / "in" / "seg_study"
+    factory.write_series(seg_study, ct, affine, modality="CT", rescale=(1.0, -1024.0))
+    factory.write_seg(seg_study / "seg.dcm", {1: drawn}, affine, labels={1: "Ball"})
+    export = tmp_path / "in" / "export"
+    factory.write_series(export / "CT", ct, affine, modality="CT", rescale=(1.0, -1024.0))
+    rings = [
+        factory.contour_item(factory.circle(8.0 - abs(k - 6), (20.0, 20.0), 2.0 * k))
+        for k in range(3, 10)
+    ]
+    factory.write_rtstruct(
+        export / "RTSTRUCT" / "RS.dcm", {(1, "Lesion"): rings}, on_series=export / "CT"
+    )
+    for folder in (seg_study, export):
+        out = tmp_path / "run" / folder.name
+        assert main(["run", str(folder), "-o", str(out), "-q"]) == 0
+        assert nib.load(out / "labels.nii.gz").shape == ct.shape  # the CT's grid
+        assert (out / "seg.dcm").is_file()
+    assert json.loads((tmp_path / "run" / "seg_study" / "plan.json").read_text())[
+        "annotation"
+    ].startswith("sparse annotation")
+    result = run_batch(
+        tmp_path / "in", tmp_path / "out", ReconstructConfig(n_points=5000), workers=0, report=False
+    )
+    assert [(c.case, c.kind, c.status) for c in result.cases] == [
+        ("export__RTSTRUCT__RS", "rtstruct", "ok"),
+        ("seg_study__seg", "dicom-seg", "ok"),
+    ]
+    for case in ("export__RTSTRUCT__RS", "seg_study__seg"):
+        assert (tmp_path / "out" / case / "seg.dcm").is_file()
+        assert nib.load(tmp_path / "out" / case / "labels.nii.gz").shape == ct.shape
 
 
 # ------------------------------------------------------------------ batch on Dask
