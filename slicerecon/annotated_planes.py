@@ -71,6 +71,13 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
         return annotation
     planes = annotation.planes
     holding = [frozenset(p.masks) for p in planes]
+    everything = frozenset(values)
+    # structures that may overlap: one drawn inside another (GTV in its organ) on every
+    # plane holding both, drawn on a plane without it, says nothing of that other there
+    outer = {} if annotation.exclusive else _nested_in(planes, holding)
+    silent = [
+        frozenset(x for y in held for x in outer.get(y, ()) if x not in held) for held in holding
+    ]
     alone: list[int] = []
     gaps: dict[int, int] = {}
     for value in values:
@@ -81,6 +88,7 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
             if value not in h
             and h
             and planes[n].annotates(value)
+            and value not in silent[n]
             and _between(planes[n].pose, [planes[k].pose for k in own])
         ]
         if not inside:
@@ -106,16 +114,36 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
             annotation.structure(value).label,
             count,
         )
-    if not alone:
+    if not alone and not any(silent):
         return annotation
-    everything = frozenset(values)
     rebuilt = []
-    for plane, held in zip(planes, holding, strict=True):
+    for plane, held, quiet in zip(planes, holding, silent, strict=True):
         speaks = (everything if plane.structures is None else plane.structures) - (
             frozenset(alone) - held
         )
-        rebuilt.append(AnnotatedPlane(plane.pose, plane.masks, speaks))
+        rebuilt.append(AnnotatedPlane(plane.pose, plane.masks, speaks - quiet))
     return replace(annotation, planes=tuple(rebuilt))
+
+
+def _nested_in(
+    planes: Sequence[AnnotatedPlane], holding: Sequence[frozenset[int]]
+) -> dict[int, frozenset[int]]:
+    """For each structure, the structures it lies inside: on every plane holding both
+    (one at least), all its pixels are the other's too."""
+    inside: dict[int, set[int]] = {}
+    seen: set[tuple[int, int]] = set()
+    broken: set[tuple[int, int]] = set()
+    for plane, held in zip(planes, holding, strict=True):
+        for y in held:
+            for x in held:
+                if x == y or (y, x) in broken:
+                    continue
+                seen.add((y, x))
+                if np.any(plane.masks[y] & ~plane.masks[x]):
+                    broken.add((y, x))
+    for y, x in seen - broken:
+        inside.setdefault(y, set()).add(x)
+    return {y: frozenset(xs) for y, xs in inside.items()}
 
 
 def _between(pose: PlanePose, own: Sequence[PlanePose]) -> bool:
