@@ -184,7 +184,7 @@ class Annotation:
         Structures reconstructed on a grid of their own, not the reference
         grid: ``{value: (affine, shape)}``. Several inputs combined give a
         structure drawn by one input only that input's grid
-        (:func:`slicerecon.case_inputs.combine_cases`); see :meth:`of_structure`.
+        (:func:`slicerecon.combine.combine_cases`); see :meth:`of_structure`.
     """
 
     planes: tuple[AnnotatedPlane, ...]

@@ -633,7 +633,7 @@ def run_case(
     """Reconstruct one case and write its outputs: the one pipeline of ``slicerecon run``.
 
     ``input_path`` is one input, or several sparse inputs of one study
-    (:func:`slicerecon.case_inputs.combine_cases`).
+    (:func:`slicerecon.combine.combine_cases`).
 
     Writes into ``outdir`` (:func:`slicerecon.case_outputs.write_case`, every
     file atomically): ``mesh.<format>`` for one structure or

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -23,29 +23,26 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .annotated_planes import (
-    check_drawings_meet,
-    covering_grid,
-    merge_repeated_planes,
     planes_of_each_structure,
 )
 from .annotation import (
     AnnotatedPlane,
     Annotation,
-    PlanePose,
     annotation_from_sections,
     plane_pose,
 )
+from .case_input import CaseInput
+from .combine import combine_cases
 from .errors import EmptyMaskError, OptionError
 from .inputs import axis_upsample, prepare_inputs, refuse_plane_options
 from .io import InputKind, detect_kind, load_ground_truth, load_input
-from .io.contours import read_contour_annotation
+from .io.contours import contour_file_grid, read_contour_annotation
 from .io.dicom import dicom_info, dicom_series_geometry
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
-from .io.outputs import dicom_image_series
 from .io.rtstruct import read_rtstruct_annotation
-from .labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks
+from .labels import LabelMap, Structure, StructureMasks
 from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
 from .reconstruct import ReconstructConfig
 from .sections import AXIS_NAMES, CrossSections, Volume, axis_index, in_plane_axes
@@ -58,63 +55,6 @@ logger = logging.getLogger(__name__)
 MIN_GAPS_WARNED = 2
 """Runs of empty slices inside a dense-read mask along one axis from which a warning says
 that it may be drawn on groups of slices (one gap: two pieces, which dense masks have)."""
-
-
-@dataclass(frozen=True, eq=False)
-class CaseInput:
-    """What a case reconstructs from, and what it is scored against.
-
-    Attributes
-    ----------
-    annotation : Annotation
-        The annotated planes of every structure, on the shared grid (the
-        input's grid cropped around all the structures, or the contours' grid).
-    labels : LabelMap or None
-        A dense input on the shared grid: each structure's silhouettes come
-        from it, and it is each structure's ground truth. None for sparse inputs.
-    truth : LabelMap, Volume, trimesh.Trimesh or None
-        A separate ground truth (``--gt``): a label map holding the
-        structures' values, or one shape for a one-structure case.
-    input_path : Path
-        The input.
-    kind : InputKind
-        What the input is.
-    output_affine : ndarray of shape (4, 4)
-        Voxel index → world mm of the grid the label map is written on (the
-        input's own grid for label maps).
-    output_shape : tuple of 3 int
-        Shape of that grid.
-    crop_lo : ndarray of shape (3,), int
-        Where the shared grid starts on the output grid.
-    missing : tuple of Structure
-        Structures the input lists but nothing was drawn for (RTSTRUCT ROIs
-        without closed contours): reported, not reconstructed.
-    """
-
-    annotation: Annotation
-    labels: LabelMap | StructureMasks | None
-    input_path: Path
-    kind: InputKind
-    output_affine: NDArray[np.float64]
-    output_shape: tuple[int, int, int]
-    crop_lo: NDArray[np.int64]
-    truth: Any = None
-    missing: tuple[Structure, ...] = ()
-
-    @property
-    def dense(self) -> bool:
-        """True when the input was a dense mask (sampled here, its own ground truth)."""
-        return self.labels is not None
-
-    @property
-    def has_truth(self) -> bool:
-        """True when the case can be scored (a dense input, or a separate ground truth)."""
-        return self.labels is not None or self.truth is not None
-
-    @property
-    def shared(self) -> CrossSections:
-        """Every structure's planes together, on the shared grid."""
-        return self.annotation.cross_sections()
 
 
 def _as_label_map(volume: Volume, structure: Structure | None = None) -> LabelMap:
@@ -557,7 +497,8 @@ def _load_rtstruct(
         memory_budget_gb=config.max_memory_gb,
     )
     # the reader has said which ROIs have no (closed planar) contour, and why
-    return _contour_input(annotation, kind, config, missing)
+    series = image_dir if image_dir is not None else kind.image_dir
+    return _contour_input(annotation, kind, config, missing, built=series is None)
 
 
 def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
@@ -572,7 +513,8 @@ def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:
     )
     if config.selectors:
         annotation = annotation.select(config.selectors, source=kind.path)
-    return _contour_input(annotation, kind, config, ())
+    built = config.pixel_spacing is not None or contour_file_grid(kind.path) is None
+    return _contour_input(annotation, kind, config, (), built=built)
 
 
 def _contour_input(
@@ -580,20 +522,34 @@ def _contour_input(
     kind: InputKind,
     config: ReconstructConfig,
     missing: tuple[Structure, ...],
+    *,
+    built: bool = False,
 ) -> CaseInput:
     """The case input of contours read as ``annotation``, its sampled grid inside the budget.
 
     Contours on parallel planes are reconstructed on a grid sampled along the
     plane normal as finely as in plane (:func:`_upsampled`): that grid, not only
-    the rasterized planes, must fit ``--max-memory``.
+    the rasterized planes, must fit ``--max-memory``. On a grid built on the
+    contours (``built``: no image's grid; its slice step is the gap between
+    planes), the label maps are written on that sampling too, so that they hold
+    the surface between the planes and not only the drawn slices.
     """
     first = annotation.grid_axis()
+    output_affine, output_shape = annotation.affine, annotation.grid_shape
     if first is not None:
+        sampled = _upsampled(annotation, first)
         check_grid(
-            _upsampled(annotation, first),
+            sampled,
             what=f"{kind.path}: the reconstruction grid",
             memory_budget_gb=config.max_memory_gb,
         )
+        factor = sampled[first] // annotation.grid_shape[first]
+        if built and factor > 1:
+            output_affine = annotation.affine.copy()
+            column = annotation.affine[:3, first]
+            output_affine[:3, first] = column / factor
+            output_affine[:3, 3] = annotation.affine[:3, 3] - column * (factor - 1) / (2 * factor)
+            output_shape = (int(sampled[0]), int(sampled[1]), int(sampled[2]))
     annotation = replace(
         annotation,
         source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}",
@@ -603,8 +559,8 @@ def _contour_input(
         None,
         kind.path,
         kind,
-        annotation.affine,
-        annotation.grid_shape,
+        output_affine,
+        output_shape,
         np.zeros(3, np.int64),
         missing=missing,
     )
@@ -673,238 +629,3 @@ def reading_of(
         return None
     crop = union.crop(pad=3)
     return detect_planes(crop.mask, parse_annotation(annotation)).describe(crop.spacing)
-
-
-def _key(structure: Structure) -> str:
-    return " ".join(structure.name.split()).casefold()
-
-
-def combine_cases(
-    cases: Sequence[CaseInput], *, memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB
-) -> CaseInput:
-    """Several sparse inputs of one study as one annotation, in world mm.
-
-    The **reference** input is the one with the most planes among those drawn
-    on an image (a label map, or contours with their image series; contours
-    without one when no input has an image); on a tie, the one with the
-    smallest voxels, then by file name. The others are taken by file name, so
-    the result is the same in any order. The reference's voxel lattice is the
-    reference grid, extended to hold every input's drawn pixels, and the label
-    map is written on its output grid, extended only where another input's
-    drawing lies beyond it (unless DICOM outputs refer to its image series: then
-    a warning says what lies beyond the series). The others' planes keep their
-    poses in world mm (a plane that is not a slice of that grid is sampled
-    through its projection). Structures are matched by name (case and spaces
-    ignored), unnamed ones by value; one named in one input and unnamed in
-    another is kept apart, with a warning; a structure new to the reference
-    keeps its value, or takes the next free one. The structures form a
-    partition only when every input is a label map (contours are ROIs, even
-    one structure's). Otherwise a structure drawn by one input only, on another
-    lattice than the reference's, keeps that input's grid
-    (:attr:`Annotation.grids`): it is reconstructed as that input alone would
-    reconstruct it, not on the reference's pixels. A structure drawn on one
-    plane in two inputs is kept once when both drawings agree; drawn by two
-    inputs in places that do not meet, it is warned about, or refused when they
-    lie further apart than its size (:func:`check_drawings_meet`).
-
-    Raises
-    ------
-    OptionError
-        A dense input among several (a dense mask is its own case), one value
-        named differently in two inputs, one structure drawn differently on one
-        plane in two inputs, or drawn far apart by two inputs.
-    MemoryBudgetError
-        The grid holding every input exceeds ``memory_budget_gb``.
-    """
-    for case in cases:
-        if case.dense:
-            raise OptionError(
-                f"{case.input_path} is a dense mask: several inputs combine sparse annotations "
-                "of one study; reconstruct a dense mask on its own"
-            )
-    # the reference first, the others by file name: the same result in any order
-    given = list(cases)
-    cases = sorted(given, key=_reference_rank)
-    cases = [cases[0], *sorted(cases[1:], key=lambda c: str(c.input_path))]
-    first = cases[0]
-    structures: list[Structure] = list(first.annotation.structures)
-    origin = {s.value: first.input_path for s in structures}
-    # each input's planes speak for that input's structures only
-    own_first = frozenset(first.annotation.values)
-    planes: list[AnnotatedPlane] = [
-        AnnotatedPlane(p.pose, p.masks, own_first if p.structures is None else p.structures)
-        for p in first.annotation.planes
-    ]
-    # which inputs draw each structure: one drawn by a single other input keeps that
-    # input's grid (it is reconstructed as that input alone would reconstruct it)
-    drawers: dict[int, set[int]] = {v: {0} for v in own_first}
-    grids: dict[int, tuple[NDArray[np.float64], tuple[int, int, int]]] = {}
-    for n, case in enumerate(cases[1:], start=1):
-        earlier = list(structures)
-        taken = {s.value for s in earlier} | set(case.annotation.values)
-        remap: dict[int, int] = {}
-        apart: dict[Path, list[str]] = {}
-        for structure in case.annotation.structures:
-            match = next(
-                (
-                    s
-                    for s in earlier
-                    if (structure.name and s.name and _key(s) == _key(structure))
-                    or (not structure.name and not s.name and s.value == structure.value)
-                ),
-                None,
-            )
-            if match is None:
-                clash = next((s for s in earlier if s.value == structure.value), None)
-                if clash is not None and clash.name and structure.name:
-                    raise OptionError(
-                        f"structure {structure.value} is {clash.name!r} in "
-                        f"{origin[clash.value]} and {structure.name!r} in {case.input_path}: "
-                        "give it one name in both files, or the two structures different values"
-                    )
-                value = structure.value
-                if clash is not None:  # one named, one not: kept apart, and said so
-                    apart.setdefault(origin[clash.value], []).append(
-                        f"{structure.value} ({clash.name or structure.name!r})"
-                    )
-                    value = max(taken) + 1
-                    taken.add(value)
-                match = replace(structure, value=value)
-                structures.append(match)
-                origin[value] = case.input_path
-            remap[structure.value] = match.value
-            drawers.setdefault(match.value, set()).add(n)
-        for other, listed in apart.items():
-            logger.warning(
-                "%s and %s both hold structure(s) %s, named in one and not in the other: "
-                "they are kept as separate structures; name them alike in both (or in "
-                "neither) to combine them",
-                other,
-                case.input_path,
-                ", ".join(listed),
-            )
-        # world mm of the first input's frame: LPS (DICOM, Slicer) and RAS (NIfTI) differ
-        # by the sign of x and y
-        flip = case.annotation.coordinates != first.annotation.coordinates
-        own_affine = LPS_TO_RAS @ case.annotation.affine if flip else case.annotation.affine
-        for value in remap.values():
-            grids[value] = (own_affine, case.annotation.grid_shape)
-        for plane in case.annotation.planes:
-            masks = {remap[v]: m for v, m in plane.masks.items()}
-            own = (
-                frozenset(remap.values())
-                if plane.structures is None
-                else frozenset(remap[v] for v in plane.structures)
-            )
-            pose = (
-                PlanePose(LPS_TO_RAS @ plane.pose.affine, plane.pose.shape) if flip else plane.pose
-            )
-            planes.append(AnnotatedPlane(pose, masks, own))
-    # contours are ROIs (they may nest) even when a file holds one structure
-    exclusive = all(c.annotation.exclusive and c.kind.kind in LABEL_MAP_KINDS for c in cases)
-    # a partition is resolved on one grid; elsewhere a structure drawn by one input only,
-    # on another lattice than the reference's, keeps that input's grid
-    grids = {
-        value: grid
-        for value, grid in grids.items()
-        if not exclusive
-        and len(drawers[value]) == 1
-        and not _same_lattice(grid[0], first.annotation.affine)
-    }
-    origins = [str(c.input_path) for c in cases for _ in c.annotation.planes]
-    check_drawings_meet(planes, origins, {s.value: s.label for s in structures})
-    affine = first.annotation.affine
-    lo, hi = covering_grid(planes, affine, first.annotation.grid_shape)
-    size = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), int(hi[2] - lo[2]))
-    check_grid(size, what="the grid of the inputs together", memory_budget_gb=memory_budget_gb)
-    moved = affine.copy()
-    moved[:3, 3] = affine[:3, :3] @ lo + affine[:3, 3]
-    annotation = Annotation(
-        tuple(planes),
-        tuple(structures),
-        moved,
-        size,
-        first.annotation.coordinates,
-        exclusive,
-        grids=grids,
-    )
-    annotation = merge_repeated_planes(annotation, origins, first.crop_lo + lo)
-    names = ", ".join(str(c.input_path) for c in given)
-    annotation = replace(
-        annotation,
-        source=f"{len(cases)} inputs ({names}), {len(structures)} structure(s): "
-        f"{annotation.describe()}",
-    )
-    missing = tuple(s for c in cases for s in c.missing)
-    # the written grid grows only where a drawing lies beyond it, not by the padding
-    drawn_lo, drawn_hi = covering_grid(planes, affine, first.annotation.grid_shape, pad=0)
-    output_affine, output_shape, start = _output_holding(
-        first, first.crop_lo + drawn_lo, first.crop_lo + drawn_hi, memory_budget_gb
-    )
-    return replace(
-        first,
-        annotation=annotation,
-        missing=missing,
-        output_affine=output_affine,
-        output_shape=output_shape,
-        crop_lo=first.crop_lo + lo - start,
-    )
-
-
-def _same_lattice(affine: NDArray[np.float64], reference: NDArray[np.float64]) -> bool:
-    """Whether a grid's voxel centres are voxel centres of the reference grid."""
-    if not np.allclose(affine[:3, :3], reference[:3, :3], atol=1e-6):
-        return False
-    offset = np.linalg.solve(reference[:3, :3], affine[:3, 3] - reference[:3, 3])
-    return bool(np.allclose(offset, np.rint(offset), atol=1e-4))
-
-
-def _reference_rank(case: CaseInput) -> tuple[bool, int, float, str]:
-    """Sorts the reference first: drawn on an image, most planes, smallest voxels, name."""
-    voxel = float(abs(np.linalg.det(case.annotation.affine[:3, :3])))
-    return (not _on_an_image(case), -len(case.annotation.planes), voxel, str(case.input_path))
-
-
-def _on_an_image(case: CaseInput) -> bool:
-    """Whether an input's grid is an image's (not one made for its contours)."""
-    return case.kind.kind in LABEL_MAP_KINDS or _has_series(case)
-
-
-def _has_series(case: CaseInput) -> bool:
-    """Whether DICOM outputs of the input refer to an image series (its slices fix the grid)."""
-    kind = case.kind
-    return dicom_image_series(kind.kind, kind.path, kind.image_dir) is not None
-
-
-def _output_holding(
-    reference: CaseInput,
-    drawn_lo: NDArray[np.int64],
-    drawn_hi: NDArray[np.int64],
-    memory_budget_gb: float,
-) -> tuple[NDArray[np.float64], tuple[int, int, int], NDArray[np.int64]]:
-    """The reference input's output grid grown to hold the voxels ``[drawn_lo, drawn_hi)``
-    (indices on it): its affine, its shape, and where the old grid's first voxel moved
-    (``start``; zeros when it did not grow).
-
-    DICOM outputs refer to the slices of an image series, whose grid cannot grow: a
-    warning then says that the label maps hold only the series' extent.
-    """
-    shape = np.asarray(reference.output_shape, dtype=np.int64)
-    start = np.minimum(drawn_lo, 0)
-    stop = np.maximum(shape, drawn_hi)
-    if not np.any(start < 0) and not np.any(stop > shape):
-        return reference.output_affine, reference.output_shape, start
-    if _has_series(reference):
-        logger.warning(
-            "%s: the inputs' drawings reach beyond its image series: the label maps and DICOM "
-            "outputs hold the series' extent only, the meshes everything",
-            reference.input_path,
-        )
-        return reference.output_affine, reference.output_shape, np.zeros(3, dtype=np.int64)
-    grown = (int(stop[0] - start[0]), int(stop[1] - start[1]), int(stop[2] - start[2]))
-    check_grid(
-        grown, what="the output grid of the inputs together", memory_budget_gb=memory_budget_gb
-    )
-    affine = reference.output_affine.copy()
-    affine[:3, 3] = affine[:3, :3] @ start + affine[:3, 3]
-    return affine, grown, start

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .annotation import AnnotatedPlane, Annotation, window
 from .errors import OptionError
@@ -311,6 +312,26 @@ def _planes_in_words(annotation: Annotation) -> str:
     return f"{n} planes in {len(annotation.orientations())} orientations"
 
 
+def _on_annotation_grid(result: CaseReconstruction, annotation: Annotation) -> NDArray[Any]:
+    """The written label map on the annotation's grid: its window there (it may reach past
+    the written grid), or, written more finely along an axis (contours on a grid of their
+    own), the voxels whose centres are the annotation's."""
+    labels = result.labels
+    inverse = np.linalg.inv(result.affine) @ annotation.affine
+    steps = np.diag(inverse[:3, :3])
+    if np.allclose(steps, 1.0) or not np.allclose(inverse[:3, :3], np.diag(steps), atol=1e-6):
+        lo = np.asarray(result.crop_lo)
+        return window(labels, lo, lo + annotation.grid_shape)
+    out = np.zeros(annotation.grid_shape, dtype=labels.dtype)
+    index = [
+        np.rint(steps[a] * np.arange(n) + inverse[a, 3]).astype(np.int64)
+        for a, n in enumerate(annotation.grid_shape)
+    ]
+    valid = [(i >= 0) & (i < labels.shape[a]) for a, i in enumerate(index)]
+    out[np.ix_(*valid)] = labels[np.ix_(*(i[v] for i, v in zip(index, valid, strict=True)))]
+    return out
+
+
 def _write_preview(
     path: Path, case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
 ) -> None:
@@ -354,10 +375,7 @@ def _write_preview(
         path,
         structures=structures,
         sections=sections,
-        # the annotation's grid on the output grid (it may reach past the written grid)
-        result=window(
-            result.labels, result.crop_lo, np.asarray(result.crop_lo) + annotation.grid_shape
-        ),
+        result=_on_annotation_grid(result, annotation),
         title=title,
         frame=result.coordinates,
         boxes=one.plan.boxes if one is not None else (),

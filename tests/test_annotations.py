@@ -1053,3 +1053,27 @@ def test_a_lesion_inside_an_organ_of_a_seg_says_nothing_of_the_organ_where_drawn
     true_volume = organ.sum() * np.prod(SPACING)
     assert records["Organ"]["volume_mm3"] == pytest.approx(true_volume, rel=0.03)
     assert _volume(out / "meshes" / "1_Organ.stl") == pytest.approx(true_volume, rel=0.03)
+
+
+def test_the_label_map_of_contours_without_a_grid_holds_the_surface_between_planes(
+    tmp_path: Path,
+) -> None:
+    """Contours without an image grid are rasterized on a grid built on them, one slice per
+    plane: labels.nii.gz held the drawn planes only (13 slices 7.5 mm apart; Dice 0.945
+    where the mesh had 0.978). It is now written on the sampling the surface is made on."""
+    rows = ["plane,polygon,x,y,z"]
+    heights = np.arange(-18.0, 19.0, 6.0)
+    for n, z in enumerate(heights):
+        radius = np.sqrt(20.0**2 - z**2)
+        for t in np.linspace(0, 2 * np.pi, 64, endpoint=False):
+            rows.append(f"{n},0,{radius * np.cos(t):.4f},{radius * np.sin(t):.4f},{z}")
+    (tmp_path / "ball.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ball.csv"), "-o", str(out), "-q"]) == 0
+    image = nib.load(out / "labels.nii.gz")
+    spacing = np.linalg.norm(image.affine[:3, :3], axis=0)
+    assert spacing[2] < 6.0 / 3  # slices between the planes
+    voxels = np.count_nonzero(np.asanyarray(image.dataobj)) * np.prod(spacing)
+    assert voxels == pytest.approx(_volume(out / "mesh.stl"), rel=0.03)
+    centres = image.affine[2, 3] + spacing[2] * np.arange(image.shape[2])
+    assert centres[0] < heights[0] and centres[-1] > heights[-1]  # it spans every plane

@@ -91,6 +91,7 @@ __all__ = [
     "ContourFile",
     "ContourGrid",
     "ContourPlane",
+    "contour_file_grid",
     "contour_structures",
     "read_contour_annotation",
     "read_contours",
@@ -215,6 +216,21 @@ def read_contour_annotation(
     """
     with reading(path):
         return _read_contour_annotation(Path(path), pixel_spacing, memory_budget_gb)
+
+
+def contour_file_grid(
+    path: str | os.PathLike[str],
+) -> tuple[NDArray[np.float64], tuple[int, int, int]] | None:
+    """The voxel grid a contour file gives (its ``grid``: affine, shape), or None when the
+    grid is built on its contours (CSV files, JSON files without ``grid``).
+
+    Raises
+    ------
+    InputError, FormatError
+        As :func:`read_contours`, for a file that cannot be read.
+    """
+    with reading(path):
+        return _read_parsed(Path(path)).grid
 
 
 def _read_contour_annotation(

@@ -1,0 +1,79 @@
+"""The record a case is read into: its annotation, its ground truth, where it is written.
+
+:func:`slicerecon.case_inputs.load_case` makes it from any input,
+:func:`slicerecon.combine.combine_cases` from several; :mod:`slicerecon.case`
+reconstructs from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .annotation import Annotation
+from .io import InputKind
+from .labels import LabelMap, Structure, StructureMasks
+from .sections import CrossSections
+
+__all__ = ["CaseInput"]
+
+
+@dataclass(frozen=True, eq=False)
+class CaseInput:
+    """What a case reconstructs from, and what it is scored against.
+
+    Attributes
+    ----------
+    annotation : Annotation
+        The annotated planes of every structure, on the shared grid (the
+        input's grid cropped around all the structures, or the contours' grid).
+    labels : LabelMap or None
+        A dense input on the shared grid: each structure's silhouettes come
+        from it, and it is each structure's ground truth. None for sparse inputs.
+    truth : LabelMap, Volume, trimesh.Trimesh or None
+        A separate ground truth (``--gt``): a label map holding the
+        structures' values, or one shape for a one-structure case.
+    input_path : Path
+        The input.
+    kind : InputKind
+        What the input is.
+    output_affine : ndarray of shape (4, 4)
+        Voxel index → world mm of the grid the label map is written on (the
+        input's own grid for label maps).
+    output_shape : tuple of 3 int
+        Shape of that grid.
+    crop_lo : ndarray of shape (3,), int
+        Where the shared grid starts on the output grid.
+    missing : tuple of Structure
+        Structures the input lists but nothing was drawn for (RTSTRUCT ROIs
+        without closed contours): reported, not reconstructed.
+    """
+
+    annotation: Annotation
+    labels: LabelMap | StructureMasks | None
+    input_path: Path
+    kind: InputKind
+    output_affine: NDArray[np.float64]
+    output_shape: tuple[int, int, int]
+    crop_lo: NDArray[np.int64]
+    truth: Any = None
+    missing: tuple[Structure, ...] = ()
+
+    @property
+    def dense(self) -> bool:
+        """True when the input was a dense mask (sampled here, its own ground truth)."""
+        return self.labels is not None
+
+    @property
+    def has_truth(self) -> bool:
+        """True when the case can be scored (a dense input, or a separate ground truth)."""
+        return self.labels is not None or self.truth is not None
+
+    @property
+    def shared(self) -> CrossSections:
+        """Every structure's planes together, on the shared grid."""
+        return self.annotation.cross_sections()
