@@ -48,11 +48,13 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
 
     A label map's annotated plane says every structure it does not hold is
     absent there, when the structures were drawn on the same planes. A
-    structure that shares **no** plane with another, while planes of others lie
-    inside its own extent, was drawn on planes of its own (structures annotated
-    on interleaved slices): it is read on its own planes, with one line saying
-    so. A structure that does share planes and is missing from planes inside
-    its extent that hold others is read as absent there, with a warning.
+    structure that shares **no** plane with another, while its planes and the
+    others' interleave (a plane of one inside the other's extent: structures
+    annotated on interleaved slices, a lesion drawn on one extra slice), was
+    drawn on planes of its own: it is read on its own planes, which speak for
+    it alone, with one line saying so. A structure that does share planes and
+    is missing from planes inside its extent that hold others is read as
+    absent there, with a warning.
 
     Parameters
     ----------
@@ -78,25 +80,33 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
     silent = [
         frozenset(x for y in held for x in outer.get(y, ()) if x not in held) for held in holding
     ]
-    alone: list[int] = []
-    gaps: dict[int, int] = {}
-    for value in values:
-        own = [n for n, h in enumerate(holding) if value in h]
-        inside = [
+    own = {v: [n for n, h in enumerate(holding) if v in h] for v in values}
+
+    def inside(value: int, skip: frozenset[int] = frozenset()) -> list[int]:
+        # planes inside the value's extent that speak for it and hold others only
+        return [
             n
             for n, h in enumerate(holding)
             if value not in h
             and h
+            and not h <= skip
             and planes[n].annotates(value)
             and value not in silent[n]
-            and _between(planes[n].pose, [planes[k].pose for k in own])
+            and _between(planes[n].pose, [planes[k].pose for k in own[value]])
         ]
-        if not inside:
-            continue
-        if all(holding[n] == {value} for n in own):
-            alone.append(value)
-        else:
-            gaps[value] = len(inside)
+
+    between = {v: inside(v) for v in values}
+    # drawn on planes of its own, interleaved with the others' planes (on planes inside
+    # the extent of another, or with the others' planes inside its own): read on them
+    alone = [
+        v
+        for v in values
+        if own[v]
+        and all(holding[n] == {v} for n in own[v])
+        and (between[v] or any(n in between[w] for w in values if w != v for n in own[v]))
+    ]
+    lone = frozenset(alone)
+    gaps = {v: len(found) for v in values if v not in lone and (found := inside(v, skip=lone))}
     if alone:
         names = ", ".join(annotation.structure(v).label for v in alone)
         logger.warning(
@@ -118,9 +128,9 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
         return annotation
     rebuilt = []
     for plane, held, quiet in zip(planes, holding, silent, strict=True):
-        speaks = (everything if plane.structures is None else plane.structures) - (
-            frozenset(alone) - held
-        )
+        given = everything if plane.structures is None else plane.structures
+        # a plane of structures drawn on planes of their own speaks for them alone
+        speaks = given & held if held and held <= lone else given - (lone - held)
         rebuilt.append(AnnotatedPlane(plane.pose, plane.masks, speaks - quiet))
     return replace(annotation, planes=tuple(rebuilt))
 

@@ -58,7 +58,7 @@ from .rasterize import mesh_to_mask
 from .reconstruct import ReconstructConfig, reconstruct
 from .sampling import projections_from_sections, projections_from_volume
 from .sections import Box, CrossSections, Projections, Volume
-from .surface.joint import resolve
+from .surface.joint import keep_drawn_sections, resolve
 from .surface.smooth import taubin_smooth
 from .surface.views import views_surface
 
@@ -504,6 +504,7 @@ def _resolve(
     results: list[StructureResult], fields: list[Any], annotation: Annotation, *, smooth: bool
 ) -> None:
     """Resolve a partition's structures on their fields: meshes and shares in place."""
+    keep_drawn_sections(fields, [r.structure.value for r in results], annotation)
     joint = resolve(fields, annotation.grid_shape)
     for i, item in enumerate(results):
         if fields[i] is None:

@@ -28,11 +28,13 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from ..annotation import Annotation
 from ..errors import OptionError
+from ..sections import in_plane_axes
 from .marching import march_field
 from .sdf import SdfField
 
-__all__ = ["JointResult", "resolve"]
+__all__ = ["JointResult", "keep_drawn_sections", "resolve"]
 
 logger = logging.getLogger(__name__)
 
@@ -74,6 +76,74 @@ def _extent(field: SdfField) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     scale[field.axis] = field.upsample
     start = np.asarray(field.lo, dtype=np.int64) * scale - 1
     return start, np.asarray(field.values.shape, dtype=np.int64)
+
+
+def keep_drawn_sections(
+    fields: Sequence[SdfField | None], values: Sequence[int], annotation: Annotation
+) -> int:
+    """Keep every drawn section in a partition: its pixels go to the structure drawn there.
+
+    A plane that does not speak for a structure (structures drawn on planes of
+    their own: a lesion on one extra slice, organs on every 4th) leaves that
+    structure's field there interpolated from its own planes, and in the
+    :func:`resolve` competition it could take the pixels another structure is
+    drawn on. In a partition a drawn pixel is no other structure's, so over
+    the slice such a plane stands for (half a voxel each side) and its drawn
+    pixels, each structure it does not speak for is made outside: its field
+    there is replaced by its absolute value. In place.
+
+    Parameters
+    ----------
+    fields : sequence of SdfField or None
+        One per structure, on the annotation's grid (as for :func:`resolve`).
+    values : sequence of int
+        The structures' values, in the order of ``fields``.
+    annotation : Annotation
+        The planes, and the structures each speaks for.
+
+    Returns
+    -------
+    int
+        How many samples were made outside.
+    """
+    inverse = np.linalg.inv(annotation.affine)
+    changed = 0
+    for plane in annotation.planes:
+        if plane.structures is None or not plane.masks:
+            continue
+        axis = annotation.axis_of(plane.pose)
+        if axis is None or annotation.grid_shift(plane.pose, axis) is None:
+            continue  # a plane off the grid's slices keeps the blend
+        drawn = annotation.grid_mask(plane, None, axis)
+        index = float((inverse[:3, :3] @ plane.pose.affine[:3, 3] + inverse[:3, 3])[axis])
+        a, b = in_plane_axes(axis)
+        for value, field in zip(values, fields, strict=True):
+            if field is None or plane.annotates(value):
+                continue
+            to_grid = inverse @ field.affine  # sample index -> grid index (diagonal)
+            along = to_grid[axis, axis] * np.arange(field.values.shape[axis]) + to_grid[axis, 3]
+            layer = np.flatnonzero(np.abs(along - index) <= 0.5 + 1e-6)
+            rows = np.rint(to_grid[a, a] * np.arange(field.values.shape[a]) + to_grid[a, 3]).astype(
+                np.int64
+            )
+            cols = np.rint(to_grid[b, b] * np.arange(field.values.shape[b]) + to_grid[b, 3]).astype(
+                np.int64
+            )
+            ok_rows = (rows >= 0) & (rows < drawn.shape[0])
+            ok_cols = (cols >= 0) & (cols < drawn.shape[1])
+            if not layer.size or not ok_rows.any() or not ok_cols.any():
+                continue
+            mask = np.zeros((rows.size, cols.size), dtype=bool)
+            mask[np.ix_(ok_rows, ok_cols)] = drawn[np.ix_(rows[ok_rows], cols[ok_cols])]
+            if not mask.any():
+                continue
+            view = np.moveaxis(field.values, (axis, a, b), (0, 1, 2))  # writes through
+            for k in layer:
+                section = view[k]
+                flip = mask & (section < 0)
+                changed += int(np.count_nonzero(flip))
+                section[flip] = -section[flip]
+    return changed
 
 
 def resolve(fields: Sequence[SdfField | None], grid_shape: tuple[int, int, int]) -> JointResult:
