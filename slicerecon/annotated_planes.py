@@ -47,14 +47,16 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
     """Which planes of a sparse label map speak for which structure.
 
     A label map's annotated plane says every structure it does not hold is
-    absent there, when the structures were drawn on the same planes. A
-    structure that shares **no** plane with another, while its planes and the
-    others' interleave (a plane of one inside the other's extent: structures
-    annotated on interleaved slices, a lesion drawn on one extra slice), was
-    drawn on planes of its own: it is read on its own planes, which speak for
-    it alone, with one line saying so. A structure that does share planes and
-    is missing from planes inside its extent that hold others is read as
-    absent there, with a warning.
+    absent there, when the structures were drawn on the same planes; a
+    structure missing from planes inside its extent that speak for it is read
+    as absent there, with a warning. A plane speaks for fewer structures when
+    the structures were drawn in groups on slices of their own and the groups'
+    planes interleave (each plane then speaks for its own group: two
+    annotators, a lesion drawn on one slice only), with one line saying so;
+    when it was added between two regular planes (it speaks for what it holds:
+    :func:`_extra_planes`); and, for structures that may overlap, where a
+    structure drawn inside another is drawn without it (it says nothing of
+    the other there: :func:`_nested_in`).
 
     Parameters
     ----------
@@ -73,7 +75,6 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
         return annotation
     planes = annotation.planes
     holding = [frozenset(p.masks) for p in planes]
-    everything = frozenset(values)
     # structures that may overlap: one drawn inside another (GTV in its organ) on every
     # plane holding both, drawn on a plane without it, says nothing of that other there
     outer = {} if annotation.exclusive else _nested_in(planes, holding)
@@ -81,39 +82,46 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
         frozenset(x for y in held for x in outer.get(y, ()) if x not in held) for held in holding
     ]
     own = {v: [n for n, h in enumerate(holding) if v in h] for v in values}
+    # structures drawn together (on a common plane, directly or through others) form a
+    # group; a plane speaks for its own group's structures when groups interleave
+    groups = _drawn_together(values, holding)
+    group = {v: g for g in groups for v in g}
 
-    def inside(value: int, skip: frozenset[int] = frozenset()) -> list[int]:
+    extra = _extra_planes(planes)
+
+    def speaks_for(n: int, value: int) -> bool:
+        held = holding[n]
+        if not planes[n].annotates(value) or value in silent[n]:
+            return False
+        if n in extra and value not in held:
+            return False  # a slice added between two regular ones: for what it holds
+        return not held or not interleaved or value in group[next(iter(held))]
+
+    def inside(value: int) -> list[int]:
         # planes inside the value's extent that speak for it and hold others only
         return [
             n
             for n, h in enumerate(holding)
             if value not in h
             and h
-            and not h <= skip
-            and planes[n].annotates(value)
-            and value not in silent[n]
+            and speaks_for(n, value)
             and _between(planes[n].pose, [planes[k].pose for k in own[value]])
         ]
 
-    between = {v: inside(v) for v in values}
-    # drawn on planes of its own, interleaved with the others' planes (on planes inside
-    # the extent of another, or with the others' planes inside its own): read on them
-    alone = [
-        v
-        for v in values
-        if own[v]
-        and all(holding[n] == {v} for n in own[v])
-        and (between[v] or any(n in between[w] for w in values if w != v for n in own[v]))
-    ]
-    lone = frozenset(alone)
-    gaps = {v: len(found) for v in values if v not in lone and (found := inside(v, skip=lone))}
-    if alone:
-        names = ", ".join(annotation.structure(v).label for v in alone)
+    interleaved = False
+    if len(groups) > 1:  # some plane of one group inside the extent of another's structure
+        interleaved = any(not holding[n] <= group[v] for v in values for n in inside(v))
+    gaps = {v: len(found) for v in values if (found := inside(v))}
+    if interleaved:
+        listed = " | ".join(
+            ", ".join(annotation.structure(v).label for v in sorted(g)) for g in groups
+        )
         logger.warning(
-            "%s: structure(s) %s drawn on planes of their own (none of them holds another "
-            "structure): each is read on its own planes, not as absent from the others'",
+            "%s: structures drawn on planes of their own, in %d groups (%s): each group is "
+            "read on its own planes, not as absent from the others'",
             source,
-            names,
+            len(groups),
+            listed,
         )
     for value, count in gaps.items():
         logger.warning(
@@ -124,15 +132,68 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
             annotation.structure(value).label,
             count,
         )
-    if not alone and not any(silent):
+    if not interleaved and not extra and not any(silent):
         return annotation
     rebuilt = []
-    for plane, held, quiet in zip(planes, holding, silent, strict=True):
-        given = everything if plane.structures is None else plane.structures
-        # a plane of structures drawn on planes of their own speaks for them alone
-        speaks = given & held if held and held <= lone else given - (lone - held)
-        rebuilt.append(AnnotatedPlane(plane.pose, plane.masks, speaks - quiet))
+    for n, plane in enumerate(planes):
+        speaks = frozenset(v for v in values if speaks_for(n, v))
+        rebuilt.append(AnnotatedPlane(plane.pose, plane.masks, speaks))
     return replace(annotation, planes=tuple(rebuilt))
+
+
+EXTRA_GAP_TOLERANCE = 0.25
+"""How far (a fraction of the typical gap) the gap around a plane may differ from the
+typical gap for the plane to count as added between two regular ones."""
+
+
+def _extra_planes(planes: Sequence[AnnotatedPlane]) -> set[int]:
+    """Planes added between two regularly spaced ones: the gap between their neighbours
+    is the typical (median) gap of their orientation, within :data:`EXTRA_GAP_TOLERANCE`
+    (a lesion drawn on one more slice of an organ annotated on every 3rd)."""
+    extra: set[int] = set()
+    remaining = list(range(len(planes)))
+    while remaining:
+        first = planes[remaining[0]].pose
+        same = [n for n in remaining if planes[n].pose.is_parallel(first)]
+        remaining = [n for n in remaining if n not in same]
+        if len(same) < 4:
+            continue
+        offsets = np.array(
+            [planes[n].pose.offset_mm * np.sign(planes[n].pose.normal @ first.normal) for n in same]
+        )
+        order = np.argsort(offsets)
+        ranked = offsets[order]
+        typical = float(np.median(np.diff(ranked)))
+        if typical <= 0:
+            continue
+        for k in range(1, len(ranked) - 1):
+            span = ranked[k + 1] - ranked[k - 1]
+            if abs(span - typical) <= EXTRA_GAP_TOLERANCE * typical:
+                extra.add(same[int(order[k])])
+    return extra
+
+
+def _drawn_together(
+    values: Sequence[int], holding: Sequence[frozenset[int]]
+) -> list[frozenset[int]]:
+    """The structures grouped by the planes that hold them together (connected
+    components of "drawn on one plane"), in the order of ``values``."""
+    parent = {v: v for v in values}
+
+    def root(v: int) -> int:
+        while parent[v] != v:
+            parent[v] = parent[parent[v]]
+            v = parent[v]
+        return v
+
+    for held in holding:
+        first, *rest = sorted(held) or [None]
+        for v in rest:
+            parent[root(v)] = root(first)
+    found: dict[int, set[int]] = {}
+    for v in values:
+        found.setdefault(root(v), set()).add(v)
+    return [frozenset(g) for g in found.values()]
 
 
 def _nested_in(

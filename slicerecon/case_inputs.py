@@ -277,7 +277,8 @@ def case_from_label_map(
     # structures drawn on every slice beside others drawn on some (a lesion drawn on each
     # slice, the organs on every 4th): the sparse ones set the planes
     every_slice: frozenset[int] = frozenset()
-    if reading.dense and not reading.stated and _has_gaps(crop.mask):
+    several = len(label_map.structures) > 1
+    if several and not reading.stated and (not reading.dense or _has_gaps(crop.mask)):
         first = np.rint(
             np.linalg.solve(label_map.affine[:3, :3], crop.affine[:3, 3] - label_map.affine[:3, 3])
         ).astype(np.int64)
@@ -373,9 +374,10 @@ def _has_gaps(mask: NDArray[np.bool_]) -> bool:
 def _mixed_reading(
     masks: dict[int, NDArray[np.bool_]],
 ) -> tuple[PlaneReading, frozenset[int]] | None:
-    """A label map read as dense on all its structures together, whose structures are
-    read one by one: some drawn on planes of one axis with slices between them, the others
-    on every slice (a lesion contoured on each slice, the organs on every 4th).
+    """A label map of several structures read one by one: some drawn on planes of one
+    axis with slices between them, the others on every slice they cross (a lesion
+    contoured on each slice, the organs on every 4th). Read together, such a map looks
+    dense, or sparse with the lesion's slices as planes of every structure.
 
     Returns
     -------
@@ -384,7 +386,7 @@ def _mixed_reading(
         drawn on every slice; None when no structure, or every one, reads as sparse, or
         the sparse ones are not planes of one axis with a slice between two of them.
     """
-    sparse = [v for v, m in masks.items() if m.any() and not detect_planes(m).dense]
+    sparse = [v for v, m in masks.items() if m.any() and not detect_planes(_boxed(m)).dense]
     if not sparse or len(sparse) == len(masks):
         return None
     reading = detect_planes(np.logical_or.reduce([masks[v] for v in sparse]))
@@ -399,6 +401,13 @@ def _mixed_reading(
     )
     planes = np.union1d(reading.planes[axis], slices).astype(np.int64)
     return replace(reading, planes={axis: planes}), rest
+
+
+def _boxed(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """A mask cropped to its foreground with one empty voxel around it."""
+    lo = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[0]) for a in range(3)]
+    hi = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[-1]) + 1 for a in range(3)]
+    return np.pad(mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]], 1)
 
 
 def _warn_of_gaps(mask: NDArray[np.bool_], source: Any) -> None:
