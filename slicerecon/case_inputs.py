@@ -386,9 +386,19 @@ def _mixed_reading(
         drawn on every slice; None when no structure, or every one, reads as sparse, or
         the sparse ones are not planes of one axis with a slice between two of them.
     """
-    sparse = [v for v, m in masks.items() if m.any() and not detect_planes(_boxed(m)).dense]
-    if not sparse or len(sparse) == len(masks):
+    own = {v: detect_planes(_boxed(m)) for v, m in masks.items() if m.any()}
+    sparse = [v for v, r in own.items() if not r.dense]
+    if not sparse:
         return None
+    if len(sparse) == len(masks):
+        # each is drawn on planes, all together are not (a lesion drawn on the two slices
+        # between two of the organs' planes): every structure's own planes, read alone
+        axes = {a for r in own.values() for a in r.axes}
+        if len(axes) != 1:
+            return None
+        axis = axes.pop()
+        held = np.logical_or.reduce([m.any(axis=in_plane_axes(axis)) for m in masks.values()])
+        return PlaneReading(False, {axis: np.flatnonzero(held).astype(np.int64)}, 1.0), frozenset()
     reading = detect_planes(np.logical_or.reduce([masks[v] for v in sparse]))
     if reading.dense or len(reading.axes) != 1:
         return None
