@@ -296,7 +296,10 @@ def _folder_cases(
     series_files = tuple(
         sorted(images + dicom.get("unreadable", []) + dicom.get("other", []) + annotations)
     )
-    if images and not annotations:
+    # an RTSTRUCT or SEG of another frame of reference (another study) does not take the
+    # images: it is read alone, and the images are a case of their own
+    paired = [f for f in annotations if not images or same_frame(f, folder)]
+    if images and not paired:
         rel = _relpath(folder, root) if folder != root else folder.name
         found.append((rel, Case("", folder, "dicom-series", rel, series_files, folder)))
     elif not images:
@@ -308,14 +311,14 @@ def _folder_cases(
             SkippedInput(_relpath(f, root), OTHER_DICOM_REASON) for f in dicom.get("other", [])
         ]
     reference = tuple(sorted(images + dicom.get("unreadable", []))) if images else ()
-    for f in dicom.get("seg", []):
-        rel = _relpath(f, root)
-        case = Case("", f, "dicom-seg", rel, (f, *reference), folder, folder if images else None)
-        found.append((_strip_suffix(rel), case))
-    for f in dicom.get("rtstruct", []):
-        rel = _relpath(f, root)
-        case = Case("", f, "rtstruct", rel, (f, *reference), folder, folder if images else None)
-        found.append((_strip_suffix(rel), case))
+    for kind, role in (("dicom-seg", "seg"), ("rtstruct", "rtstruct")):
+        for f in dicom.get(role, []):
+            rel = _relpath(f, root)
+            on = images and f in paired
+            case = Case(
+                "", f, kind, rel, (f, *reference) if on else (f,), folder, folder if on else None
+            )
+            found.append((_strip_suffix(rel), case))
     return found, skipped
 
 

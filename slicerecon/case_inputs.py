@@ -32,7 +32,7 @@ from .annotation import (
     plane_pose,
 )
 from .case_input import CaseInput
-from .combine import combine_cases
+from .combine import _same_lattice, combine_cases
 from .errors import EmptyMaskError, OptionError
 from .inputs import axis_upsample, prepare_inputs, refuse_plane_options
 from .io import InputKind, detect_kind, load_ground_truth, load_input
@@ -118,18 +118,30 @@ def load_case(
     elif kind.kind == "contours":
         case = _load_contours(kind, config)
     else:
-        case = _load_label_map(kind, config)
         series = image_dir if image_dir is not None else kind.image_dir
         if kind.kind == "dicom-seg" and series is not None:
-            case = _on_series(case, Path(series), config, given=image_dir is not None)
+            grid = dicom_series_geometry(series, allow_irregular=config.allow_irregular)[:2]
+            case = _on_series(_load_label_map(kind, config, onto=grid), Path(series), grid)
+        else:
+            case = _load_label_map(kind, config)
     if ground_truth is not None:
         case = _with_ground_truth(case, ground_truth, config)
     logger.info("%s: %s", kind.path, case.annotation.source)
     return case
 
 
-def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
-    """A label map file (or a mesh, voxelised), read whole."""
+def _load_label_map(
+    kind: InputKind,
+    config: ReconstructConfig,
+    *,
+    onto: tuple[NDArray[np.float64], tuple[int, int, int]] | None = None,
+) -> CaseInput:
+    """A label map file (or a mesh, voxelised), read whole; a SEG put on the slices of
+    its series' grid ``onto`` when it is given (:func:`_on_slices_of`)."""
+
+    def on(label_map: Any) -> Any:
+        return label_map if onto is None else _on_slices_of(label_map, onto)
+
     if config.pixel_spacing is not None:
         raise OptionError(
             "--pixel-spacing applies to contours without a grid (contour files, an RTSTRUCT "
@@ -147,7 +159,7 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         volume = load_input(kind.path, label=structure.value, memory_budget_gb=config.max_memory_gb)
         assert isinstance(volume, Volume)
         label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
-        return case_from_label_map(label_map, replace(config, label=None, roi=None), kind=kind)
+        return case_from_label_map(on(label_map), replace(config, label=None, roi=None), kind=kind)
     if not config.union and (kind.kind == "dicom-seg" or _layered_nrrd(kind)):
         # SEG segments, and segments in different layers of a .seg.nrrd, may overlap or
         # nest: kept whole, each reconstructed on its own
@@ -161,7 +173,7 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
                 kind.path,
                 masks.overlap_voxels,
             )
-            return case_from_label_map(masks, config, kind=kind)
+            return case_from_label_map(on(masks), config, kind=kind)
     label_map = read_label_map(
         kind.path,
         allow_irregular=config.allow_irregular,
@@ -169,27 +181,21 @@ def _load_label_map(kind: InputKind, config: ReconstructConfig) -> CaseInput:
         chosen=bool(selectors) or config.union,
     )
     assert label_map is not None
-    return case_from_label_map(label_map, config, kind=kind)
+    return case_from_label_map(on(label_map), config, kind=kind)
 
 
 def _on_series(
-    case: CaseInput, series: Path, config: ReconstructConfig, *, given: bool
+    case: CaseInput, series: Path, grid: tuple[NDArray[np.float64], tuple[int, int, int]]
 ) -> CaseInput:
     """A SEG's case written on the grid of the image series it was drawn on.
 
-    The SEG's grid spans its frames only; its label maps and DICOM outputs go on
-    the series' grid, which holds it voxel for voxel. A series it does not fit
-    (other voxels, or frames beyond its slices) is refused in one line when it
-    was given (``image_dir``), and left aside with a warning when it was only
-    found beside the SEG (the outputs then keep the SEG's grid, without DICOM
-    outputs).
-
-    Raises
-    ------
-    OptionError
-        ``given`` and the SEG's grid is not a part of the series'.
+    The SEG's grid spans its frames only (put on the series' slices by
+    :func:`_on_slices_of`); its label maps and DICOM outputs go on the series'
+    grid, which holds it voxel for voxel. A series it does not fit (other
+    pixels, frames off or beyond its slices) is left aside with a warning: the
+    outputs then keep the SEG's grid, without DICOM outputs.
     """
-    affine, shape, _ = dicom_series_geometry(series, allow_irregular=config.allow_irregular)
+    affine, shape = grid
     own = case.output_affine
     offset = np.linalg.solve(affine[:3, :3], own[:3, 3] - affine[:3, 3])
     start = np.rint(offset).astype(np.int64)
@@ -200,15 +206,12 @@ def _on_series(
         and bool(np.all(start + np.asarray(case.output_shape) <= np.asarray(shape)))
     )
     if not fits:
-        message = (
-            f"{case.input_path}: its frames are not slices of the image series {series} "
-            "(other voxels, or beyond its slices)"
-        )
-        if given:
-            raise OptionError(f"{message}; pass the series the SEG was drawn on, or the SEG alone")
         logger.warning(
-            "%s: the outputs keep the SEG's grid, and no DICOM output refers to the series",
-            message,
+            "%s: its frames are not slices of the image series %s (other pixels, or off or "
+            "beyond its slices): the outputs keep the SEG's grid, and no DICOM output refers "
+            "to the series",
+            case.input_path,
+            series,
         )
         return replace(case, kind=replace(case.kind, image_dir=None))
     return replace(
@@ -218,6 +221,39 @@ def _on_series(
         output_shape=(int(shape[0]), int(shape[1]), int(shape[2])),
         crop_lo=case.crop_lo + start,
     )
+
+
+def _on_slices_of(
+    label_map: LabelMap | StructureMasks, grid: tuple[NDArray[np.float64], tuple[int, int, int]]
+) -> LabelMap | StructureMasks:
+    """A SEG read on the step of its frames put on the slices of its series when the
+    frames lie on every ``m``-th of them (a SEG without SpacingBetweenSlices, drawn on
+    every 2nd slice): the slices between are empty, so the annotation is read as one."""
+    affine, _ = grid
+    own = label_map.affine
+    axis = 2
+    ratio = np.linalg.norm(own[:3, axis]) / np.linalg.norm(affine[:3, axis])
+    m = int(round(ratio))
+    offset = np.linalg.solve(affine[:3, :3], own[:3, 3] - affine[:3, 3])
+    if (
+        m < 2
+        or abs(ratio - m) > 1e-3 * m
+        or not np.allclose(own[:3, :2], affine[:3, :2], atol=1e-3)
+        or not np.allclose(own[:3, axis], m * affine[:3, axis], atol=1e-3 * m)
+        or not np.allclose(offset, np.rint(offset), atol=1e-2)
+    ):
+        return label_map
+    moved = own.copy()
+    moved[:3, axis] = affine[:3, axis]
+
+    def spread(array: NDArray[Any]) -> NDArray[Any]:
+        out = np.zeros((*array.shape[:2], (array.shape[2] - 1) * m + 1), dtype=array.dtype)
+        out[:, :, ::m] = array
+        return out
+
+    if isinstance(label_map, LabelMap):
+        return replace(label_map, labels=spread(label_map.labels), affine=moved)
+    return replace(label_map, masks=tuple(spread(mask) for mask in label_map.masks), affine=moved)
 
 
 def _layered_nrrd(kind: InputKind) -> bool:
@@ -517,7 +553,19 @@ def _load_rtstruct(
     )
     # the reader has said which ROIs have no (closed planar) contour, and why
     series = image_dir if image_dir is not None else kind.image_dir
-    return _contour_input(annotation, kind, config, missing, built=series is None)
+    case = _contour_input(annotation, kind, config, missing, built=series is None)
+    if series is not None:
+        affine, shape, _ = dicom_series_geometry(series, allow_irregular=config.allow_irregular)
+        if not _same_lattice(case.output_affine, affine):
+            # contours off the series' slices keep their positions; the label maps and
+            # DICOM outputs are still written on the series' grid, from the surface
+            case = replace(
+                case,
+                output_affine=affine,
+                output_shape=(int(shape[0]), int(shape[1]), int(shape[2])),
+                crop_lo=np.zeros(3, dtype=np.int64),
+            )
+    return case
 
 
 def _load_contours(kind: InputKind, config: ReconstructConfig) -> CaseInput:

@@ -356,6 +356,8 @@ def test_contours_on_some_slices_a_little_off_them_give_what_on_them_gives(
         assert main(["run", str(folder), "-o", str(tmp_path / f"out{shift}"), "-q"]) == 0
         mesh = trimesh.load(tmp_path / f"out{shift}" / "mesh.stl")
         assert mesh.is_watertight
+        labels = nib.load(tmp_path / f"out{shift}" / "labels.nii.gz")  # on the CT's grid
+        assert labels.shape == (48, 48, 21) and labels.affine[2, 3] == pytest.approx(0.0)
         assert mesh.bounds[0, 2] == pytest.approx(zs[0] - 1.5, abs=0.25)  # half a slice
         volumes.append(mesh.volume)
     assert volumes[1] == pytest.approx(volumes[0], rel=0.03)

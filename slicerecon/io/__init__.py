@@ -39,6 +39,7 @@ __all__ = [
     "load_input",
     "same_frame",
     "series_below",
+    "series_of",
 ]
 
 logger = logging.getLogger(__name__)
@@ -122,9 +123,10 @@ def series_below(folder: Path) -> Path | None:
     return found[0] if len(found) == 1 else None
 
 
-def same_frame(drawing: Path, series: Path) -> bool:
+def same_frame(drawing: Path, series: Path, *, known: bool = False) -> bool:
     """Whether an RTSTRUCT or SEG and the first image of a series folder name one
-    FrameOfReferenceUID (True when either does not say: nothing tells them apart)."""
+    FrameOfReferenceUID (True when either does not say: nothing tells them apart,
+    unless ``known``: then both must name it)."""
     from .dicom.sniff import read_dicom_header
 
     def frame(path: Path) -> str:
@@ -138,11 +140,58 @@ def same_frame(drawing: Path, series: Path) -> bool:
             uid = str(items[0].get("FrameOfReferenceUID", "") or "") if len(items) else ""
         return uid
 
+    from .dicom import dicom_modality
+
     first = next(
-        (f for f in sorted(series.iterdir()) if f.is_file() and not f.name.startswith(".")), None
+        (
+            f
+            for f in sorted(series.iterdir())
+            if f.is_file()
+            and not f.name.startswith(".")
+            and dicom_modality(f) not in (None, "RTSTRUCT", "SEG")
+        ),
+        None,
     )
     own, theirs = frame(drawing), "" if first is None else frame(first)
+    if known:
+        return bool(own) and own == theirs
     return not own or not theirs or own == theirs
+
+
+def series_of(drawing: Path, *, images_beside: bool | None = None) -> Path | None:
+    """The image series an RTSTRUCT or SEG was drawn on: its own folder when that holds
+    images, else the one subfolder of it holding images (:func:`series_below`); None
+    when there is none, or when the series names another FrameOfReferenceUID (another
+    study's images: said in one warning line). Given the file alone (``images_beside``
+    None), the images beside it are taken only when they name its FrameOfReferenceUID."""
+    folder = drawing.parent
+    if images_beside is None:
+        candidate = folder if _holds_images(folder) else series_below(folder)
+        if candidate is not None and same_frame(drawing, candidate, known=True):
+            return candidate
+        return None
+    series = folder if images_beside else series_below(folder)
+    if series is not None and not same_frame(drawing, series):
+        logger.warning(
+            "%s: the images in %s are of another frame of reference (another study): it is "
+            "read without them",
+            drawing,
+            series,
+        )
+        return None
+    return series
+
+
+def _holds_images(folder: Path) -> bool:
+    """Whether a folder holds a DICOM image file (not an RTSTRUCT or SEG)."""
+    from .dicom import dicom_modality
+
+    return any(
+        f.is_file()
+        and not f.name.startswith(".")
+        and dicom_modality(f) not in (None, "RTSTRUCT", "SEG")
+        for f in sorted(folder.iterdir())
+    )
 
 
 def _drawing_below(folder: Path) -> InputKind | None:
@@ -198,7 +247,8 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         if len(drawings) == 1:
             images = [f for f, m in modalities.items() if m not in (None, "RTSTRUCT", "SEG")]
             kind = "rtstruct" if modalities[drawings[0]] == "RTSTRUCT" else "dicom-seg"
-            return InputKind(kind, drawings[0], image_dir=p if images else series_below(p))
+            series = series_of(drawings[0], images_beside=bool(images))
+            return InputKind(kind, drawings[0], image_dir=series)
         if len(drawings) > 1:
             raise InputError(
                 f"directory {p} holds {len(drawings)} RTSTRUCT or SEG files "
@@ -209,10 +259,9 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
     if named is not None:
         return InputKind(named[0], p)
     modality = dicom_modality(p)
-    if modality == "SEG":
-        return InputKind("dicom-seg", p)
-    if modality == "RTSTRUCT":
-        return InputKind("rtstruct", p)
+    if modality in ("SEG", "RTSTRUCT"):  # with the images beside it, as its folder is read
+        kind = "dicom-seg" if modality == "SEG" else "rtstruct"
+        return InputKind(kind, p, image_dir=series_of(p))
     if modality is not None:
         raise InputError(
             f"{p} is a single DICOM {modality} image; pass the directory of its series"

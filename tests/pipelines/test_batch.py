@@ -12,6 +12,7 @@ from pathlib import Path
 import dicom_factory as factory  # tests/io, on pytest's pythonpath
 import nibabel as nib
 import numpy as np
+import pydicom
 import pytest
 import trimesh
 
@@ -237,8 +238,16 @@ def test_a_seg_beside_its_series_and_a_pacs_export_are_read_on_the_series(tmp_pa
     drawn = np.zeros(ball.shape, bool)
     drawn[:, :, ::2] = ball[:, :, ::2]
     seg_study = tmp_path / "in" / "seg_study"
-    factory.write_series(seg_study, ct, affine, modality="CT", rescale=(1.0, -1024.0))
-    factory.write_seg(seg_study / "seg.dcm", {1: drawn}, affine, labels={1: "Ball"})
+    files = factory.write_series(seg_study, ct, affine, modality="CT", rescale=(1.0, -1024.0))
+    frame = str(pydicom.dcmread(files[0], stop_before_pixels=True).FrameOfReferenceUID)
+    factory.write_seg(
+        seg_study / "seg.dcm", {1: drawn}, affine, labels={1: "Ball"}, frame_of_reference_uid=frame
+    )
+    other_study = tmp_path / "other" / "study"  # the same SEG beside another study's images
+    factory.write_series(other_study, ct, affine, modality="CT", rescale=(1.0, -1024.0))
+    factory.write_seg(other_study / "seg.dcm", {1: drawn}, affine, labels={1: "Ball"})
+    assert main(["run", str(other_study), "-o", str(tmp_path / "other_out"), "-q"]) == 0
+    assert not (tmp_path / "other_out" / "seg.dcm").exists()  # it refers to no other study
     export = tmp_path / "in" / "export"
     factory.write_series(export / "CT", ct, affine, modality="CT", rescale=(1.0, -1024.0))
     rings = [
@@ -248,6 +257,23 @@ def test_a_seg_beside_its_series_and_a_pacs_export_are_read_on_the_series(tmp_pa
     factory.write_rtstruct(
         export / "RTSTRUCT" / "RS.dcm", {(1, "Lesion"): rings}, on_series=export / "CT"
     )
+    # a SEG that says only its own 4 mm step, its frames on every 2nd slice of that CT
+    coarse = affine.copy()
+    coarse[:3, 2] *= 2
+    older = tmp_path / "older"
+    files = factory.write_series(older, ct, affine, modality="CT", rescale=(1.0, -1024.0))
+    frame = str(pydicom.dcmread(files[0], stop_before_pixels=True).FrameOfReferenceUID)
+    factory.write_seg(
+        older / "seg.dcm",
+        {1: ball[:, :, ::2]},
+        coarse,
+        labels={1: "Ball"},
+        frame_of_reference_uid=frame,
+    )
+    assert main(["run", str(older), "-o", str(tmp_path / "older_out"), "-q"]) == 0
+    assert nib.load(tmp_path / "older_out" / "labels.nii.gz").shape == ct.shape
+    plan = json.loads((tmp_path / "older_out" / "plan.json").read_text())
+    assert plan["annotation"].startswith("sparse annotation")  # not a dense 4 mm mask
     for folder in (seg_study, export):
         out = tmp_path / "run" / folder.name
         assert main(["run", str(folder), "-o", str(out), "-q"]) == 0
