@@ -51,6 +51,9 @@ class CaseInput:
     missing : tuple of Structure
         Structures the input lists but nothing was drawn for (RTSTRUCT ROIs
         without closed contours): reported, not reconstructed.
+    inputs : tuple of Path
+        Every input of a case combined from several (:func:`slicerecon.combine.combine_cases`);
+        empty for one input.
     """
 
     annotation: Annotation
@@ -62,6 +65,12 @@ class CaseInput:
     crop_lo: NDArray[np.int64]
     truth: Any = None
     missing: tuple[Structure, ...] = ()
+    inputs: tuple[Path, ...] = ()
+
+    @property
+    def named(self) -> str:
+        """The input, or every input of a combined case, for messages."""
+        return ", ".join(str(p) for p in self.inputs) if self.inputs else str(self.input_path)
 
     @property
     def dense(self) -> bool:

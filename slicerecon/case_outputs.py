@@ -216,7 +216,7 @@ def write_case(
         logger.warning(
             "%s: structures overlap on %d voxels; labels.nii.gz holds one structure per voxel "
             "(the smallest on top); %s keep each whole",
-            case.input_path,
+            case.named,
             result.overlap_voxels,
             ", ".join(whole),
         )

@@ -50,7 +50,8 @@ def combine_cases(
     a warning says what lies beyond the series). The others' planes keep their
     poses in world mm (a plane that is not a slice of that grid is sampled
     through its projection). Structures are matched by name (case and spaces
-    ignored), unnamed ones by value; one named in one input and unnamed in
+    ignored), unnamed ones by value; two names of one value are two structures
+    (the later takes the next free value, with a warning); one named in one input and unnamed in
     another is kept apart, with a warning; a structure new to the reference
     keeps its value, or takes the next free one. The structures form a
     partition only when every input is a label map (contours are ROIs, even
@@ -65,9 +66,9 @@ def combine_cases(
     Raises
     ------
     OptionError
-        A dense input among several (a dense mask is its own case), one value
-        named differently in two inputs, one structure drawn differently on one
-        plane in two inputs, or drawn far apart by two inputs.
+        A dense input among several (a dense mask is its own case), one
+        structure drawn differently on one plane in two inputs, or drawn far
+        apart by two inputs.
     MemoryBudgetError
         The grid holding every input exceeds ``memory_budget_gb``.
     """
@@ -75,7 +76,8 @@ def combine_cases(
         if case.dense:
             raise OptionError(
                 f"{case.input_path} is a dense mask: several inputs combine sparse annotations "
-                "of one study; reconstruct a dense mask on its own"
+                "of one study; reconstruct a dense mask on its own, or, if it is drawn on "
+                "every slice it crosses, state the axis drawn on (--annotation z)"
             )
     # the reference first, the others by file name: the same result in any order
     given = list(cases)
@@ -120,14 +122,23 @@ def combine_cases(
             )
             if match is None:
                 clash = next((s for s in earlier if s.value == structure.value), None)
-                if clash is not None and clash.name and structure.name:
-                    raise OptionError(
-                        f"structure {structure.value} is {clash.name!r} in "
-                        f"{origin[clash.value]} and {structure.name!r} in {case.input_path}: "
-                        "give it one name in both files, or the two structures different values"
-                    )
                 value = structure.value
-                if clash is not None:  # one named, one not: kept apart, and said so
+                if clash is not None and clash.name and structure.name:
+                    # two names, one value: two structures; the later takes a free value
+                    value = max(taken) + 1
+                    taken.add(value)
+                    logger.warning(
+                        "structure %d is %r in %s and %r in %s: two structures; %r is "
+                        "written as value %d",
+                        structure.value,
+                        clash.name,
+                        origin[clash.value],
+                        structure.name,
+                        case.input_path,
+                        structure.name,
+                        value,
+                    )
+                elif clash is not None:  # one named, one not: kept apart, and said so
                     apart.setdefault(origin[clash.value], []).append(
                         f"{structure.value} ({clash.name or structure.name!r})"
                     )
@@ -209,6 +220,7 @@ def combine_cases(
         first,
         annotation=annotation,
         missing=missing,
+        inputs=tuple(Path(c.input_path) for c in given),
         output_affine=output_affine,
         output_shape=output_shape,
         crop_lo=first.crop_lo + lo - start,

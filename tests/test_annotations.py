@@ -371,7 +371,9 @@ def test_several_inputs_of_one_study_are_combined_in_world_mm(
     one_file = reconstruct_structures(((axial | sagittal).astype(np.uint8), AFFINE)).labels
     np.testing.assert_array_equal(combined > 0, one_file > 0)  # the same as drawn in one file
     assert set(np.unique(combined)) == {0, 1}  # matched by name, the first file's value
-    # one value named differently in two files cannot be matched: one line
+    # one value named differently in two files: two structures, the second renumbered
+    # and said in one line (it was refused, and a version 1 contour file cannot choose
+    # its value)
     write_seg_nrrd(sagittal, AFFINE, [Structure(1, "Spleen")], tmp_path / "other.seg.nrrd")
     assert (
         main(
@@ -383,10 +385,12 @@ def test_several_inputs_of_one_study_are_combined_in_world_mm(
                 str(tmp_path / "o2"),
             ]
         )
-        == 2
+        == 0
     )
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "'Liver'" in err[0] and "'Spleen'" in err[0]
+    err = [line for line in capsys.readouterr().err.splitlines() if "'Spleen'" in line]
+    assert len(err) == 1 and "'Liver'" in err[0] and "value 2" in err[0]
+    records = json.loads((tmp_path / "o2" / "structures.json").read_text())["structures"]
+    assert {(r["value"], r["name"]) for r in records} == {(1, "Liver"), (2, "Spleen")}
 
 
 def test_contour_file_version_2_holds_planes_of_any_orientation_and_several_structures(
