@@ -330,14 +330,15 @@ def _pair_series_below(found: list[tuple[str, Case]], root: Path) -> list[tuple[
     study); that series is then its reference, not a case."""
     out = list(found)
     claimed: set[int] = set()
-    drawings = [case.path for _, case in found if case.kind in ("rtstruct", "dicom-seg")]
+    series_folders = {case.path for _, case in found if case.kind == "dicom-series"}
     for n, (base, case) in enumerate(found):
         if case.kind not in ("rtstruct", "dicom-seg") or case.image_dir is not None:
             continue
         folder = case.path.parent
         below = series_below(folder)
-        alone = sum(p.parent == folder for p in drawings) == 1
-        if below is None and alone and folder != root and _within(folder.parent, root):
+        # a folder of drawings only (SEG/ or RTSTRUCT/ beside CT/, one file or several)
+        drawings_only = folder not in series_folders
+        if below is None and drawings_only and folder != root and _within(folder.parent, root):
             below = series_below(folder.parent)
         if below is not None and not same_frame(case.path, below):
             continue  # another study's images
@@ -345,7 +346,7 @@ def _pair_series_below(found: list[tuple[str, Case]], root: Path) -> list[tuple[
             (
                 m
                 for m, (_, other) in enumerate(found)
-                if other.kind == "dicom-series" and other.path == below and m not in claimed
+                if other.kind == "dicom-series" and other.path == below
             ),
             None,
         )

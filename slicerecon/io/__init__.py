@@ -167,6 +167,8 @@ def series_of(drawing: Path, *, images_beside: bool | None = None) -> Path | Non
     folder = drawing.parent
     if images_beside is None:
         candidate = folder if _holds_images(folder) else series_below(folder)
+        if candidate is None and folder.parent != folder:  # CT/ beside RTSTRUCT/
+            candidate = series_below(folder.parent)
         if candidate is not None and same_frame(drawing, candidate, known=True):
             return candidate
         return None
@@ -194,11 +196,17 @@ def _holds_images(folder: Path) -> bool:
     )
 
 
-def _drawing_below(folder: Path) -> InputKind | None:
+def _drawing_below(folder: Path) -> InputKind:
     """A folder of subfolders only, as PACS exports a study (``CT/`` beside
     ``RTSTRUCT/``): its one RTSTRUCT or SEG in a subfolder, with the one image
-    series of another subfolder (:func:`series_below`); None when there is not
-    exactly one of each."""
+    series of another subfolder (:func:`series_below`).
+
+    Raises
+    ------
+    InputError
+        Not exactly one RTSTRUCT or SEG, or not exactly one image series of its
+        FrameOfReferenceUID: the message says which.
+    """
     from .dicom import dicom_modality
 
     images = series_below(folder)
@@ -210,9 +218,30 @@ def _drawing_below(folder: Path) -> InputKind | None:
             modality = dicom_modality(f)
             if modality in ("RTSTRUCT", "SEG"):
                 found.append((f, modality))
-    if images is None or len(found) != 1 or not same_frame(found[0][0], images):
-        return None
+    if len(found) > 1:
+        listed = ", ".join(str(f.relative_to(folder)) for f, _ in found[:4])
+        raise InputError(
+            f"directory {folder} holds {len(found)} RTSTRUCT or SEG files in its subfolders "
+            f"({listed}): pass one of them (its folder's images, or the one series beside "
+            "it, are taken with it)"
+        )
+    if not found:
+        raise InputError(
+            f"directory {folder} holds no file, and its subfolders no RTSTRUCT or SEG: pass "
+            "a DICOM series folder, or a folder holding an RTSTRUCT or SEG and its images"
+        )
     path, modality = found[0]
+    if images is None:
+        raise InputError(
+            f"{path}: directory {folder} holds no one image series beside it (none, or "
+            "several subfolders of images): put it in one folder with the series it was "
+            "drawn on, or pass the file alone"
+        )
+    if not same_frame(path, images):
+        raise InputError(
+            f"{path}: the images in {images} are of another frame of reference (another "
+            "study): pass the file alone, or the folder with the series it was drawn on"
+        )
     return InputKind("rtstruct" if modality == "RTSTRUCT" else "dicom-seg", path, image_dir=images)
 
 
@@ -235,13 +264,7 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
     if p.is_dir():
         files = sorted(f for f in p.iterdir() if f.is_file() and not f.name.startswith("."))
         if not files:
-            below = _drawing_below(p)
-            if below is not None:
-                return below
-            raise InputError(
-                f"directory {p} holds no file: expected a DICOM series, or an RTSTRUCT or SEG "
-                "beside it (in one folder, or in two folders side by side)"
-            )
+            return _drawing_below(p)
         modalities = {f: dicom_modality(f) for f in files}
         drawings = [f for f in files if modalities[f] in ("RTSTRUCT", "SEG")]
         if len(drawings) == 1:

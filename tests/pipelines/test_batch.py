@@ -292,6 +292,23 @@ def test_a_seg_beside_its_series_and_a_pacs_export_are_read_on_the_series(tmp_pa
     for case in ("export__RTSTRUCT__RS", "seg_study__seg"):
         assert (tmp_path / "out" / case / "seg.dcm").is_file()
         assert nib.load(tmp_path / "out" / case / "labels.nii.gz").shape == ct.shape
+    # a second annotator's file beside the first: both keep the series (they lost it, and
+    # the CT became a failed case)
+    import shutil
+
+    shutil.copy(export / "RTSTRUCT" / "RS.dcm", export / "RTSTRUCT" / "RS2.dcm")
+    again = run_batch(
+        tmp_path / "in",
+        tmp_path / "out2",
+        ReconstructConfig(n_points=5000),
+        workers=0,
+        report=False,
+    )
+    assert [(c.case, c.status) for c in again.cases if c.case.startswith("export")] == [
+        ("export__RTSTRUCT__RS", "ok"),
+        ("export__RTSTRUCT__RS2", "ok"),
+    ]
+    assert (tmp_path / "out2" / "export__RTSTRUCT__RS2" / "seg.dcm").is_file()
 
 
 # ------------------------------------------------------------------ batch on Dask
