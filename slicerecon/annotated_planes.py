@@ -147,9 +147,11 @@ typical gap for the plane to count as added between two regular ones."""
 
 
 def _extra_planes(planes: Sequence[AnnotatedPlane]) -> set[int]:
-    """Planes added between two regularly spaced ones: the gap between their neighbours
-    is the typical (median) gap of their orientation, within :data:`EXTRA_GAP_TOLERANCE`
-    (a lesion drawn on one more slice of an organ annotated on every 3rd)."""
+    """Planes added between two regularly spaced ones: both gaps to their neighbours
+    are short and the gap between their neighbours is the typical (median) gap of
+    their orientation, within :data:`EXTRA_GAP_TOLERANCE` (a lesion drawn on one more
+    slice of an organ annotated on every 3rd; not a regular plane beside a run of
+    slices drawn one after another)."""
     extra: set[int] = set()
     remaining = list(range(len(planes)))
     while remaining:
@@ -166,9 +168,11 @@ def _extra_planes(planes: Sequence[AnnotatedPlane]) -> set[int]:
         typical = float(np.median(np.diff(ranked)))
         if typical <= 0:
             continue
+        short = (1 - EXTRA_GAP_TOLERANCE) * typical
         for k in range(1, len(ranked) - 1):
             span = ranked[k + 1] - ranked[k - 1]
-            if abs(span - typical) <= EXTRA_GAP_TOLERANCE * typical:
+            splits = ranked[k] - ranked[k - 1] < short and ranked[k + 1] - ranked[k] < short
+            if splits and abs(span - typical) <= EXTRA_GAP_TOLERANCE * typical:
                 extra.add(same[int(order[k])])
     return extra
 
