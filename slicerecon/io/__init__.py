@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -130,8 +131,10 @@ def same_frame(drawing: Path, series: Path, *, known: bool = False) -> bool:
     from .dicom.sniff import read_dicom_header
 
     def frame(path: Path) -> str:
-        try:
-            ds = read_dicom_header(path)
+        try:  # a peek at one element: the real read of the file says what is wrong
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ds = read_dicom_header(path)
         except Exception:  # noqa: BLE001 - an unreadable file names no frame
             return ""
         uid = str(ds.get("FrameOfReferenceUID", "") or "")
