@@ -139,8 +139,9 @@ def plain_sdf(sparse: np.ndarray, spacing: np.ndarray, axial: np.ndarray) -> np.
     return out
 
 
-def itk_mci(sparse: np.ndarray, spacing: np.ndarray) -> np.ndarray:
-    """ITK's morphological contour interpolation, all axes (Slicer's Fill between slices)."""
+def itk_mci_labels(sparse: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """ITK's morphological contour interpolation (Slicer's Fill between slices), all axes,
+    every label of the sparse label map at once: the filled label map, drawn voxels kept."""
     import itk
 
     image = itk.image_from_array(np.ascontiguousarray(sparse, dtype=np.uint8))
@@ -150,10 +151,15 @@ def itk_mci(sparse: np.ndarray, spacing: np.ndarray) -> np.ndarray:
     try:
         interpolator = itk.MorphologicalContourInterpolator.New(image)
         interpolator.Update()
-        filled = np.asarray(itk.array_from_image(interpolator.GetOutput())) > 0
+        filled = np.asarray(itk.array_from_image(interpolator.GetOutput()))
     finally:
         itk.MultiThreaderBase.SetGlobalDefaultNumberOfThreads(threads)
-    return filled | sparse
+    return np.where(sparse > 0, sparse, filled)
+
+
+def itk_mci(sparse: np.ndarray, spacing: np.ndarray) -> np.ndarray:
+    """ITK's morphological contour interpolation, all axes (Slicer's Fill between slices)."""
+    return itk_mci_labels(sparse, spacing) > 0
 
 
 def _plane_mask(

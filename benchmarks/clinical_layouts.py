@@ -37,27 +37,21 @@ from pathlib import Path
 
 import numpy as np
 
+from slicerecon.realshapes import FROG_TISSUES
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from annotations import iou  # noqa: E402
+from annotations import iou, itk_mci_labels  # noqa: E402
 from plain_sdf import plain_sdf_field  # noqa: E402
 
 ORGANS = {
-    "brain": 2,
-    "duodenum": 3,
-    "eye_retina": 4,
-    "eye_white": 5,
-    "heart": 6,
-    "ileum": 7,
-    "kidney": 8,
-    "l_intestine": 9,
-    "liver": 10,
-    "lung": 11,
-    "spleen": 14,
-    "stomach": 15,
+    name: value
+    for name, value in FROG_TISSUES.items()
+    if name not in ("blood", "nerve", "skeleton")
 }
-"""The frog's organs used (its blood vessels, nerves and skeleton are 1-2 voxels thin at
-this resolution: the resampling, not a reconstruction, would be scored)."""
+"""The frog's organs used: its blood vessels and nerves are 1-2 voxels thin at this
+resolution (the resampling, not a reconstruction, would be scored), and its skeleton is a
+tissue of many bones around the organs, not one organ."""
 
 LAYOUTS = ("every4", "every4+dense", "every3+extra", "interleaved")
 
@@ -127,7 +121,7 @@ def run(names: list[str]) -> str:
         ).annotation.source
         ours = reconstruct_structures((sparse, affine)).labels
         seconds = time.perf_counter() - start
-        itk_labels = _itk_labels(sparse, spacing)
+        itk_labels = itk_mci_labels(sparse, spacing)
         methods = ("ours", "plain SDF", "ITK-MCI")
         scores: dict[str, list[float]] = {m: [] for m in methods}
         rows = []
@@ -160,23 +154,6 @@ def run(names: list[str]) -> str:
         ]
         print(f"{name}: done", file=sys.stderr, flush=True)
     return "\n".join(lines)
-
-
-def _itk_labels(sparse: np.ndarray, spacing: np.ndarray) -> np.ndarray:
-    """ITK's morphological contour interpolation of the multi-label map, its labels kept."""
-    import itk
-
-    image = itk.image_from_array(np.ascontiguousarray(sparse, dtype=np.uint8))
-    image.SetSpacing([float(s) for s in spacing[::-1]])
-    threads = itk.MultiThreaderBase.GetGlobalDefaultNumberOfThreads()
-    itk.MultiThreaderBase.SetGlobalDefaultNumberOfThreads(1)  # the filter is not thread-safe
-    try:
-        interpolator = itk.MorphologicalContourInterpolator.New(image)
-        interpolator.Update()
-        filled = np.asarray(itk.array_from_image(interpolator.GetOutput()))
-    finally:
-        itk.MultiThreaderBase.SetGlobalDefaultNumberOfThreads(threads)
-    return np.where(sparse > 0, sparse, filled)
 
 
 def _counts(diffs: np.ndarray) -> str:
