@@ -118,7 +118,10 @@ def series_below(folder: Path) -> Path | None:
 
     found = []
     for sub in sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".")):
-        first = next((f for f in sorted(sub.iterdir()) if f.is_file()), None)
+        try:
+            first = next((f for f in sorted(sub.iterdir()) if f.is_file()), None)
+        except OSError:  # gone, or not readable: holds no series to take
+            continue
         if first is not None and dicom_modality(first) not in (None, "RTSTRUCT", "SEG"):
             found.append(sub)
     return found[0] if len(found) == 1 else None
@@ -170,8 +173,8 @@ def series_of(drawing: Path, *, images_beside: bool | None = None) -> Path | Non
     folder = drawing.parent
     if images_beside is None:
         candidate = folder if _holds_images(folder) else series_below(folder)
-        if candidate is None and folder.parent != folder:  # CT/ beside RTSTRUCT/
-            candidate = series_below(folder.parent)
+        if candidate is None and folder.parent != folder and _drawings_only(folder):
+            candidate = series_below(folder.parent)  # RTSTRUCT/ beside CT/
         if candidate is not None and same_frame(drawing, candidate, known=True):
             return candidate
         return None
@@ -185,6 +188,14 @@ def series_of(drawing: Path, *, images_beside: bool | None = None) -> Path | Non
         )
         return None
     return series
+
+
+def _drawings_only(folder: Path) -> bool:
+    """Whether every file of a folder is an RTSTRUCT or SEG (a PACS export's RTSTRUCT/)."""
+    from .dicom import dicom_modality
+
+    files = [f for f in sorted(folder.iterdir()) if f.is_file() and not f.name.startswith(".")]
+    return bool(files) and all(dicom_modality(f) in ("RTSTRUCT", "SEG") for f in files)
 
 
 def _holds_images(folder: Path) -> bool:
