@@ -796,12 +796,18 @@ def test_a_ctrl_c_in_a_publish_waits_until_both_renames_are_done():
     from pipelines.publish import sigint_deferred as _sigint_deferred
 
     done = []
-    with pytest.raises(KeyboardInterrupt):
-        with _sigint_deferred():
-            signal.raise_signal(signal.SIGINT)
-            done.append("after the signal")
+    # Python's own Ctrl-C handler, as in a terminal: a job started in the background
+    # by a non-interactive shell inherits SIGINT ignored, and Python then keeps it so
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with _sigint_deferred():
+                signal.raise_signal(signal.SIGINT)
+                done.append("after the signal")
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, outer)
     assert done == ["after the signal"]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_a_result_left_aside_by_a_killed_publish_is_restored(tmp_path):
