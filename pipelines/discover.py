@@ -322,26 +322,44 @@ def _folder_cases(
     return found, skipped
 
 
-def _pair_series_below(found: list[tuple[str, Case]], root: Path) -> list[tuple[str, Case]]:
+def _pair_series_below(
+    found: list[tuple[str, Case]], root: Path
+) -> tuple[list[tuple[str, Case]], list[SkippedInput]]:
     """An RTSTRUCT or SEG in a folder without images takes the one image series in a
     subfolder of it (``pat1/RS.dcm`` beside ``pat1/CT/``: :func:`slicerecon.io.series_below`,
     as ``slicerecon run pat1`` reads it), or, alone in its folder, the one series in a
     folder beside it (``pat1/RTSTRUCT/RS.dcm`` beside ``pat1/CT/``, as PACS exports a
-    study); that series is then its reference, not a case."""
+    study); that series is then its reference, not a case. Of several such series, it
+    takes the one it names as its own; the others of its frame of reference that no file
+    takes are skipped (another series of the study, not a label map)."""
     out = list(found)
     claimed: set[int] = set()
+    passed_over: dict[int, SkippedInput] = {}
     series_folders = {case.path for _, case in found if case.kind == "dicom-series"}
     for n, (base, case) in enumerate(found):
         if case.kind not in ("rtstruct", "dicom-seg") or case.image_dir is not None:
             continue
         folder = case.path.parent
-        below = series_below(folder)
+        below = series_below(folder, case.path, quiet=True)
         # a folder of drawings only (SEG/ or RTSTRUCT/ beside CT/, one file or several)
         drawings_only = folder not in series_folders
         if below is None and drawings_only and folder != root and _within(folder.parent, root):
-            below = series_below(folder.parent)
+            below = series_below(folder.parent, case.path, quiet=True)
         if below is not None and not same_frame(case.path, below):
             continue  # another study's images
+        if below is not None:
+            for m, (_, other) in enumerate(found):
+                if (
+                    other.kind == "dicom-series"
+                    and other.path != below
+                    and other.path.parent == below.parent
+                    and same_frame(case.path, other.path, known=True)
+                ):
+                    passed_over[m] = SkippedInput(
+                        other.relpath,
+                        f"another image series of the study of {case.relpath}, which names "
+                        f"{_relpath(below, root)} as its own",
+                    )
         m = next(
             (
                 m
@@ -356,7 +374,9 @@ def _pair_series_below(found: list[tuple[str, Case]], root: Path) -> list[tuple[
         images = found[m][1]
         files = (case.path, *images.files)
         out[n] = (base, dataclasses.replace(case, files=files, image_dir=images.path))
-    return [item for n, item in enumerate(out) if n not in claimed]
+    skipped = [item for m, item in passed_over.items() if m not in claimed]
+    gone = claimed | set(passed_over)
+    return [item for n, item in enumerate(out) if n not in gone], skipped
 
 
 @dataclass(frozen=True)
@@ -564,7 +584,8 @@ def discover(
         )
         found.extend(cases_here)
         skipped.extend(skipped_here)
-    found = _pair_series_below(found, root)
+    found, passed_over = _pair_series_below(found, root)
+    skipped.extend(passed_over)
     found.sort(key=lambda item: item[1].relpath)
     cases: list[Case] = []
     taken: set[str] = {name.casefold() for name in RESERVED_NAMES}

@@ -111,9 +111,13 @@ def kind_of_name(name: str) -> tuple[str, str] | None:
     return None
 
 
-def series_below(folder: Path) -> Path | None:
+def series_below(folder: Path, drawing: Path | None = None, *, quiet: bool = False) -> Path | None:
     """The one subfolder of ``folder`` holding DICOM images (an RTSTRUCT beside ``CT/``), or
-    None when there is none or several; the rule ``run`` and batch discovery share."""
+    None when there is none or several; the rule ``run`` and batch discovery share.
+
+    Of several, the one whose images ``drawing`` (an RTSTRUCT or SEG) names as those it
+    was drawn on (:func:`slicerecon.io.dicom.series.referenced_series`), said in one
+    warning line unless ``quiet`` (batch discovery: the case's own read says it)."""
     from .dicom import dicom_modality
 
     found = []
@@ -124,7 +128,51 @@ def series_below(folder: Path) -> Path | None:
             continue
         if first is not None and dicom_modality(first) not in (None, "RTSTRUCT", "SEG"):
             found.append(sub)
+    if len(found) > 1 and drawing is not None:
+        named = _named_by(drawing, found)
+        if len(named) == 1 and not quiet:
+            logger.warning(
+                "%s: %d folders beside it hold images (%s): read %s, the series it names",
+                drawing,
+                len(found),
+                ", ".join(sub.name for sub in found[:4]),
+                named[0],
+            )
+        if len(named) == 1:
+            return named[0]
     return found[0] if len(found) == 1 else None
+
+
+def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
+    """Those of ``folders`` whose images an RTSTRUCT or SEG names (by SeriesInstanceUID,
+    else by SOPInstanceUID): :func:`slicerecon.io.dicom.series.referenced_series`."""
+    from .dicom.series import referenced_series
+    from .dicom.sniff import read_dicom_header
+
+    def header(path: Path, tags: list[str] | None = None) -> Any:
+        try:  # a peek: the real read of the file says what is wrong with it
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return read_dicom_header(path, specific_tags=tags)
+        except Exception:  # noqa: BLE001 - an unreadable file names nothing
+            return None
+
+    ds = header(drawing)
+    if ds is None:
+        return []
+    series, instances = referenced_series(ds)
+    named = []
+    for folder in folders:
+        files = [f for f in sorted(folder.iterdir()) if f.is_file() and not f.name.startswith(".")]
+        for f in files if instances and not series else files[:1]:
+            image = header(f, ["SeriesInstanceUID", "SOPInstanceUID"])
+            if image is not None and (
+                str(image.get("SeriesInstanceUID", "")) in series
+                or str(image.get("SOPInstanceUID", "")) in instances
+            ):
+                named.append(folder)
+                break
+    return named
 
 
 def same_frame(drawing: Path, series: Path, *, known: bool = False) -> bool:
@@ -172,13 +220,13 @@ def series_of(drawing: Path, *, images_beside: bool | None = None) -> Path | Non
     None), the images beside it are taken only when they name its FrameOfReferenceUID."""
     folder = drawing.parent
     if images_beside is None:
-        candidate = folder if _holds_images(folder) else series_below(folder)
+        candidate = folder if _holds_images(folder) else series_below(folder, drawing)
         if candidate is None and folder.parent != folder and _drawings_only(folder):
-            candidate = series_below(folder.parent)  # RTSTRUCT/ beside CT/
+            candidate = series_below(folder.parent, drawing)  # RTSTRUCT/ beside CT/
         if candidate is not None and same_frame(drawing, candidate, known=True):
             return candidate
         return None
-    series = folder if images_beside else series_below(folder)
+    series = folder if images_beside else series_below(folder, drawing)
     if series is not None and not same_frame(drawing, series):
         logger.warning(
             "%s: the images in %s are of another frame of reference (another study): it is "
@@ -223,11 +271,8 @@ def _drawing_below(folder: Path) -> InputKind:
     """
     from .dicom import dicom_modality
 
-    images = series_below(folder)
     found = []
     for sub in sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".")):
-        if sub == images:
-            continue
         for f in sorted(f for f in sub.iterdir() if f.is_file() and not f.name.startswith(".")):
             modality = dicom_modality(f)
             if modality in ("RTSTRUCT", "SEG"):
@@ -245,11 +290,12 @@ def _drawing_below(folder: Path) -> InputKind:
             "a DICOM series folder, or a folder holding an RTSTRUCT or SEG and its images"
         )
     path, modality = found[0]
+    images = series_below(folder, path)
     if images is None:
         raise InputError(
             f"{path}: directory {folder} holds no one image series beside it (none, or "
-            "several subfolders of images): put it in one folder with the series it was "
-            "drawn on, or pass the file alone"
+            "several subfolders of images and the file names none of them as its own): put "
+            "it in one folder with the series it was drawn on, or pass the file alone"
         )
     if not same_frame(path, images):
         raise InputError(

@@ -23,7 +23,7 @@ from pipelines.batch import (
     run_batch,
     write_summary,
 )
-from pipelines.discover import discover_cases, safe_case_name
+from pipelines.discover import discover, discover_cases, safe_case_name
 from slicerecon.cli import main
 from slicerecon.errors import InputError, OptionError
 from slicerecon.io.nifti import write_nifti
@@ -224,6 +224,93 @@ def test_an_rtstruct_beside_its_series_in_a_subfolder_is_read_on_that_series(tmp
     assert plan["sections"]["plane_indices"] == list(range(3, 10))  # on the CT's slice grid
     assert main(["run", str(patient), "-o", str(tmp_path / "run"), "-q"]) == 0
     assert (tmp_path / "run" / "rtstruct.dcm").is_file()
+
+
+def _two_series_and_an_rtstruct(root: Path, subfolders: bool, *, names_series: bool = True):
+    """A study of a 1 mm and a 3 mm CT series (one frame of reference) and an RTSTRUCT
+    drawn on the 1 mm one: in one folder, or as thin/, thick/ and RTSTRUCT/."""
+    from pydicom.dataset import Dataset
+    from pydicom.sequence import Sequence as DicomSequence
+    from pydicom.uid import generate_uid
+
+    study, frame, thin_uid = generate_uid(), generate_uid(), generate_uid()
+    thin_dir, thick_dir = (root / "thin", root / "thick") if subfolders else (root, root)
+    common = {"modality": "CT", "study_uid": study, "frame_of_reference_uid": frame}
+    thin = factory.write_series(
+        thin_dir,
+        np.zeros((48, 48, 36), np.uint16),
+        np.diag([0.8, 0.8, 1.0, 1.0]),
+        series_uid=thin_uid,
+        series_description="thin",
+        file_names=[f"a{k:03d}.dcm" for k in range(36)],
+        **common,
+    )
+    factory.write_series(
+        thick_dir,
+        np.zeros((48, 48, 12), np.uint16),
+        np.diag([0.8, 0.8, 3.0, 1.0]),
+        series_description="thick",
+        file_names=[f"b{k:03d}.dcm" for k in range(12)],
+        **common,
+    )
+    rings = [
+        factory.contour_item(factory.circle(np.sqrt(100.0 - (k - 18) ** 2), (19.0, 19.0), k))
+        for k in range(10, 27, 4)
+    ]
+    path = factory.write_rtstruct(
+        (root / "RTSTRUCT" if subfolders else root) / "rs.dcm",
+        {(1, "Ball"): rings},
+        on_series=thin_dir,
+    )
+    if names_series:  # the structure set's references, as a planning system writes them
+        ds = pydicom.dcmread(path)
+        series = Dataset()
+        series.SeriesInstanceUID = thin_uid
+        study_item = Dataset()
+        study_item.RTReferencedSeriesSequence = DicomSequence([series])
+        frame_item = Dataset()
+        frame_item.FrameOfReferenceUID = frame
+        frame_item.RTReferencedStudySequence = DicomSequence([study_item])
+        ds.ReferencedFrameOfReferenceSequence = DicomSequence([frame_item])
+        ds.save_as(path)
+    return path, len(thin)
+
+
+@pytest.mark.parametrize("subfolders", [False, True], ids=["one folder", "thin/ thick/ RTSTRUCT/"])
+def test_of_two_series_of_a_study_the_one_the_rtstruct_names_is_read(tmp_path, capsys, subfolders):
+    """A study exported with two series (1 mm and 3 mm) and an RTSTRUCT drawn on the 1 mm
+    one was refused ("holds 2 image series", or "no one image series beside it"): the
+    RTSTRUCT says which series it was drawn on. Without that reference it still is."""
+    study = tmp_path / "in" / "study"
+    _, slices = _two_series_and_an_rtstruct(study, subfolders)
+    out = tmp_path / "run"
+    assert main(["run", str(study), "-o", str(out)]) == 0
+    assert nib.load(out / "labels.nii.gz").shape == (48, 48, slices)  # the 1 mm series' grid
+    assert (out / "seg.dcm").is_file() and (out / "rtstruct.dcm").is_file()
+    warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning")]
+    assert len(warned) == 1 and ("thin" in warned[0]) and ("thick" in warned[0])
+    if not subfolders:  # the SEG written there names its series too
+        import shutil
+
+        seg_study = tmp_path / "seg_study"
+        shutil.copytree(study, seg_study, ignore=shutil.ignore_patterns("rs.dcm"))
+        shutil.copy(out / "seg.dcm", seg_study / "seg.dcm")
+        assert main(["run", str(seg_study), "-o", str(tmp_path / "seg_out"), "-q"]) == 0
+        assert nib.load(tmp_path / "seg_out" / "labels.nii.gz").shape == (48, 48, slices)
+    result = run_batch(
+        tmp_path / "in", tmp_path / "out", ReconstructConfig(n_points=5000), workers=0, report=False
+    )
+    assert [(c.kind, c.status) for c in result.cases] == [("rtstruct", "ok")]
+    assert nib.load(next((tmp_path / "out").glob("*/labels.nii.gz"))).shape == (48, 48, slices)
+    if subfolders:  # the 3 mm series is no case of its own (a CT is no label map)
+        left = discover(tmp_path / "in").skipped
+        assert [(s.relpath, "names study/thin" in s.reason) for s in left] == [
+            ("study/thick", True)
+        ]
+    blind = tmp_path / "blind"
+    _two_series_and_an_rtstruct(blind, subfolders, names_series=False)
+    assert main(["run", str(blind), "-o", str(tmp_path / "blind_out"), "-q"]) == 2
+    assert "series" in capsys.readouterr().err
 
 
 def test_a_seg_beside_its_series_and_a_pacs_export_are_read_on_the_series(tmp_path):

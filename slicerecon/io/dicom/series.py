@@ -68,6 +68,7 @@ __all__ = [
     "dicom_series_geometry",
     "read_dicom_series",
     "read_dicom_series_values",
+    "referenced_series",
     "series_info",
     "series_label",
 ]
@@ -166,10 +167,96 @@ def _slice_from(ds: Any, path: Path) -> _Slice | None:
     )
 
 
+def referenced_series(ds: Any) -> tuple[set[str], set[str]]:
+    """The images an RTSTRUCT or SEG says it was drawn on.
+
+    Parameters
+    ----------
+    ds : pydicom Dataset
+        An RTSTRUCT (``ReferencedFrameOfReferenceSequence`` > ``RTReferencedStudySequence``
+        > ``RTReferencedSeriesSequence``, and each contour's ``ContourImageSequence``)
+        or a SEG (``ReferencedSeriesSequence``, and each frame's source images).
+
+    Returns
+    -------
+    (series, instances) : tuple of set of str
+        The SeriesInstanceUIDs and SOPInstanceUIDs it names; empty when it names none
+        (these elements are optional).
+    """
+    series: set[str] = set()
+    instances: set[str] = set()
+
+    def items(parent: Any, keyword: str) -> list[Any]:
+        try:
+            return list(parent.get(keyword, None) or [])
+        except PARSE_ERRORS:  # a malformed sequence names nothing
+            return []
+
+    def uid(item: Any, keyword: str) -> str:
+        try:
+            return str(item.get(keyword, "") or "").strip()
+        except PARSE_ERRORS:
+            return ""
+
+    for frame in items(ds, "ReferencedFrameOfReferenceSequence"):
+        for study in items(frame, "RTReferencedStudySequence"):
+            for item in items(study, "RTReferencedSeriesSequence"):
+                series.add(uid(item, "SeriesInstanceUID"))
+                for image in items(item, "ContourImageSequence"):
+                    instances.add(uid(image, "ReferencedSOPInstanceUID"))
+    for roi in items(ds, "ROIContourSequence"):
+        for contour in items(roi, "ContourSequence"):
+            for image in items(contour, "ContourImageSequence"):
+                instances.add(uid(image, "ReferencedSOPInstanceUID"))
+    for item in items(ds, "ReferencedSeriesSequence"):
+        series.add(uid(item, "SeriesInstanceUID"))
+        for image in items(item, "ReferencedInstanceSequence"):
+            instances.add(uid(image, "ReferencedSOPInstanceUID"))
+    series.discard("")
+    instances.discard("")
+    return series, instances
+
+
+def _referenced_only(
+    slices: list[_Slice], drawings: list[tuple[Path, Any]], where: str
+) -> list[_Slice]:
+    """Of images of several series, those of the one series the folder's one RTSTRUCT or
+    SEG names (:func:`referenced_series`), said in one warning line; all of them when
+    there is no such one series (:func:`check_one_series` then says what the folder holds)."""
+    by_series = _groups(slices, "series_uid")
+    if len(by_series) < 2 or len(drawings) != 1:
+        return slices
+    path, drawing = drawings[0]
+    uids, instances = referenced_series(drawing)
+    named = [
+        key
+        for key, group in by_series.items()
+        if key in uids or any(item.sop_uid in instances for item in group)
+    ]
+    if len(named) != 1:
+        return slices
+    kept = by_series[named[0]]
+    rest = {key: group for key, group in by_series.items() if key != named[0]}
+    # the drawing's name in the line: said alike by every reader of the folder, so once
+    logger.warning(
+        "%s holds %d image series: read %d images of %s, the series %s names as its own; "
+        "set aside %s",
+        where,
+        len(by_series),
+        len(kept),
+        kept[0].label,
+        path.name,
+        _listing(rest, "series"),
+    )
+    return kept
+
+
 def _scan_series(directory: Path, *, stop_before_pixels: bool) -> list[_Slice]:
-    """Read every image slice in ``directory``; check that they form exactly one series."""
+    """Read every image slice in ``directory``; check that they form exactly one series
+    (or that the folder's one RTSTRUCT or SEG names one of them: :func:`_referenced_only`)."""
     files = sorted(f for f in directory.iterdir() if f.is_file() and not f.name.startswith("."))
     slices: list[_Slice] = []
+    drawings: list[tuple[Path, Any]] = []
     for f in files:
         if not is_dicom_file(f):
             if f.suffix.lower() in DICOM_SUFFIXES:
@@ -182,12 +269,15 @@ def _scan_series(directory: Path, *, stop_before_pixels: bool) -> list[_Slice]:
         with reading(f):  # pydicom parses values lazily: name the file that fails
             ds = read_dicom_header(f, stop_before_pixels=stop_before_pixels)
             item = _slice_from(ds, f)
+            if item is None and object_kind(ds) in ("rtstruct", "seg"):
+                drawings.append((f, ds))
         if item is not None:
             slices.append(item)
     if not slices:
         raise InputError(
             f"no DICOM image files in {directory}; pass a directory holding one image series"
         )
+    slices = _referenced_only(slices, drawings, str(directory))
     check_one_series(slices, str(directory))
     return slices
 
