@@ -479,6 +479,30 @@ class Annotation:
             parts.append(f"{len(members)} plane{'s' * (len(members) != 1)} {where}{spacing}")
         return "; ".join(parts) if parts else "no plane"
 
+    def describe_fewer(self, limit: int = 3) -> str:
+        """The structures drawn on fewer of the planes than the annotation holds, in words
+        (``"; GTV on 5 of them, spacing 3 mm"``), or ``""`` when each is on every plane.
+
+        For inputs whose structures are drawn each on planes of their own (RTSTRUCT
+        ROIs): :meth:`describe` counts the planes of all of them. At most ``limit``
+        structures are named, then how many more.
+        """
+        total = len(self.planes)
+        fewer = []
+        for structure in self.structures:
+            planes = self.planes_of(structure.value)
+            if 0 < len(planes) < total:
+                offsets = np.sort([p.pose.offset_mm for p in planes])
+                orientations = {tuple(np.round(p.pose.normal, 3)) for p in planes}
+                gaps = np.diff(offsets) if len(orientations) == 1 else np.empty(0)
+                spacing = f", spacing {np.median(gaps):.3g} mm" if gaps.size else ""
+                name = structure.name or str(structure.value)
+                fewer.append(f"{name} on {len(planes)} of them{spacing}")
+        if not fewer:
+            return ""
+        more = f" and {len(fewer) - limit} more on fewer" if len(fewer) > limit else ""
+        return "; " + ", ".join(fewer[:limit]) + more
+
 
 def window(mask: NDArray[Any], lo: ArrayLike, hi: ArrayLike) -> NDArray[Any]:
     """``mask[lo[0]:hi[0], lo[1]:hi[1], ...]``, zero where the window leaves the array.

@@ -619,7 +619,8 @@ def _contour_input(
             output_shape = (int(sampled[0]), int(sampled[1]), int(sampled[2]))
     annotation = replace(
         annotation,
-        source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}",
+        source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}"
+        f"{annotation.describe_fewer()}",
     )
     return CaseInput(
         annotation,

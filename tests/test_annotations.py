@@ -292,6 +292,26 @@ def test_nested_rois_are_each_reconstructed_whole(tmp_path: Path) -> None:
     assert layered.overlap_voxels > 0  # the layers hold the nesting
 
 
+def test_the_read_line_names_an_roi_drawn_on_fewer_planes(tmp_path: Path, capsys) -> None:
+    """BODY contoured on every 1 mm slice and a GTV on every 3rd: the line said '36 planes
+    along z, spacing 1 mm' for both (the structures table alone told them apart)."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    study = tmp_path / "study"
+    factory.write_series(study, np.zeros((64, 64, 40), np.uint16), np.diag([0.8, 0.8, 1, 1]))
+    body = [factory.contour_item(factory.circle(20, (25, 25), z)) for z in range(2, 38)]
+    gtv = [
+        factory.contour_item(factory.circle(np.sqrt(64 - (z - 20) ** 2), (25, 25), z))
+        for z in range(13, 28, 3)
+    ]
+    factory.write_rtstruct(study / "rs.dcm", {(1, "BODY"): body, (2, "GTV"): gtv}, on_series=study)
+    assert main(["run", str(study), "-o", str(tmp_path / "out")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("read as"))
+    assert line.endswith("36 planes along z, spacing 1 mm; GTV on 5 of them, spacing 3 mm")
+    plan = json.loads((tmp_path / "out" / "plan.json").read_text())
+    assert plan["annotation"] == line.removeprefix("read as: ")
+
+
 def _ellipsoid_section(normal: np.ndarray, offset: float, n: int = 120) -> np.ndarray:
     """The ellipse where the plane ``x · normal = offset`` cuts x²/20² + y²/20² + z²/30² = 1."""
     normal = normal / np.linalg.norm(normal)
