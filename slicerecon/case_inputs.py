@@ -686,13 +686,21 @@ def reading_of(
     kind = detect_kind(path)
     if kind.kind not in LABEL_MAP_KINDS:
         return None
-    label_map = read_label_map(
-        kind.path,
-        allow_irregular=allow_irregular,
-        memory_budget_gb=DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb,
-    )
-    assert label_map is not None
-    union = label_map.union()
+    budget = DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb
+    if kind.kind == "dicom-seg" or _layered_nrrd(kind):
+        # segments that may overlap, read whole as run reads them (a label map of them
+        # gives overlapping voxels to one, with a warning run does not give)
+        if kind.kind == "dicom-seg":
+            masks = read_seg_masks(kind.path, memory_budget_gb=budget)
+        else:
+            masks = read_nrrd_masks(kind.path, memory_budget_gb=budget)
+        union = masks.union()
+    else:
+        label_map = read_label_map(
+            kind.path, allow_irregular=allow_irregular, memory_budget_gb=budget
+        )
+        assert label_map is not None
+        union = label_map.union()
     if union.is_empty:
         return None
     crop = union.crop(pad=3)

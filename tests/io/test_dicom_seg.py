@@ -344,6 +344,32 @@ def test_seg_grid_over_the_memory_budget_is_refused_before_decoding(tmp_path, mo
         read_dicom_seg(path)
 
 
+def test_a_seg_whose_frames_are_thinner_than_their_gaps_is_an_annotation(tmp_path, capsys):
+    """highdicom writes a SEG drawn on every 3rd slice of a 2.5 mm CT with SliceThickness
+    2.5 and SpacingBetweenSlices 7.5 (its frames' spacing). Given alone it was read as a
+    dense mask of 7.5 mm slices, planned and scored against itself (volume IoU 1.0 in
+    metrics.json). Frames thinner than their gaps by a whole factor are slices with
+    slices between them: an annotation, as beside its series."""
+    from slicerecon.case_inputs import reading_of
+    from slicerecon.cli import main
+
+    affine = np.diag([0.8, 0.8, 2.5, 1.0])
+    centres = np.indices((40, 36, 32)).reshape(3, -1).T * [0.8, 0.8, 2.5]
+    truth = ((((centres - [16, 14, 40]) / [10, 9, 33]) ** 2).sum(axis=1) <= 1).reshape(40, 36, 32)
+    drawn = np.zeros_like(truth)
+    drawn[:, :, 1::3] = truth[:, :, 1::3]
+    path = factory.write_seg(tmp_path / "seg.dcm", {1: drawn}, affine, labels={1: "Organ"})
+    ds = pydicom.dcmread(path)
+    measures = ds.SharedFunctionalGroupsSequence[0].PixelMeasuresSequence[0]
+    measures.SpacingBetweenSlices = "7.5"
+    ds.save_as(path)
+    assert read_dicom_seg(path).affine[2, 2] == pytest.approx(2.5)
+    assert reading_of(path).startswith("sparse annotation")  # info says what run reads
+    assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 0
+    assert "read as: sparse annotation" in capsys.readouterr().out
+    assert not (tmp_path / "out" / "metrics.json").exists()
+
+
 @pytest.mark.parametrize("slices", [list(range(2, 30, 2)), [2, 4, 7, 10, 14, 17, 19, 23, 26, 28]])
 def test_a_seg_drawn_on_some_slices_of_its_series_is_an_annotation(tmp_path, capsys, slices):
     """A SEG drawn on every 2nd CT slice (or on irregular ones) was read on a grid of its

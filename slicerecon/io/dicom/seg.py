@@ -133,6 +133,7 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
         )
     orientations, positions, segment_numbers = [], [], []
     spacing: NDArray[np.float64] | None = None
+    between: float | None = None
     thickness: float | None = None
     for f, item in enumerate(per_frame):
         orient = _functional(ds, item, "PlaneOrientationSequence")
@@ -153,9 +154,8 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
             raise FormatError(f"{where}: ReferencedSegmentNumber is missing") from exc
         if measures is not None and spacing is None:
             spacing = floats(measures, "PixelSpacing", 2, where)
-            thickness = optional_float(measures, "SpacingBetweenSlices") or optional_float(
-                measures, "SliceThickness"
-            )
+            between = optional_float(measures, "SpacingBetweenSlices")
+            thickness = optional_float(measures, "SliceThickness")
     if spacing is None:
         raise FormatError(f"{path} has no PixelMeasuresSequence/PixelSpacing")
     if np.any(spacing <= 0):
@@ -176,7 +176,7 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
             distinct.append(int(i))
     t_planes = t[distinct]
     if len(distinct) == 1:
-        step_t = thickness or 1.0
+        step_t = between or thickness or 1.0
         direction = normal
     else:
         # spacing from the frame positions (SpacingBetweenSlices is often wrong); frames
@@ -188,17 +188,23 @@ def _seg_geometry(ds: Any, path: Path) -> _SegGeometry:
                 "too close to tell planes apart; check the frame positions"
             )
         direction = line_fit(pos[distinct], t_planes, [f"frame {i + 1}" for i in distinct])
-        if _drawn_on_some_slices(t_planes, thickness):
-            # frames on some slices of a series (every 2nd, or irregular): the planes are
-            # that series' slices, and those without a frame are not annotated
-            assert thickness is not None
-            step_t = thickness
-        elif thickness is not None and abs(thickness - step_t) > position_tolerance(step_t):
+        # frames on some slices of a series (every 2nd, or irregular): the planes are that
+        # series' slices, and those without a frame are not annotated. The series' step is
+        # SpacingBetweenSlices, or SliceThickness: a writer may give the frames' own spacing
+        # as SpacingBetweenSlices (highdicom does), and frames thinner than their gaps by a
+        # whole factor are slices with slices between them
+        lattice = next(
+            (s for s in (between, thickness) if _drawn_on_some_slices(t_planes, s)), None
+        )
+        declared = between or thickness
+        if lattice is not None:
+            step_t = lattice
+        elif declared is not None and abs(declared - step_t) > position_tolerance(step_t):
             logger.debug(
                 "%s: SpacingBetweenSlices/SliceThickness %.4g mm differs from the frame "
                 "spacing %.4g mm; using the frame spacing",
                 path,
-                thickness,
+                declared,
                 step_t,
             )
     steps = (t - t_planes[0]) / step_t
