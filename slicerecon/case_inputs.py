@@ -101,7 +101,16 @@ def load_case(
         paths = list(input_path)
         if len(paths) == 1:
             return load_case(paths[0], config, ground_truth=ground_truth, image_dir=image_dir)
-        cases = [load_case(path, config, image_dir=image_dir) for path in paths]
+        drawn = [detect_kind(path).kind in CONTOUR_KINDS for path in paths]
+        if all(drawn):
+            _refuse_annotation(config, " ".join(map(str, paths)))
+        # --annotation states how the label maps among them are read
+        cases = [
+            load_case(
+                path, replace(config, annotation="auto") if d else config, image_dir=image_dir
+            )
+            for path, d in zip(paths, drawn, strict=True)
+        ]
         case = combine_cases(cases, memory_budget_gb=config.max_memory_gb)
         if ground_truth is not None:
             case = _with_ground_truth(case, ground_truth, config)
@@ -113,6 +122,8 @@ def load_case(
             f"an image series applies to RTSTRUCT and SEG inputs only; {input_path} is a "
             f"{kind.kind} input"
         )
+    if kind.kind in CONTOUR_KINDS:
+        _refuse_annotation(config, kind.path)
     if kind.kind == "rtstruct":
         case = _load_rtstruct(kind, config, image_dir)
     elif kind.kind == "contours":
@@ -128,6 +139,46 @@ def load_case(
         case = _with_ground_truth(case, ground_truth, config)
     logger.info("%s: %s", kind.path, case.annotation.source)
     return case
+
+
+def _say_stated(
+    stated: PlaneReading, rule: PlaneReading, spacing: NDArray[np.float64], text: str, path: Path
+) -> None:
+    """One warning line when ``--annotation`` reads a label map otherwise than the rule would
+    (a map drawn on axial slices read along y gives slivers, and was said nowhere)."""
+    if stated.dense == rule.dense and (stated.dense or stated.axes == rule.axes):
+        return
+
+    def said(reading: PlaneReading) -> str:
+        how = reading.describe(spacing)  # "sparse annotation (...): 8 planes along z ..."
+        return "a dense mask" if reading.dense else how.split(": ", 1)[-1]
+
+    logger.warning(
+        "%s: read as --annotation %s states, %s; by its own rule it reads %s",
+        path,
+        text,
+        said(stated),
+        said(rule),
+    )
+
+
+CONTOUR_KINDS = ("rtstruct", "contours")
+"""Inputs of drawn polygons: every polygon's plane is an annotated plane."""
+
+
+def _refuse_annotation(config: ReconstructConfig, what: object) -> None:
+    """``--annotation`` stated for contours only: it tells how a label map is read.
+
+    Raises
+    ------
+    OptionError
+        ``config.annotation`` is not ``"auto"``.
+    """
+    if parse_annotation(config.annotation) != "auto":
+        raise OptionError(
+            f"--annotation applies to label maps; {what} holds contours, read as drawn (each "
+            "polygon's plane is an annotated plane): leave --annotation out"
+        )
 
 
 def _load_label_map(
@@ -310,6 +361,8 @@ def case_from_label_map(
     crop = union.crop(pad=3)
     check_grid(crop.shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
     reading = detect_planes(crop.mask, parse_annotation(config.annotation))
+    if reading.stated:
+        _say_stated(reading, detect_planes(crop.mask), crop.spacing, config.annotation, kind.path)
     # structures drawn on every slice beside others drawn on some (a lesion drawn on each
     # slice, the organs on every 4th): the sparse ones set the planes
     every_slice: frozenset[int] = frozenset()

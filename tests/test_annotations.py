@@ -1187,3 +1187,34 @@ def test_only_a_slice_splitting_a_regular_gap_is_taken_as_added() -> None:
     assert _extra_planes(planes(sorted(set(run)))) == set()
     added = sorted([*regular, 46])  # between 44 and 48
     assert _extra_planes(planes(added)) == {added.index(46)}
+
+
+def test_a_stated_reading_the_rule_disagrees_with_is_said_and_contours_refuse_it(
+    tmp_path: Path, capsys
+) -> None:
+    """``--annotation y`` on a map drawn on axial slices read it along y without a word (IoU
+    0.20 against 0.95); ``--annotation z`` on a contour file was ignored without a word."""
+    labels = np.zeros((40, 40, 40), np.uint8)
+    labels[10:30, 10:30, 5:35:5] = 1
+    nib.save(nib.Nifti1Image(labels, np.eye(4)), tmp_path / "axial.nii.gz")
+    for stated, said in (("z", 0), ("y", 1), ("dense", 1)):
+        out = tmp_path / stated
+        assert (
+            main(["run", str(tmp_path / "axial.nii.gz"), "--annotation", stated, "-o", str(out)])
+            == 0
+        )
+        warned = [x for x in capsys.readouterr().err.splitlines() if x.startswith("warning")]
+        assert len(warned) == said, warned
+        if said:
+            assert f"--annotation {stated} states" in warned[0]
+            assert warned[0].endswith("it reads 6 planes along z (spacing 5 mm)")
+    rows = ["plane,polygon,x,y,z"]
+    for n, z in enumerate((5.0, 15.0, 25.0)):
+        rows += [f"{n},0,{x},{y},{z}" for x, y in ((10, 10), (28, 10), (28, 28), (10, 28))]
+    (tmp_path / "square.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "contours"
+    assert main(["run", str(tmp_path / "square.csv"), "--annotation", "z", "-o", str(out)]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("error: --annotation applies to label maps") and not out.exists()
+    both = [str(tmp_path / "axial.nii.gz"), str(tmp_path / "square.csv")]  # it states the map's
+    assert main(["run", *both, "--annotation", "z", "-o", str(tmp_path / "both"), "-q"]) == 0
