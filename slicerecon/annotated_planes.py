@@ -30,6 +30,7 @@ __all__ = [
     "merge_repeated_planes",
     "planes_of_each_structure",
     "views_disagreement",
+    "warn_coinciding",
 ]
 
 logger = logging.getLogger(__name__)
@@ -273,14 +274,15 @@ def check_drawings_meet(
     """Refuse a structure whose drawings in two inputs lie far apart; warn when they do not meet.
 
     For each structure drawn by several inputs, the world-mm boxes of each input's
-    drawing: two views of one structure overlap. Boxes further apart than the larger
-    one's diagonal cannot be one study in one frame (refused); a smaller gap (more than
-    one pixel) is warned about.
+    drawing: two views of one structure overlap, or nearly (an axial plane near its
+    top may end short of a sagittal plane). Boxes further apart than half the larger
+    one's diagonal cannot be one study in one frame (refused: such a gap gave a mesh
+    in dozens of pieces); a smaller gap (more than one pixel) is warned about.
 
     Raises
     ------
     OptionError
-        A structure's drawings in two inputs lie further apart than their size.
+        A structure's drawings in two inputs lie further apart than half their size.
     """
     boxes: dict[int, dict[str, tuple[NDArray[np.float64], NDArray[np.float64], float]]] = {}
     for plane, origin in zip(planes, origins, strict=True):
@@ -304,10 +306,10 @@ def check_drawings_meet(
                 (alo, ahi, astep), (blo, bhi, bstep) = by_input[a], by_input[b]
                 gap = float(np.linalg.norm(np.maximum(0.0, np.maximum(alo - bhi, blo - ahi))))
                 size = max(float(np.linalg.norm(ahi - alo)), float(np.linalg.norm(bhi - blo)))
-                if gap > size:
+                if gap > size / 2:
                     raise OptionError(
                         f"structure {labels.get(value, value)} is drawn {gap:.0f} mm apart in "
-                        f"{a} and {b}, further than its size ({size:.0f} mm): they are not "
+                        f"{a} and {b}, further than half its size ({size:.0f} mm): they are not "
                         "views of one structure in one frame; check that the files belong "
                         "to one study, or give them another structure name"
                     )
@@ -419,24 +421,113 @@ def views_disagreement(annotation: Annotation, value: int) -> tuple[int, int]:
         for m in np.flatnonzero(crossing):  # parallel planes do not meet
             k = n + 1 + int(m)
             b = planes[k]
-            direction = np.cross(a.pose.normal, b.pose.normal)
-            direction /= np.linalg.norm(direction)
-            point = np.linalg.solve(
-                np.stack([a.pose.normal, b.pose.normal, direction]),
-                [a.pose.offset_mm, b.pose.offset_mm, 0.0],
-            )
-            span = _line_span(a.pose.shape, to_pixels[n], point, direction)
-            other = _line_span(b.pose.shape, to_pixels[k], point, direction)
-            lo, hi = max(span[0], other[0]), min(span[1], other[1])
-            if hi <= lo:
+            world = _crossing(a, b, to_pixels[n], to_pixels[k])
+            if world is None:
                 continue
-            step = float(min(a.pose.pixel_spacing.min(), b.pose.pixel_spacing.min()))
-            world = point + np.arange(lo + step / 2, hi, step)[:, None] * direction
             one = _drawn_at(a, value, to_pixels[n], world)
             two = _drawn_at(b, value, to_pixels[k], world)
             differ += int(np.count_nonzero(one != two))
             drawn += int(np.count_nonzero(one | two))
     return differ, drawn
+
+
+COINCIDING_DICE = 0.5
+"""Two structures of different inputs coincide when, where their planes cross, their
+drawings have at least this Dice: perhaps one structure given two values."""
+
+
+def warn_coinciding(
+    planes: Sequence[AnnotatedPlane],
+    drawer: Sequence[int],
+    names: Sequence[str],
+    labels: dict[int, str],
+) -> None:
+    """Warn of two structures, drawn by different inputs only, that coincide where their
+    planes cross (one structure valued 1 in one label map and 2 in the other is split
+    into two that share its voxels).
+
+    Parameters
+    ----------
+    planes : sequence of AnnotatedPlane
+    drawer : sequence of int
+        The input each plane comes from.
+    names : sequence of str
+        Each input's name (its path).
+    labels : dict
+        Structure value → its label, for the message.
+    """
+    by_input: dict[int, set[int]] = {}
+    for plane, n in zip(planes, drawer, strict=True):
+        by_input.setdefault(n, set()).update(plane.masks)
+    both: dict[tuple[int, int], list[int]] = {}  # (x, y) -> [x and y, x, y] on the lines
+    normals = np.array([p.pose.normal for p in planes]).reshape(-1, 3)
+    to_pixels = [np.linalg.inv(p.pose.affine) for p in planes]
+    limit = np.sin(np.radians(0.5))
+    for n, a in enumerate(planes):
+        for k in range(n + 1, len(planes)):
+            b = planes[k]
+            if drawer[k] == drawer[n] or np.linalg.norm(np.cross(normals[n], normals[k])) < limit:
+                continue
+            pairs = [
+                (x, y)
+                for x in a.masks
+                for y in b.masks
+                if x != y
+                and y not in by_input[drawer[n]]
+                and x not in by_input[drawer[k]]
+                and b.annotates(x) is False
+                and a.annotates(y) is False
+            ]
+            if not pairs:
+                continue
+            world = _crossing(a, b, to_pixels[n], to_pixels[k])
+            if world is None:
+                continue
+            for x, y in pairs:
+                one = _drawn_at(a, x, to_pixels[n], world)
+                two = _drawn_at(b, y, to_pixels[k], world)
+                counts = both.setdefault((x, y), [0, 0, 0])
+                counts[0] += int(np.count_nonzero(one & two))
+                counts[1] += int(np.count_nonzero(one))
+                counts[2] += int(np.count_nonzero(two))
+    for (x, y), (shared, nx, ny) in both.items():
+        dice = 2 * shared / (nx + ny) if nx + ny else 0.0
+        if dice >= COINCIDING_DICE:
+            first = next(n for p, n in zip(planes, drawer, strict=True) if x in p.masks)
+            second = next(n for p, n in zip(planes, drawer, strict=True) if y in p.masks)
+            logger.warning(
+                "structure %s of %s and structure %s of %s coincide where their planes "
+                "cross (Dice %.2f): they are reconstructed as two structures; if they are "
+                "one, give them one value or one name in both",
+                labels.get(x, x),
+                names[first],
+                labels.get(y, y),
+                names[second],
+                dice,
+            )
+
+
+def _crossing(
+    a: AnnotatedPlane,
+    b: AnnotatedPlane,
+    a_inverse: NDArray[np.float64],
+    b_inverse: NDArray[np.float64],
+) -> NDArray[np.float64] | None:
+    """World points (mm) along the line where two non-parallel planes meet, where it
+    crosses both planes' pixels, at the finer pixel size; None where it crosses none."""
+    direction = np.cross(a.pose.normal, b.pose.normal)
+    direction /= np.linalg.norm(direction)
+    point = np.linalg.solve(
+        np.stack([a.pose.normal, b.pose.normal, direction]),
+        [a.pose.offset_mm, b.pose.offset_mm, 0.0],
+    )
+    span = _line_span(a.pose.shape, a_inverse, point, direction)
+    other = _line_span(b.pose.shape, b_inverse, point, direction)
+    lo, hi = max(span[0], other[0]), min(span[1], other[1])
+    if hi <= lo:
+        return None
+    step = float(min(a.pose.pixel_spacing.min(), b.pose.pixel_spacing.min()))
+    return point + np.arange(lo + step / 2, hi, step)[:, None] * direction
 
 
 def _line_span(

@@ -16,7 +16,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .annotated_planes import check_drawings_meet, covering_grid, merge_repeated_planes
+from .annotated_planes import (
+    check_drawings_meet,
+    covering_grid,
+    merge_repeated_planes,
+    warn_coinciding,
+)
 from .annotation import AnnotatedPlane, Annotation, PlanePose
 from .case_input import CaseInput
 from .errors import OptionError
@@ -61,7 +66,10 @@ def combine_cases(
     reconstruct it, not on the reference's pixels. A structure drawn on one
     plane in two inputs is kept once when both drawings agree; drawn by two
     inputs in places that do not meet, it is warned about, or refused when they
-    lie further apart than its size (:func:`check_drawings_meet`).
+    lie further apart than half its size (:func:`check_drawings_meet`). Two
+    structures drawn by different inputs only that coincide where their planes
+    cross (one structure valued 1 in one file and 2 in the other) are warned
+    about (:func:`slicerecon.annotated_planes.warn_coinciding`).
 
     Raises
     ------
@@ -179,6 +187,8 @@ def combine_cases(
     exclusive = all(c.annotation.exclusive and c.kind.kind in LABEL_MAP_KINDS for c in cases)
     # a partition is resolved on one grid; elsewhere a structure drawn by one input only,
     # on another lattice than the reference's, keeps that input's grid
+    if exclusive:
+        _say_coarser(grids, drawers, cases, structures)
     grids = {
         value: grid
         for value, grid in grids.items()
@@ -187,7 +197,10 @@ def combine_cases(
         and not _same_lattice(grid[0], first.annotation.affine)
     }
     origins = [str(c.input_path) for c in cases for _ in c.annotation.planes]
-    check_drawings_meet(planes, origins, {s.value: s.label for s in structures})
+    labels = {s.value: s.label for s in structures}
+    check_drawings_meet(planes, origins, labels)
+    drawer = [n for n, c in enumerate(cases) for _ in c.annotation.planes]
+    warn_coinciding(planes, drawer, [str(c.input_path) for c in cases], labels)
     affine = first.annotation.affine
     lo, hi = covering_grid(planes, affine, first.annotation.grid_shape)
     size = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), int(hi[2] - lo[2]))
@@ -225,6 +238,43 @@ def combine_cases(
         output_shape=output_shape,
         crop_lo=first.crop_lo + lo - start,
     )
+
+
+def _say_coarser(
+    grids: dict[int, tuple[NDArray[np.float64], tuple[int, int, int]]],
+    drawers: dict[int, set[int]],
+    cases: Sequence[CaseInput],
+    structures: Sequence[Structure],
+) -> None:
+    """One warning per input whose own structures lose voxels: label maps' structures are
+    resolved together on the reference's grid, even those drawn on finer voxels by
+    another label map only (a coronal 0.6 mm map's structure on an axial 3 mm one)."""
+    reference = cases[0].annotation.affine
+    size = float(abs(np.linalg.det(reference[:3, :3])))
+    by_input: dict[int, list[str]] = {}
+    for s in structures:
+        (n,) = drawers[s.value] if len(drawers[s.value]) == 1 else (0,)
+        affine = grids.get(s.value, (reference,))[0]
+        if n and float(abs(np.linalg.det(affine[:3, :3]))) < size * (1 - 1e-6):
+            by_input.setdefault(n, []).append(s.label)
+    for n, labels in by_input.items():
+        case = cases[n]
+        logger.warning(
+            "structure(s) %s, drawn in %s only, are reconstructed on the %s mm voxels of %s, "
+            "coarser than their own %s mm: the structures of label maps are resolved "
+            "together on one grid; reconstruct %s alone for its own voxels",
+            ", ".join(labels),
+            case.input_path,
+            _voxel(cases[0].annotation.affine),
+            cases[0].input_path,
+            _voxel(case.annotation.affine),
+            case.input_path,
+        )
+
+
+def _voxel(affine: NDArray[np.float64]) -> str:
+    """``0.6 x 1.2 x 0.6``: a grid's voxel size, mm."""
+    return " x ".join(f"{v:.3g}" for v in np.linalg.norm(affine[:3, :3], axis=0))
 
 
 def _same_lattice(affine: NDArray[np.float64], reference: NDArray[np.float64]) -> bool:

@@ -1218,3 +1218,37 @@ def test_a_stated_reading_the_rule_disagrees_with_is_said_and_contours_refuse_it
     assert line.startswith("error: --annotation applies to label maps") and not out.exists()
     both = [str(tmp_path / "axial.nii.gz"), str(tmp_path / "square.csv")]  # it states the map's
     assert main(["run", *both, "--annotation", "z", "-o", str(tmp_path / "both"), "-q"]) == 0
+
+
+def test_two_files_meeting_badly_are_said_or_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Found by a new user's pass, each exit 0 without a word, or with one that did not
+    stop it: the organ valued 1 in the axial file and 2 in the sagittal one (two
+    structures sharing its voxels); a sagittal file's structure of finer voxels put on the
+    axial file's 2 mm voxels; a sagittal file moved by most of the organ's size (a mesh
+    in dozens of pieces)."""
+    truth = _ellipsoid()
+    axial = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(axial, AFFINE), tmp_path / "axial.nii.gz")
+    sagittal = _keep(truth, {0: [16, 32]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(sagittal * 2, AFFINE), tmp_path / "valued_2.nii.gz")
+    fine = np.zeros((20, 60, 120), np.uint8)  # 0.5 mm voxels: a small structure 3 beside it
+    fine[[5, 15], 10:30, 20:60] = 3
+    fine_affine = np.diag([0.5, 0.5, 0.5, 1.0])
+    fine_affine[:3, 3] = [60.0, 0.0, 0.0]
+    nib.save(nib.Nifti1Image(fine, fine_affine), tmp_path / "fine.nii.gz")
+    moved = AFFINE.copy()
+    moved[0, 3] = 60.0
+    nib.save(nib.Nifti1Image(sagittal, moved), tmp_path / "moved.nii.gz")
+    said = {}
+    for other in ("valued_2", "fine", "moved"):
+        argv = ["run", str(tmp_path / "axial.nii.gz"), str(tmp_path / f"{other}.nii.gz")]
+        said[other] = main([*argv, "-o", str(tmp_path / other)])
+        said[other] = (said[other], capsys.readouterr().err.strip().splitlines())
+    code, lines = said["valued_2"]
+    assert code == 0 and len(lines) == 1 and "coincide where their planes cross" in lines[0]
+    code, lines = said["fine"]
+    assert code == 0 and len(lines) == 1 and "reconstructed on the 1 x 1 x 2 mm voxels" in lines[0]
+    code, lines = said["moved"]
+    assert code == 2 and len(lines) == 1 and "further than half its size" in lines[0]
