@@ -244,6 +244,7 @@ def write_case(
     times["write"] = time.perf_counter() - start
     plan = _plan_record(case, result)
     plan["input"] = str(case.input_path)
+    plan["inputs"] = [str(p) for p in case.inputs or (case.input_path,)]
     plan["ground_truth"] = None if ground_truth is None else str(ground_truth)
     # the configuration as it ran: ``auto`` resolved to the planner the input chose
     plan["config"] = {**config.to_dict(), "planner": config.resolved_planner(sparse=not case.dense)}
@@ -254,7 +255,7 @@ def write_case(
     if metrics is not None:
         files.append(outdir / METRICS_FILE)
     if earlier_run:
-        inputs = [case.input_path, case.kind.path]
+        inputs = [case.input_path, case.kind.path, *case.inputs]
         _remove_stale(outdir, files + [Path(p) for p in inputs])
     mesh_path = (
         outdir / mesh_file(result.results[0].structure.label, config.mesh_format, several=False)

@@ -1248,6 +1248,8 @@ def test_two_files_meeting_badly_are_said_or_refused(
         said[other] = (said[other], capsys.readouterr().err.strip().splitlines())
     code, lines = said["valued_2"]
     assert code == 0 and len(lines) == 1 and "coincide where their planes cross" in lines[0]
+    plan = json.loads((tmp_path / "valued_2" / "plan.json").read_text())
+    assert [Path(p).name for p in plan["inputs"]] == ["axial.nii.gz", "valued_2.nii.gz"]
     code, lines = said["fine"]
     assert code == 0 and len(lines) == 1 and "reconstructed on the 1 x 1 x 2 mm voxels" in lines[0]
     code, lines = said["moved"]

@@ -100,7 +100,13 @@ def show_messages(level: int) -> None:
 @app.callback()
 def _root(
     verbose: Annotated[
-        bool, typer.Option("--verbose", "-v", help="Also show progress messages.")
+        bool,
+        typer.Option(
+            "--verbose",
+            "-v",
+            help="Also show what each step reads and finds (info messages); a run of "
+            "over 2 s shows its stage anyway.",
+        ),
     ] = False,
     debug: Annotated[
         bool, typer.Option("--debug", help="Show every message, and tracebacks on errors.")
