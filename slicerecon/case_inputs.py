@@ -428,7 +428,7 @@ def case_from_label_map(
     dense = cropped is not None
     if not dense:
         annotation = planes_of_each_structure(annotation, kind.path)
-    how = "dense mask" if dense else reading.describe(crop.spacing)
+    how = "dense mask" if dense else reading.describe(affine=crop.affine)
     if every_slice:
         names = ", ".join(s.label for s in label_map.structures if s.value in every_slice)
         how += f"; structure(s) {names} drawn on every slice they cross"
@@ -757,4 +757,4 @@ def reading_of(
     if union.is_empty:
         return None
     crop = union.crop(pad=3)
-    return detect_planes(crop.mask, parse_annotation(annotation)).describe(crop.spacing)
+    return detect_planes(crop.mask, parse_annotation(annotation)).describe(affine=crop.affine)

@@ -102,15 +102,38 @@ class PlaneReading:
         """The axes that have annotated planes, increasing."""
         return tuple(sorted(a for a, p in self.planes.items() if p.size))
 
-    def describe(self, spacing: ArrayLike | None = None) -> str:
-        """One line: dense, or how many planes along which axes and their spacing."""
+    def describe(self, spacing: ArrayLike | None = None, affine: ArrayLike | None = None) -> str:
+        """One line: dense, or how many planes along which axes and their spacing.
+
+        With the grid's ``affine`` (voxel index → world mm, shape (4, 4)) the spacing
+        is measured along the planes' normal, and planes whose normal is not the world
+        axis of their grid axis's name say so: ``the grid's z (world x)`` (a sagittal
+        acquisition's slices), or ``the grid's z`` (oblique ones). ``--annotation``
+        names the grid's axes.
+        """
         how = "stated" if self.stated else "detected"
         if self.dense:
             return f"dense mask ({how})"
+        names = list(AXIS_NAMES)
+        if affine is not None:
+            columns = np.asarray(affine, dtype=np.float64)[:3, :3]
+            # the planes' normal names them, and their spacing is measured along it (a
+            # sheared grid's column, as after a CT gantry tilt, is longer)
+            spacing = np.empty(3)
+            for axis in range(3):
+                a, b = in_plane_axes(axis)
+                normal = np.cross(columns[:, a], columns[:, b])
+                unit = np.abs(normal) / np.linalg.norm(normal)
+                spacing[axis] = abs(columns[:, axis] @ normal) / np.linalg.norm(normal)
+                world = int(np.argmax(unit))
+                if unit.max() < 1 - 1e-6:
+                    names[axis] = f"the grid's {AXIS_NAMES[axis]}"
+                elif world != axis:
+                    names[axis] = f"the grid's {AXIS_NAMES[axis]} (world {AXIS_NAMES[world]})"
         parts = []
         for axis in self.axes:
             planes = self.planes[axis]
-            text = f"{planes.size} plane{'s' * (planes.size != 1)} along {AXIS_NAMES[axis]}"
+            text = f"{planes.size} plane{'s' * (planes.size != 1)} along {names[axis]}"
             if planes.size > 1:
                 gaps = np.diff(planes)
                 step = float(np.median(gaps))

@@ -1254,3 +1254,20 @@ def test_two_files_meeting_badly_are_said_or_refused(
     assert code == 0 and len(lines) == 1 and "reconstructed on the 1 x 1 x 2 mm voxels" in lines[0]
     code, lines = said["moved"]
     assert code == 2 and len(lines) == 1 and "further than half its size" in lines[0]
+
+
+def test_the_read_line_names_grid_axes_that_are_not_the_world_axes() -> None:
+    """A sagittal acquisition (the grid's z runs along world x) was read as '6 planes along
+    z' beside '6 planes along x' for the same planes; a sheared grid's plane spacing was
+    the column's length (7.71 mm), not the distance between the planes (7.5 mm)."""
+    mask = np.zeros((40, 40, 40), bool)
+    mask[10:30, 10:30, 5:35:5] = True
+    reading = detect_planes(mask)
+    permuted = np.array([[0, 0, 2.0, 0], [1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1]])
+    assert reading.describe(affine=permuted).endswith(
+        "6 planes along the grid's z (world x) (spacing 10 mm)"
+    )
+    sheared = np.diag([1.0, 1.0, 1.5, 1.0])
+    sheared[0, 2] = 0.36  # the slices' origins move sideways: a CT gantry tilt
+    assert reading.describe(affine=sheared).endswith("6 planes along z (spacing 7.5 mm)")
+    assert reading.describe(affine=np.diag([1, 1, 1.5, 1])).endswith("along z (spacing 7.5 mm)")
