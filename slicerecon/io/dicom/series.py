@@ -183,35 +183,42 @@ def referenced_series(ds: Any) -> tuple[set[str], set[str]]:
         The SeriesInstanceUIDs and SOPInstanceUIDs it names; empty when it names none
         (these elements are optional).
     """
-    series: set[str] = set()
-    instances: set[str] = set()
 
-    def items(parent: Any, keyword: str) -> list[Any]:
-        try:
-            return list(parent.get(keyword, None) or [])
-        except PARSE_ERRORS:  # a malformed sequence names nothing
-            return []
+    def items(parents: list[Any], *path: str) -> list[Any]:
+        """The items at the end of a path of sequences, below every parent."""
+        for keyword in path:
+            found = []
+            for parent in parents:
+                try:
+                    found += list(parent.get(keyword, None) or [])
+                except PARSE_ERRORS:  # a malformed sequence names nothing
+                    continue
+            parents = found
+        return parents
 
-    def uid(item: Any, keyword: str) -> str:
-        try:
-            return str(item.get(keyword, "") or "").strip()
-        except PARSE_ERRORS:
-            return ""
+    def uids(found: list[Any], keyword: str) -> set[str]:
+        named = set()
+        for item in found:
+            try:
+                named.add(str(item.get(keyword, "") or "").strip())
+            except PARSE_ERRORS:
+                continue
+        return named
 
-    for frame in items(ds, "ReferencedFrameOfReferenceSequence"):
-        for study in items(frame, "RTReferencedStudySequence"):
-            for item in items(study, "RTReferencedSeriesSequence"):
-                series.add(uid(item, "SeriesInstanceUID"))
-                for image in items(item, "ContourImageSequence"):
-                    instances.add(uid(image, "ReferencedSOPInstanceUID"))
-    for roi in items(ds, "ROIContourSequence"):
-        for contour in items(roi, "ContourSequence"):
-            for image in items(contour, "ContourImageSequence"):
-                instances.add(uid(image, "ReferencedSOPInstanceUID"))
-    for item in items(ds, "ReferencedSeriesSequence"):
-        series.add(uid(item, "SeriesInstanceUID"))
-        for image in items(item, "ReferencedInstanceSequence"):
-            instances.add(uid(image, "ReferencedSOPInstanceUID"))
+    rt_series = items(
+        [ds],
+        "ReferencedFrameOfReferenceSequence",
+        "RTReferencedStudySequence",
+        "RTReferencedSeriesSequence",
+    )
+    seg_series = items([ds], "ReferencedSeriesSequence")
+    series = uids(rt_series + seg_series, "SeriesInstanceUID")
+    images = (
+        items(rt_series, "ContourImageSequence")
+        + items([ds], "ROIContourSequence", "ContourSequence", "ContourImageSequence")
+        + items(seg_series, "ReferencedInstanceSequence")
+    )
+    instances = uids(images, "ReferencedSOPInstanceUID")
     series.discard("")
     instances.discard("")
     return series, instances
