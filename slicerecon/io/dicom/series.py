@@ -203,7 +203,7 @@ def referenced_series(ds: Any) -> tuple[set[str], set[str]]:
                 named.add(str(item.get(keyword, "") or "").strip())
             except PARSE_ERRORS:
                 continue
-        return named
+        return named - {""}
 
     rt_series = items(
         [ds],
