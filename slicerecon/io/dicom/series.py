@@ -175,7 +175,7 @@ def referenced_series(ds: Any) -> tuple[set[str], set[str]]:
     ds : pydicom Dataset
         An RTSTRUCT (``ReferencedFrameOfReferenceSequence`` > ``RTReferencedStudySequence``
         > ``RTReferencedSeriesSequence``, and each contour's ``ContourImageSequence``)
-        or a SEG (``ReferencedSeriesSequence``, and each frame's source images).
+        or a SEG (``ReferencedSeriesSequence`` and its ``ReferencedInstanceSequence``).
 
     Returns
     -------
