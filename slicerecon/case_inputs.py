@@ -731,30 +731,25 @@ def reading_of(
 ) -> str | None:
     """How ``slicerecon run`` reads a label map, in one line (None for other inputs).
 
-    ``dense mask (detected)`` or ``sparse annotation (detected): 12 planes
-    along z (spacing 5 mm), 2 planes along x ...``: the rule of
-    :func:`slicerecon.plane_detection.detect_planes` on every structure
-    together, or as ``annotation`` states it.
+    The line ``run`` prints (:func:`load_case`): ``dense mask; 3 structure(s): ...``
+    or ``sparse annotation (detected): 12 planes along z (spacing 5 mm), 2 planes
+    along x ...; 1 structure(s): ...``, by the rule of
+    :func:`slicerecon.plane_detection.detect_planes` or as ``annotation`` states
+    it, a SEG on its image series' slices when the series lies beside it.
+
+    Raises
+    ------
+    SlicereconError
+        What :func:`load_case` raises: the input cannot be read as ``run`` reads it.
     """
     kind = detect_kind(path)
     if kind.kind not in LABEL_MAP_KINDS:
         return None
-    budget = DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb
-    if kind.kind == "dicom-seg" or _layered_nrrd(kind):
-        # segments that may overlap, read whole as run reads them (a label map of them
-        # gives overlapping voxels to one, with a warning run does not give)
-        if kind.kind == "dicom-seg":
-            masks = read_seg_masks(kind.path, memory_budget_gb=budget)
-        else:
-            masks = read_nrrd_masks(kind.path, memory_budget_gb=budget)
-        union = masks.union()
-    else:
-        label_map = read_label_map(
-            kind.path, allow_irregular=allow_irregular, memory_budget_gb=budget
-        )
-        assert label_map is not None
-        union = label_map.union()
-    if union.is_empty:
-        return None
-    crop = union.crop(pad=3)
-    return detect_planes(crop.mask, parse_annotation(annotation)).describe(affine=crop.affine)
+    config = ReconstructConfig(
+        annotation=annotation,
+        allow_irregular=allow_irregular,
+        max_memory_gb=DEFAULT_MEMORY_BUDGET_GB if memory_budget_gb is None else memory_budget_gb,
+    )
+    # read as run reads it: overlapping segments whole, a SEG on its series' slices,
+    # structures drawn on every slice beside sparse ones
+    return load_case(path, config).annotation.source
