@@ -330,8 +330,9 @@ def _pair_series_below(
     as ``slicerecon run pat1`` reads it), or, alone in its folder, the one series in a
     folder beside it (``pat1/RTSTRUCT/RS.dcm`` beside ``pat1/CT/``, as PACS exports a
     study); that series is then its reference, not a case. Of several such series, it
-    takes the one it names as its own; the others of its frame of reference that no file
-    takes are skipped (another series of the study, not a label map)."""
+    takes the one it names as its own; the other image series beside it that no file
+    takes are skipped (a scout, another reconstruction, a registered MR: images of the
+    study, not label maps)."""
     out = list(found)
     claimed: set[int] = set()
     passed_over: dict[int, SkippedInput] = {}
@@ -353,12 +354,15 @@ def _pair_series_below(
                     other.kind == "dicom-series"
                     and other.path != below
                     and other.path.parent == below.parent
-                    and same_frame(case.path, other.path, known=True)
                 ):
+                    # a scout, another reconstruction, a registered MR: images of the
+                    # study, not masks (a CT or MR read as a label map fails)
+                    same = same_frame(case.path, other.path, rois=True)
+                    frame = "" if same else " (another frame)"
                     passed_over[m] = SkippedInput(
                         other.relpath,
-                        f"another image series of the study of {case.relpath}, which names "
-                        f"{_relpath(below, root)} as its own",
+                        f"another image series{frame} of the study of {case.relpath}, which "
+                        f"was drawn on {_relpath(below, root)}",
                     )
         m = next(
             (

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import os
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -116,31 +117,44 @@ def series_below(folder: Path, drawing: Path | None = None, *, quiet: bool = Fal
     None when there is none or several; the rule ``run`` and batch discovery share.
 
     Of several, the one whose images ``drawing`` (an RTSTRUCT or SEG) names as those it
-    was drawn on (:func:`slicerecon.io.dicom.series.referenced_series`), said in one
-    warning line unless ``quiet`` (batch discovery: the case's own read says it)."""
-    from .dicom import dicom_modality
-
+    was drawn on (:func:`slicerecon.io.dicom.series.referenced_series`), else the one
+    of its FrameOfReferenceUID, said in one warning line unless ``quiet`` (batch
+    discovery: the case's own read says it)."""
     found = []
     for sub in sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith(".")):
         try:
-            first = next((f for f in sorted(sub.iterdir()) if f.is_file()), None)
+            if next(_images_in(sub), None) is not None:
+                found.append(sub)
         except OSError:  # gone, or not readable: holds no series to take
             continue
-        if first is not None and dicom_modality(first) not in (None, "RTSTRUCT", "SEG"):
-            found.append(sub)
     if len(found) > 1 and drawing is not None:
-        named = _named_by(drawing, found)
+        named, why = _named_by(drawing, found), "the series it names"
+        if len(named) != 1:  # a CT beside a registered MR: the one of its frame
+            named = [sub for sub in found if same_frame(drawing, sub, known=True, rois=True)]
+            why = "the one series of its frame of reference"
         if len(named) == 1 and not quiet:
+            listed = ", ".join(sub.name for sub in found[:4]) + (", ..." if len(found) > 4 else "")
             logger.warning(
-                "%s: %d folders beside it hold images (%s): read %s, the series it names",
+                "%s: %d folders beside it hold images (%s): read %s, %s",
                 drawing,
                 len(found),
-                ", ".join(sub.name for sub in found[:4]),
+                listed,
                 named[0],
+                why,
             )
         if len(named) == 1:
             return named[0]
     return found[0] if len(found) == 1 else None
+
+
+def _images_in(folder: Path) -> Iterator[Path]:
+    """The DICOM image files of a folder, in name order: hidden files, other files
+    (a README, a .DS_Store), DICOMDIRs and non-image objects are passed over."""
+    from .dicom.sniff import dicom_role
+
+    for f in sorted(folder.iterdir()):
+        if f.is_file() and not f.name.startswith(".") and dicom_role(f) == "image":
+            yield f
 
 
 def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
@@ -163,8 +177,10 @@ def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
     series, instances = referenced_series(ds)
     named = []
     for folder in folders:
-        files = [f for f in sorted(folder.iterdir()) if f.is_file() and not f.name.startswith(".")]
-        for f in files if instances and not series else files[:1]:
+        images = _images_in(folder)
+        for f in images if instances and not series else [next(images, None)]:
+            if f is None:
+                break
             image = header(f, ["SeriesInstanceUID", "SOPInstanceUID"])
             if image is not None and (
                 str(image.get("SeriesInstanceUID", "")) in series
@@ -175,10 +191,12 @@ def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
     return named
 
 
-def same_frame(drawing: Path, series: Path, *, known: bool = False) -> bool:
+def same_frame(drawing: Path, series: Path, *, known: bool = False, rois: bool = False) -> bool:
     """Whether an RTSTRUCT or SEG and the first image of a series folder name one
     FrameOfReferenceUID (True when either does not say: nothing tells them apart,
-    unless ``known``: then both must name it)."""
+    unless ``known``: then both must name it). ``rois``: an RTSTRUCT without its
+    references names it by its ROIs' ReferencedFrameOfReferenceUID (to tell folders
+    side by side apart, not to refuse a series)."""
     from .dicom.sniff import read_dicom_header
 
     def frame(path: Path) -> str:
@@ -189,23 +207,17 @@ def same_frame(drawing: Path, series: Path, *, known: bool = False) -> bool:
         except Exception:  # noqa: BLE001 - an unreadable file names no frame
             return ""
         uid = str(ds.get("FrameOfReferenceUID", "") or "")
-        if not uid and "ReferencedFrameOfReferenceSequence" in ds:
-            items = ds.ReferencedFrameOfReferenceSequence
-            uid = str(items[0].get("FrameOfReferenceUID", "") or "") if len(items) else ""
+        # an RTSTRUCT names it in its references (optional), and in each ROI (``rois``)
+        for sequence, keyword in (
+            ("ReferencedFrameOfReferenceSequence", "FrameOfReferenceUID"),
+            ("StructureSetROISequence", "ReferencedFrameOfReferenceUID"),
+        )[: 2 if rois else 1]:
+            if not uid and sequence in ds:
+                items = ds[sequence].value
+                uid = str(items[0].get(keyword, "") or "") if len(items) else ""
         return uid
 
-    from .dicom import dicom_modality
-
-    first = next(
-        (
-            f
-            for f in sorted(series.iterdir())
-            if f.is_file()
-            and not f.name.startswith(".")
-            and dicom_modality(f) not in (None, "RTSTRUCT", "SEG")
-        ),
-        None,
-    )
+    first = next(_images_in(series), None)
     own, theirs = frame(drawing), "" if first is None else frame(first)
     if known:
         return bool(own) and own == theirs
@@ -239,23 +251,18 @@ def series_of(drawing: Path, *, images_beside: bool | None = None) -> Path | Non
 
 
 def _drawings_only(folder: Path) -> bool:
-    """Whether every file of a folder is an RTSTRUCT or SEG (a PACS export's RTSTRUCT/)."""
-    from .dicom import dicom_modality
+    """Whether every DICOM file of a folder is an RTSTRUCT or SEG, and it holds one (a PACS
+    export's RTSTRUCT/; a README or .DS_Store beside them is no DICOM file)."""
+    from .dicom.sniff import dicom_role
 
     files = [f for f in sorted(folder.iterdir()) if f.is_file() and not f.name.startswith(".")]
-    return bool(files) and all(dicom_modality(f) in ("RTSTRUCT", "SEG") for f in files)
+    roles = [role for role in map(dicom_role, files) if role is not None]
+    return bool(roles) and all(role in ("rtstruct", "seg") for role in roles)
 
 
 def _holds_images(folder: Path) -> bool:
-    """Whether a folder holds a DICOM image file (not an RTSTRUCT or SEG)."""
-    from .dicom import dicom_modality
-
-    return any(
-        f.is_file()
-        and not f.name.startswith(".")
-        and dicom_modality(f) not in (None, "RTSTRUCT", "SEG")
-        for f in sorted(folder.iterdir())
-    )
+    """Whether a folder holds a DICOM image file (not an RTSTRUCT, SEG or DICOMDIR)."""
+    return next(_images_in(folder), None) is not None
 
 
 def _drawing_below(folder: Path) -> InputKind:

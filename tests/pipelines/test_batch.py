@@ -304,13 +304,50 @@ def test_of_two_series_of_a_study_the_one_the_rtstruct_names_is_read(tmp_path, c
     assert nib.load(next((tmp_path / "out").glob("*/labels.nii.gz"))).shape == (48, 48, slices)
     if subfolders:  # the 3 mm series is no case of its own (a CT is no label map)
         left = discover(tmp_path / "in").skipped
-        assert [(s.relpath, "names study/thin" in s.reason) for s in left] == [
+        assert [(s.relpath, "drawn on study/thin" in s.reason) for s in left] == [
             ("study/thick", True)
         ]
     blind = tmp_path / "blind"
     _two_series_and_an_rtstruct(blind, subfolders, names_series=False)
     assert main(["run", str(blind), "-o", str(tmp_path / "blind_out"), "-q"]) == 2
     assert "series" in capsys.readouterr().err
+
+
+def test_a_study_with_stray_files_and_a_registered_mr_reads_its_ct(tmp_path, capsys):
+    """CT/ holding a .DS_Store, a README and a DICOMDIR beside RTSTRUCT/, and a registered
+    MR/ of another frame: a stray file sorted first hid the series ('holds no one image
+    series beside it'; in a batch the case was 'ok' on a grid of its own, without DICOM
+    outputs), and the MR became a failed case ('not a label map')."""
+    from pydicom.fileset import FileSet
+
+    study = tmp_path / "in" / "pat"
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 2], [0, 0, 0])
+    ct = factory.write_series(study / "CT", np.zeros((40, 40, 12), np.uint16), affine)
+    factory.write_series(study / "MR", np.zeros((40, 40, 12), np.uint16), affine, modality="MR")
+    rings = [
+        factory.contour_item(factory.circle(8.0 - abs(k - 6), (20.0, 20.0), 2.0 * k))
+        for k in range(3, 10)
+    ]
+    factory.write_rtstruct(
+        study / "RTSTRUCT" / "RS.dcm", {(1, "GTV"): rings}, on_series=study / "CT"
+    )
+    (study / "CT" / ".DS_Store").write_bytes(b"\0\0\0\1Bud1" + bytes(100))
+    (study / "CT" / "00_README.txt").write_text("exported by PACS\n")
+    index = FileSet()
+    index.add(pydicom.dcmread(ct[0]))
+    index.write(tmp_path / "cd")
+    (tmp_path / "cd" / "DICOMDIR").rename(study / "CT" / "DICOMDIR")
+    assert main(["run", str(study), "-o", str(tmp_path / "run")]) == 0
+    assert nib.load(tmp_path / "run" / "labels.nii.gz").shape == (40, 40, 12)
+    warned = [x for x in capsys.readouterr().err.splitlines() if x.startswith("warning")]
+    assert len(warned) == 1 and "the one series of its frame of reference" in warned[0]
+    result = run_batch(
+        tmp_path / "in", tmp_path / "out", ReconstructConfig(n_points=5000), workers=0, report=False
+    )
+    assert [(c.kind, c.status) for c in result.cases] == [("rtstruct", "ok")]
+    assert (tmp_path / "out" / "pat__RTSTRUCT__RS" / "rtstruct.dcm").is_file()
+    left = {s.relpath: s.reason for s in discover(tmp_path / "in").skipped}
+    assert "another frame" in left["pat/MR"]
 
 
 def test_a_seg_beside_its_series_and_a_pacs_export_are_read_on_the_series(tmp_path):
