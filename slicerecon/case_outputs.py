@@ -210,16 +210,17 @@ def write_case(
         source=kind.path if kind.kind == "nifti" else None,
         layers=result.layers,
     )
+    overlap = None
     if result.overlap_voxels:
+        # ROIs that nest (BODY > organ > GTV) are ordinary input: said with the summary,
+        # not as a warning (one on every structure set taught users to skip warnings)
         whole = ["the meshes", "labels.seg.nrrd (in layers)"]
         whole += [f"{name}.dcm" for name in ("seg", "rtstruct") if name in outputs.written]
-        logger.warning(
-            "%s: structures overlap on %d voxels; labels.nii.gz holds one structure per voxel "
-            "(the smallest on top); %s keep each whole",
-            case.named,
-            result.overlap_voxels,
-            ", ".join(whole),
+        overlap = (
+            f"structures overlap on {result.overlap_voxels} voxels; labels.nii.gz holds one "
+            f"structure per voxel (the smallest on top); {', '.join(whole)} keep each whole"
         )
+        logger.info("%s: %s", case.named, overlap)
     write_json(
         outdir / STRUCTURES_FILE,
         {
@@ -271,6 +272,7 @@ def write_case(
         "metrics": mean,
         "structures": records,
         "annotation": case.annotation.source,
+        "overlap": overlap,
         "timings_s": plan["timings_s"],
     }
 

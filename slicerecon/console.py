@@ -132,6 +132,8 @@ def print_run_summary(summary: dict[str, Any], outdir: Path) -> None:
     if summary.get("annotation"):
         # one line, however narrow the terminal or the pipe (grep finds it whole)
         console.print(f"read as: {summary['annotation']}", highlight=False, soft_wrap=True)
+    if summary.get("overlap"):
+        console.print(f"overlaps: {summary['overlap']}", highlight=False, soft_wrap=True)
     console.print(
         f"[bold]{summary['parts']}[/] part(s) from [bold]{summary['planes']}[/] planes -> "
         f"{summary['mesh']} (watertight: {summary['watertight']})",
