@@ -37,7 +37,7 @@ from ..errors import (
 from ..labels import Structure
 from ..sections import CrossSections
 from ..selection import choose_structure, parse_selector
-from .dicom.series import dicom_series_geometry
+from .dicom.series import dicom_series_geometry, referenced_series
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 from .plane_groups import annotation_from_polygons, orientation_count
@@ -427,9 +427,23 @@ def _read_structures(
     ds, p = _read_dataset(path)
     structures, polygons = _chosen_polygons(ds, p, rois)
     sections, union = _shared_grid_sections(
-        p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+        p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb, ds
     )
     return structures, sections, union
+
+
+def _say_unnamed(p: Path, ds: Any, image_dir: str | os.PathLike[str], uids: Sequence[str]) -> None:
+    """One warning when the structure set names its images and none of them is the series'
+    (drawn on another reconstruction of the study): its contours are still placed on
+    that grid by their coordinates."""
+    named = referenced_series(ds)[1]
+    if named and not named & set(uids):
+        logger.warning(
+            "%s: its contours name none of the images in %s (drawn on another series of the "
+            "study?); they are placed on that grid by their coordinates",
+            p,
+            image_dir,
+        )
 
 
 def _shared_grid_sections(
@@ -439,12 +453,14 @@ def _shared_grid_sections(
     pixel_spacing: float | None,
     allow_irregular: bool,
     memory_budget_gb: float,
+    ds: Any,
 ) -> tuple[list[CrossSections | None], CrossSections]:
     """Each ROI's parallel polygons rasterized on the grid of all of them (or the series')."""
     everything = [poly for group in polygons for poly in group]
     reference = None
     if image_dir is not None:
-        affine, shape, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
+        affine, shape, uids = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
+        _say_unnamed(p, ds, image_dir, uids)
         reference = (affine, shape)
         pixel_spacing = None
     try:
@@ -519,7 +535,7 @@ def read_rtstruct_annotation(
         drawn = [(s, group) for s, group in zip(structures, polygons, strict=True) if group]
         if orientation_count(everything) <= 1:
             sections, _ = _shared_grid_sections(
-                p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb
+                p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb, ds
             )
             own = [(s, x) for s, x in zip(structures, sections, strict=True) if x is not None]
             annotation = annotation_from_sections(
@@ -532,7 +548,8 @@ def read_rtstruct_annotation(
             return annotation, missing
         reference = None
         if image_dir is not None:
-            affine, shape, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
+            affine, shape, uids = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
+            _say_unnamed(p, ds, image_dir, uids)
             reference = (affine, shape)
         try:
             annotation = annotation_from_polygons(

@@ -313,6 +313,26 @@ def test_of_two_series_of_a_study_the_one_the_rtstruct_names_is_read(tmp_path, c
     assert "series" in capsys.readouterr().err
 
 
+def test_an_rtstruct_naming_none_of_the_images_beside_it_is_said(tmp_path, capsys):
+    """Drawn on a 1.25 mm CT, beside the 3.75 mm one only: its contours name none of those
+    images. The warning existed for one ROI read alone, not for run and batch."""
+    from pydicom.uid import generate_uid
+
+    affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1, 1], [0, 0, 2], [0, 0, 0])
+    study = tmp_path / "study"
+    factory.write_series(study, np.zeros((40, 40, 12), np.uint16), affine, modality="CT")
+    rings = [
+        factory.contour_item(
+            factory.circle(8.0 - abs(k - 6), (20.0, 20.0), 2.0 * k), image_uid=generate_uid()
+        )
+        for k in range(3, 10)
+    ]
+    factory.write_rtstruct(study / "rs.dcm", {(1, "GTV"): rings}, on_series=study)
+    assert main(["run", str(study), "-o", str(tmp_path / "out")]) == 0
+    warned = [x for x in capsys.readouterr().err.splitlines() if x.startswith("warning")]
+    assert len(warned) == 1 and "name none of the images" in warned[0]
+
+
 def test_a_study_with_stray_files_and_a_registered_mr_reads_its_ct(tmp_path, capsys):
     """CT/ holding a .DS_Store, a README and a DICOMDIR beside RTSTRUCT/, and a registered
     MR/ of another frame: a stray file sorted first hid the series ('holds no one image
