@@ -206,8 +206,8 @@ def _load_label_map(
     if kind.kind == "dicom-seg" and len(selectors) == 1 and not config.union:
         # one segment, whole: SEG segments may overlap, and the label map of
         # every segment gives overlapping voxels to one of them
-        structure = _seg_segment(kind, selectors[0])
-        volume = load_input(kind.path, label=structure.value, memory_budget_gb=config.max_memory_gb)
+        structure, number = _seg_segment(kind, selectors[0])
+        volume = load_input(kind.path, label=number, memory_budget_gb=config.max_memory_gb)
         assert isinstance(volume, Volume)
         label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
         return case_from_label_map(on(label_map), replace(config, label=None, roi=None), kind=kind)
@@ -315,12 +315,16 @@ def _layered_nrrd(kind: InputKind) -> bool:
     return bool(info.is_segmentation and info.layers > 1)
 
 
-def _seg_segment(kind: InputKind, selector: int | str) -> Structure:
-    """The SEG segment a selector names (headers only), or LabelError listing them."""
+def _seg_segment(kind: InputKind, selector: int | str) -> tuple[Structure, int]:
+    """The SEG segment a selector names (headers only), or LabelError listing them: the
+    structure (its label value, name, colour) and its SegmentNumber."""
+    from .io.labelmap import _segment_structure
 
-    names = {int(s["number"]): str(s["label"]) for s in dicom_info(kind.path)["segments"]}
+    segments = dicom_info(kind.path)["segments"]
+    by_value = {int(s.get("value", s["number"])): s for s in segments}
+    names = {value: str(s["label"]) for value, s in by_value.items()}
     value = choose_structure(names, selector, kind="label", source=kind.path)
-    return Structure(value, names[value])
+    return _segment_structure(by_value[value]), int(by_value[value]["number"])
 
 
 def case_from_label_map(

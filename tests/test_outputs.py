@@ -71,6 +71,22 @@ def test_rtstruct_beside_its_series_writes_seg_and_rtstruct_that_read_back(tmp_p
     assert seg.FrameOfReferenceUID == image.FrameOfReferenceUID
     assert seg.ReferencedSeriesSequence[0].SeriesInstanceUID == image.SeriesInstanceUID
 
+    # read back by slicerecon beside its series, the SEG keeps the label values and colours
+    # of the map it was written from (it gave 1 and 2, without colours)
+    back = tmp_path / "back"
+    back.mkdir()
+    for path in (tmp_path / "ct").glob("slice_*.dcm"):
+        (back / path.name).write_bytes(path.read_bytes())
+    (back / "seg.dcm").write_bytes((out / "seg.dcm").read_bytes())
+    assert main(["run", str(back), "-o", str(tmp_path / "again"), "-q"]) == 0
+    again = json.loads((tmp_path / "again" / "structures.json").read_text())["structures"]
+    first = record["structures"]
+    assert [(r["value"], r["name"], r["colour"]) for r in again] == [
+        (r["value"], r["name"], r["colour"]) for r in first
+    ]
+    relabelled, _ = _nifti_labels(tmp_path / "again" / "labels.nii.gz")
+    assert sorted(np.unique(relabelled)) == [0, 3, 7]
+
     # the RTSTRUCT: read back by slicerecon into the same structures (volumes within 2 %)
     structures, sections, _ = read_rtstruct_structures(
         out / "rtstruct.dcm", image_dir=tmp_path / "ct"

@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -156,7 +157,7 @@ def read_seg_masks(
                 raise EmptyMaskError(f"{path}: segment {number} lies on another grid")
             affine = volume.affine if affine is None else affine
             masks.append(volume.mask)
-            structures.append(Structure(number, name))
+            structures.append(_segment_structure(segment))
         if affine is None:
             raise EmptyMaskError(f"{path}: no segment has a foreground pixel")
         return StructureMasks(tuple(masks), affine, tuple(structures), "LPS")
@@ -172,28 +173,46 @@ def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
     info = dicom_info(path)
     labels: NDArray[np.integer] | None = None
     affine = None
-    names: dict[int, str] = {}
+    found: list[Structure] = []
     overlap = 0
     for segment in info["segments"]:
-        number = int(segment["number"])
-        names[number] = str(segment["label"])
+        number, structure = int(segment["number"]), _segment_structure(segment)
         try:
             volume = read_dicom_seg(path, segment=number, memory_budget_gb=memory_budget_gb)
         except EmptyMaskError:
-            logger.warning("%s: segment %d (%s) has no foreground", path, number, names[number])
+            logger.warning("%s: segment %d (%s) has no foreground", path, number, structure.name)
             continue
         if labels is None:
-            labels = np.zeros(volume.shape, dtype=np.uint16)
+            top = max(int(s["value"]) for s in info["segments"])
+            labels = np.zeros(volume.shape, dtype=np.uint16 if top < 2**16 else np.uint32)
             affine = volume.affine
         overlap += int(np.count_nonzero(labels[volume.mask]))
-        labels[volume.mask] = number
+        labels[volume.mask] = structure.value
+        found.append(structure)
     if labels is None or affine is None:
         raise EmptyMaskError(f"{path}: no segment has a foreground pixel")
     if overlap:
         logger.warning(
             "%s: segments overlap on %d voxels; each goes to the later segment", path, overlap
         )
-    return LabelMap.from_array(labels, affine, names=names, coordinates="LPS")
+    return LabelMap.from_array(
+        labels,
+        affine,
+        names={s.value: s.name for s in found},
+        colours={s.value: s.colour for s in found if s.colour is not None},
+        coordinates="LPS",
+    )
+
+
+def _segment_structure(segment: dict[str, Any]) -> Structure:
+    """A SEG segment (a :func:`dicom_info` record) as a structure: its label value (the
+    one slicerecon's writer records, else its SegmentNumber), name and colour."""
+    colour = segment.get("colour")
+    return Structure(
+        int(segment.get("value", segment["number"])),
+        str(segment["label"]),
+        None if colour is None else (int(colour[0]), int(colour[1]), int(colour[2])),
+    )
 
 
 def write_label_map(

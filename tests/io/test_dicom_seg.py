@@ -203,8 +203,8 @@ def test_info_and_dispatcher(two_segment_seg):
     assert info["shape"] == [9, 8, 6]
     np.testing.assert_allclose(info["spacing_mm"], [0.7, 1.2, 3.0], atol=1e-6)
     assert info["segments"] == [
-        {"number": 1, "label": "Liver", "n_frames": 4},
-        {"number": 2, "label": "Tumour", "n_frames": 4},
+        {"number": 1, "label": "Liver", "value": 1, "colour": None, "n_frames": 4},
+        {"number": 2, "label": "Tumour", "value": 2, "colour": None, "n_frames": 4},
     ]
     assert info["n_frames"] == 8
     np.testing.assert_array_equal(load_input(path, label=1).mask, liver)

@@ -100,6 +100,47 @@ def _seg_segments(ds: Any, path: Path) -> dict[int, str]:
     return segments
 
 
+VALUE_DESCRIPTION = "label value "
+"""How slicerecon's SEG writer records a segment's label value in its SegmentDescription."""
+
+
+def _segment_extras(ds: Any) -> dict[int, tuple[int, list[int] | None]]:
+    """Segment number → (label value, display colour RGB or None).
+
+    The label value is the one slicerecon's writer records (SegmentDescription
+    ``"label value 4"``) when every segment records one and no two share it, so a
+    ``seg.dcm`` read back keeps its label map's values; otherwise the SegmentNumber.
+    The colour is RecommendedDisplayCIELabValue converted to RGB (highdicom).
+    """
+    from highdicom.color import CIELabColor
+
+    out: dict[int, tuple[int, list[int] | None]] = {}
+    recorded: dict[int, int] = {}
+    for item in ds.get("SegmentSequence", None) or []:
+        try:
+            number = int(item.SegmentNumber)
+        except PARSE_ERRORS:
+            continue
+        colour = None
+        try:
+            lab = item.get("RecommendedDisplayCIELabValue", None)
+            if lab is not None and len(lab) == 3:
+                colour = [int(c) for c in CIELabColor.from_dicom_value(list(lab)).to_rgb()]
+        except (*PARSE_ERRORS, ValueError):  # a malformed colour is no colour
+            colour = None
+        description = str(item.get("SegmentDescription", "") or "")
+        if description.startswith(VALUE_DESCRIPTION):
+            try:
+                recorded[number] = int(description[len(VALUE_DESCRIPTION) :])
+            except ValueError:
+                pass
+        out[number] = (number, colour)
+    values = list(recorded.values())
+    if set(recorded) == set(out) and len(set(values)) == len(values) and min(values, default=1) > 0:
+        out = {n: (recorded[n], colour) for n, (_, colour) in out.items()}
+    return out
+
+
 def _choose_segment(segments: dict[int, str], segment: int | str | None, path: Path) -> int:
     return choose_structure(segments, parse_selector(segment), kind="segment", source=path)
 
@@ -490,6 +531,7 @@ def seg_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     segments = _seg_segments(ds, p)
     geometry = _seg_geometry(ds, p)
     counts = {n: int(np.count_nonzero(geometry.frame_segment == n)) for n in segments}
+    extras = _segment_extras(ds)
     return {
         "kind": "dicom-seg",
         "segmentation_type": str(ds.get("SegmentationType", "")),
@@ -499,7 +541,14 @@ def seg_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         "orientation": orientation_list(geometry.affine),
         "origin_mm": [round(float(v), 6) for v in geometry.affine[:3, 3]],
         "segments": [
-            {"number": n, "label": segments[n], "n_frames": counts[n]} for n in sorted(segments)
+            {
+                "number": n,
+                "label": segments[n],
+                "value": extras.get(n, (n, None))[0],
+                "colour": extras.get(n, (n, None))[1],
+                "n_frames": counts[n],
+            }
+            for n in sorted(segments)
         ],
         "coordinates": "LPS",
     }
