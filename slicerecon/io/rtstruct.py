@@ -180,16 +180,16 @@ def _roi_polygons(
             uid = str(ref.get("ReferencedSOPInstanceUID", "") or "")
             if uid:
                 image_uids.add(uid)
-    for kind, count in skipped.items():
-        logger.warning(
-            "%s: %s: skipped %d %s contours (only CLOSED_PLANAR bound an area)",
-            path,
-            label,
-            count,
-            kind,
+    listed = ", ".join(f"{count} {kind}" for kind, count in skipped.items())
+    if not polygons:  # one line: what it has instead (a POINT isocentre marker)
+        instead = f" ({listed} contours skipped: only CLOSED_PLANAR bound an area)"
+        raise EmptyMaskError(
+            f"{path}: {label} has no closed planar contour{instead * bool(listed)}"
         )
-    if not polygons:
-        raise EmptyMaskError(f"{path}: {label} has no closed planar contour")
+    if skipped:
+        logger.warning(
+            "%s: %s: skipped %s contours (only CLOSED_PLANAR bound an area)", path, label, listed
+        )
     return polygons, names, image_uids
 
 
