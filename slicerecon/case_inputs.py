@@ -38,7 +38,7 @@ from .inputs import axis_upsample, prepare_inputs, refuse_plane_options
 from .io import InputKind, detect_kind, load_ground_truth, load_input
 from .io.contours import contour_file_grid, read_contour_annotation
 from .io.dicom import dicom_info, dicom_series_geometry
-from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
+from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks, segment_structure
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
@@ -318,13 +318,11 @@ def _layered_nrrd(kind: InputKind) -> bool:
 def _seg_segment(kind: InputKind, selector: int | str) -> tuple[Structure, int]:
     """The SEG segment a selector names (headers only), or LabelError listing them: the
     structure (its label value, name, colour) and its SegmentNumber."""
-    from .io.labelmap import _segment_structure
-
     segments = dicom_info(kind.path)["segments"]
     by_value = {int(s.get("value", s["number"])): s for s in segments}
     names = {value: str(s["label"]) for value, s in by_value.items()}
     value = choose_structure(names, selector, kind="label", source=kind.path)
-    return _segment_structure(by_value[value]), int(by_value[value]["number"])
+    return segment_structure(by_value[value]), int(by_value[value]["number"])
 
 
 def case_from_label_map(

@@ -36,6 +36,7 @@ __all__ = [
     "LABEL_MAP_KINDS",
     "read_seg_masks",
     "read_label_map",
+    "segment_structure",
     "write_label_map",
 ]
 
@@ -157,7 +158,7 @@ def read_seg_masks(
                 raise EmptyMaskError(f"{path}: segment {number} lies on another grid")
             affine = volume.affine if affine is None else affine
             masks.append(volume.mask)
-            structures.append(_segment_structure(segment))
+            structures.append(segment_structure(segment))
         if affine is None:
             raise EmptyMaskError(f"{path}: no segment has a foreground pixel")
         return StructureMasks(tuple(masks), affine, tuple(structures), "LPS")
@@ -176,7 +177,7 @@ def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
     found: list[Structure] = []
     overlap = 0
     for segment in info["segments"]:
-        number, structure = int(segment["number"]), _segment_structure(segment)
+        number, structure = int(segment["number"]), segment_structure(segment)
         try:
             volume = read_dicom_seg(path, segment=number, memory_budget_gb=memory_budget_gb)
         except EmptyMaskError:
@@ -204,9 +205,19 @@ def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
     )
 
 
-def _segment_structure(segment: dict[str, Any]) -> Structure:
-    """A SEG segment (a :func:`dicom_info` record) as a structure: its label value (the
-    one slicerecon's writer records, else its SegmentNumber), name and colour."""
+def segment_structure(segment: dict[str, Any]) -> Structure:
+    """A SEG segment as a structure: its label value (the one slicerecon's writer records,
+    else its SegmentNumber), name and colour.
+
+    Parameters
+    ----------
+    segment : dict
+        One record of ``dicom_info(path)["segments"]`` (:func:`slicerecon.io.dicom.dicom_info`).
+
+    Returns
+    -------
+    Structure
+    """
     colour = segment.get("colour")
     return Structure(
         int(segment.get("value", segment["number"])),
