@@ -475,8 +475,8 @@ def warn_coinciding(
                 if x != y
                 and y not in by_input[drawer[n]]
                 and x not in by_input[drawer[k]]
-                and b.annotates(x) is False
-                and a.annotates(y) is False
+                and not b.annotates(x)
+                and not a.annotates(y)
             ]
             if not pairs:
                 continue
