@@ -415,7 +415,10 @@ def write_rtstruct(
             )
             written += 1
         else:
-            logger.warning(
+            # a structure without any voxel (an input ROI without contours) was said by
+            # whoever made the label map; one with voxels beyond the images is news
+            say = logger.warning if np.any(values == number) else logger.info
+            say(
                 "structure %d (%s) holds no voxel on the images; its ROI has no contour",
                 number,
                 name,

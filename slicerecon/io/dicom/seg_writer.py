@@ -186,7 +186,9 @@ def write_seg(
         )
     for structure, held in zip(ordered, holds, strict=True):
         if not held:
-            logger.warning(
+            # said only when it has voxels beyond the images (none at all: said upstream)
+            say = logger.warning if np.any(values == structure.value) else logger.info
+            say(
                 "structure %d (%s) holds no voxel on the images; its segment has no frame",
                 structure.value,
                 structure.name,
