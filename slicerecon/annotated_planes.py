@@ -483,28 +483,37 @@ def warn_coinciding(
             world = _crossing(a, b, to_pixels[n], to_pixels[k])
             if world is None:
                 continue
+            # each structure sampled once per line; a pair's overlap only where both are
+            ones = {x: _drawn_at(a, x, to_pixels[n], world) for x, _ in pairs}
+            twos = {y: _drawn_at(b, y, to_pixels[k], world) for _, y in pairs}
+            nx = {x: int(np.count_nonzero(v)) for x, v in ones.items()}
+            ny = {y: int(np.count_nonzero(v)) for y, v in twos.items()}
             for x, y in pairs:
-                one = _drawn_at(a, x, to_pixels[n], world)
-                two = _drawn_at(b, y, to_pixels[k], world)
                 counts = both.setdefault((x, y), [0, 0, 0])
-                counts[0] += int(np.count_nonzero(one & two))
-                counts[1] += int(np.count_nonzero(one))
-                counts[2] += int(np.count_nonzero(two))
-    for (x, y), (shared, nx, ny) in both.items():
-        dice = 2 * shared / (nx + ny) if nx + ny else 0.0
+                if nx[x] and ny[y]:
+                    counts[0] += int(np.count_nonzero(ones[x] & twos[y]))
+                counts[1] += nx[x]
+                counts[2] += ny[y]
+    found: dict[tuple[int, int], list[tuple[int, int, float]]] = {}  # inputs -> pairs
+    for (x, y), (shared, count_x, count_y) in both.items():
+        dice = 2 * shared / (count_x + count_y) if count_x + count_y else 0.0
         if dice >= COINCIDING_DICE:
             first = next(n for p, n in zip(planes, drawer, strict=True) if x in p.masks)
             second = next(n for p, n in zip(planes, drawer, strict=True) if y in p.masks)
-            logger.warning(
-                "structure %s of %s and structure %s of %s coincide where their planes "
-                "cross (Dice %.2f): they are reconstructed as two structures; if they are "
-                "one, give them one value or one name in both",
-                labels.get(x, x),
-                names[first],
-                labels.get(y, y),
-                names[second],
-                dice,
-            )
+            found.setdefault((first, second), []).append((x, y, dice))
+    for (first, second), pairs in found.items():  # one line per two inputs
+        listed = ", ".join(
+            f"{labels.get(x, x)} ~ {labels.get(y, y)} (Dice {dice:.2f})"
+            for x, y, dice in sorted(pairs)[:6]
+        ) + (f" and {len(pairs) - 6} more" if len(pairs) > 6 else "")
+        logger.warning(
+            "structures of %s and %s coincide where their planes cross: %s; they are "
+            "reconstructed as different structures; if they are one, give them one value or "
+            "one name in both",
+            names[first],
+            names[second],
+            listed,
+        )
 
 
 def _crossing(
