@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -374,8 +374,11 @@ def case_from_label_map(
             np.linalg.solve(label_map.affine[:3, :3], crop.affine[:3, 3] - label_map.affine[:3, 3])
         ).astype(np.int64)
         box = tuple(slice(int(a), int(a) + n) for a, n in zip(first, crop.shape, strict=True))
+        # one structure's mask at a time: 25 structures of a 500 x 470 x 136 map held
+        # together took 0.8 GB
         mixed = _mixed_reading(
-            {s.value: label_map.mask(s.value).mask[box] for s in label_map.structures}
+            [s.value for s in label_map.structures],
+            lambda value: label_map.mask(value).mask[box],
         )
         if mixed is not None:
             reading, every_slice = mixed
@@ -403,12 +406,13 @@ def case_from_label_map(
     ).astype(np.int64)
     region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, grid_shape, strict=True))
     exclusive = isinstance(label_map, LabelMap)
-    crops = {s.value: label_map.mask(s.value).mask[region] for s in label_map.structures}
+    on_planes = _plane_masks(label_map, region)
     if sections is not None:
         planes = np.rint(sections.indices).astype(np.int64)
+        drawn = [on_planes(sections.axis, int(index)) for index in planes]
         own = [
             CrossSections(
-                np.moveaxis(crops[s.value], sections.axis, 0)[planes],
+                np.stack([plane[s.value] for plane in drawn]),
                 sections.indices,
                 sections.axis,
                 sections.affine,
@@ -425,7 +429,7 @@ def case_from_label_map(
         )
     else:
         annotation = _views_annotation(
-            label_map, crops, grid_affine, grid_shape, reading.planes, exclusive, every_slice
+            label_map, on_planes, grid_affine, grid_shape, reading.planes, exclusive, every_slice
         )
     dense = cropped is not None
     if not dense:
@@ -463,12 +467,20 @@ def _has_gaps(mask: NDArray[np.bool_]) -> bool:
 
 
 def _mixed_reading(
-    masks: dict[int, NDArray[np.bool_]],
+    values: Sequence[int], mask_of: Callable[[int], NDArray[np.bool_]]
 ) -> tuple[PlaneReading, frozenset[int]] | None:
     """A label map of several structures read one by one: some drawn on planes of one
     axis with slices between them, the others on every slice they cross (a lesion
     contoured on each slice, the organs on every 4th). Read together, such a map looks
     dense, or sparse with the lesion's slices as planes of every structure.
+
+    Parameters
+    ----------
+    values : sequence of int
+        The structures.
+    mask_of : callable
+        ``mask_of(value)``: a structure's mask, ndarray of shape (I, J, K), bool, on one
+        box for all of them (asked for one at a time, each more than once).
 
     Returns
     -------
@@ -477,29 +489,37 @@ def _mixed_reading(
         drawn on every slice; None when no structure, or every one, reads as sparse, or
         the sparse ones are not planes of one axis with a slice between two of them.
     """
-    own = {v: detect_planes(_boxed(m)) for v, m in masks.items() if m.any()}
+    own: dict[int, PlaneReading] = {}
+    held: dict[int, list[NDArray[np.bool_]]] = {}  # value -> slices holding it, per axis
+    for value in values:
+        mask = mask_of(value)
+        if mask.any():
+            own[value] = detect_planes(_boxed(mask))
+            held[value] = [mask.any(axis=in_plane_axes(a)) for a in range(3)]
     sparse = [v for v, r in own.items() if not r.dense]
     if not sparse:
         return None
-    if len(sparse) == len(masks):
+    if len(sparse) == len(values):
         # each is drawn on planes, all together are not (a lesion drawn on the two slices
         # between two of the organs' planes): every structure's own planes, read alone
         axes = {a for r in own.values() for a in r.axes}
         if len(axes) != 1:
             return None
         axis = axes.pop()
-        held = np.logical_or.reduce([m.any(axis=in_plane_axes(axis)) for m in masks.values()])
-        return PlaneReading(False, {axis: np.flatnonzero(held).astype(np.int64)}, 1.0), frozenset()
-    reading = detect_planes(np.logical_or.reduce([masks[v] for v in sparse]))
+        union = np.logical_or.reduce([h[axis] for h in held.values()])
+        return PlaneReading(False, {axis: np.flatnonzero(union).astype(np.int64)}, 1.0), frozenset()
+    together = mask_of(sparse[0]).copy()
+    for value in sparse[1:]:
+        together |= mask_of(value)
+    reading = detect_planes(together)
     if reading.dense or len(reading.axes) != 1:
         return None
     axis = reading.axes[0]
     if np.all(np.diff(reading.planes[axis]) <= 1):  # no slice between: not an annotation
         return None
-    rest = frozenset(masks) - frozenset(sparse)
-    slices = np.flatnonzero(
-        np.logical_or.reduce([masks[v] for v in rest]).any(axis=in_plane_axes(axis))
-    )
+    rest = frozenset(values) - frozenset(sparse)
+    drawn = [held[v][axis] for v in rest if v in held]
+    slices = np.flatnonzero(np.logical_or.reduce(drawn)) if drawn else np.empty(0, np.int64)
     planes = np.union1d(reading.planes[axis], slices).astype(np.int64)
     return replace(reading, planes={axis: planes}), rest
 
@@ -559,9 +579,32 @@ def _check_sparse_options(
         )
 
 
+def _plane_masks(
+    label_map: LabelMap | StructureMasks, region: tuple[slice, ...]
+) -> Callable[[int, int], dict[int, NDArray[np.bool_]]]:
+    """``masks(axis, index)``: every structure's mask on one slice of ``region`` of a label
+    map, ndarray of shape (the slice's), bool, by value; one slice at a time (every
+    structure's mask of a 500 x 470 x 136 map held at once took 0.8 GB)."""
+    if isinstance(label_map, LabelMap):
+        labels = label_map.labels[region]
+        values = [s.value for s in label_map.structures]
+
+        def of_labels(axis: int, index: int) -> dict[int, NDArray[np.bool_]]:
+            plane = np.take(labels, index, axis=axis)
+            return {v: plane == v for v in values}
+
+        return of_labels
+    masks = {s.value: m[region] for s, m in zip(label_map.structures, label_map.masks, strict=True)}
+
+    def of_masks(axis: int, index: int) -> dict[int, NDArray[np.bool_]]:
+        return {v: np.take(m, index, axis=axis) for v, m in masks.items()}
+
+    return of_masks
+
+
 def _views_annotation(
     label_map: LabelMap | StructureMasks,
-    crops: dict[int, NDArray[np.bool_]],
+    on_planes: Callable[[int, int], dict[int, NDArray[np.bool_]]],
     affine: NDArray[np.float64],
     shape: tuple[int, int, int],
     planes: dict[int, NDArray[np.int64]],
@@ -576,7 +619,7 @@ def _views_annotation(
     drawn = []
     for axis in sorted(planes):
         for index in planes[axis]:
-            masks = {v: np.take(m, int(index), axis=axis) for v, m in crops.items()}
+            masks = on_planes(axis, int(index))
             held = frozenset(v for v, m in masks.items() if m.any())
             speaks = every_slice if every_slice and held <= every_slice else None
             pose = plane_pose(affine, shape, axis, float(index))
