@@ -142,7 +142,7 @@ def load_case(
 
 
 def _say_stated(
-    stated: PlaneReading, rule: PlaneReading, spacing: NDArray[np.float64], text: str, path: Path
+    stated: PlaneReading, rule: PlaneReading, affine: NDArray[np.float64], text: str, path: Path
 ) -> None:
     """One warning line when ``--annotation`` reads a label map otherwise than the rule would
     (a map drawn on axial slices read along y gives slivers, and was said nowhere)."""
@@ -150,7 +150,7 @@ def _say_stated(
         return
 
     def said(reading: PlaneReading) -> str:
-        how = reading.describe(spacing)  # "sparse annotation (...): 8 planes along z ..."
+        how = reading.describe(affine=affine)  # "sparse annotation (...): 8 planes along z"
         return "a dense mask" if reading.dense else how.split(": ", 1)[-1]
 
     logger.warning(
@@ -364,7 +364,7 @@ def case_from_label_map(
     check_grid(crop.shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
     reading = detect_planes(crop.mask, parse_annotation(config.annotation))
     if reading.stated:
-        _say_stated(reading, detect_planes(crop.mask), crop.spacing, config.annotation, kind.path)
+        _say_stated(reading, detect_planes(crop.mask), crop.affine, config.annotation, kind.path)
     # structures drawn on every slice beside others drawn on some (a lesion drawn on each
     # slice, the organs on every 4th): the sparse ones set the planes
     every_slice: frozenset[int] = frozenset()

@@ -157,21 +157,25 @@ def _images_in(folder: Path) -> Iterator[Path]:
             yield f
 
 
+def _peek(path: Path, tags: list[str] | None = None) -> Any:
+    """A DICOM file's header read quietly, or None when it cannot be read (a peek to pair
+    files: the real read of the file says what is wrong with it)."""
+    from .dicom.sniff import read_dicom_header
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return read_dicom_header(path, specific_tags=tags)
+    except Exception:  # noqa: BLE001 - an unreadable file names nothing
+        return None
+
+
 def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
     """Those of ``folders`` whose images an RTSTRUCT or SEG names (by SeriesInstanceUID,
     else by SOPInstanceUID): :func:`slicerecon.io.dicom.series.referenced_series`."""
     from .dicom.series import referenced_series
-    from .dicom.sniff import read_dicom_header
 
-    def header(path: Path, tags: list[str] | None = None) -> Any:
-        try:  # a peek: the real read of the file says what is wrong with it
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                return read_dicom_header(path, specific_tags=tags)
-        except Exception:  # noqa: BLE001 - an unreadable file names nothing
-            return None
-
-    ds = header(drawing)
+    ds = _peek(drawing)
     if ds is None:
         return []
     series, instances = referenced_series(ds)
@@ -181,7 +185,7 @@ def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
         for f in images if instances and not series else [next(images, None)]:
             if f is None:
                 break
-            image = header(f, ["SeriesInstanceUID", "SOPInstanceUID"])
+            image = _peek(f, ["SeriesInstanceUID", "SOPInstanceUID"])
             if image is not None and (
                 str(image.get("SeriesInstanceUID", "")) in series
                 or str(image.get("SOPInstanceUID", "")) in instances
@@ -197,14 +201,10 @@ def same_frame(drawing: Path, series: Path, *, known: bool = False, rois: bool =
     unless ``known``: then both must name it). ``rois``: an RTSTRUCT without its
     references names it by its ROIs' ReferencedFrameOfReferenceUID (to tell folders
     side by side apart, not to refuse a series)."""
-    from .dicom.sniff import read_dicom_header
 
     def frame(path: Path) -> str:
-        try:  # a peek at one element: the real read of the file says what is wrong
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                ds = read_dicom_header(path)
-        except Exception:  # noqa: BLE001 - an unreadable file names no frame
+        ds = _peek(path)
+        if ds is None:
             return ""
         uid = str(ds.get("FrameOfReferenceUID", "") or "")
         # an RTSTRUCT names it in its references (optional), and in each ROI (``rois``)

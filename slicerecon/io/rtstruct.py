@@ -291,14 +291,7 @@ def read_rtstruct(
         affine, shape, series_uids = dicom_series_geometry(
             image_dir, allow_irregular=allow_irregular
         )
-        if image_uids and not image_uids & set(series_uids):
-            logger.warning(
-                "%s: ROI %d refers to none of the images in %s; its contours are placed "
-                "on that grid by their coordinates anyway",
-                p,
-                number,
-                image_dir,
-            )
+        _say_unnamed(p, image_uids, image_dir, series_uids)
         reference = (affine, shape)
         if pixel_spacing is not None:
             logger.warning("pixel_spacing ignored: the grid of %s is used", image_dir)
@@ -432,11 +425,12 @@ def _read_structures(
     return structures, sections, union
 
 
-def _say_unnamed(p: Path, ds: Any, image_dir: str | os.PathLike[str], uids: Sequence[str]) -> None:
-    """One warning when the structure set names its images and none of them is the series'
-    (drawn on another reconstruction of the study): its contours are still placed on
-    that grid by their coordinates."""
-    named = referenced_series(ds)[1]
+def _say_unnamed(
+    p: Path, named: set[str], image_dir: str | os.PathLike[str], uids: Sequence[str]
+) -> None:
+    """One warning when the contours name images (``named``, SOPInstanceUIDs) and none of
+    them is the series' (``uids``: drawn on another reconstruction of the study): they
+    are still placed on that grid by their coordinates."""
     if named and not named & set(uids):
         logger.warning(
             "%s: its contours name none of the images in %s (drawn on another series of the "
@@ -460,7 +454,7 @@ def _shared_grid_sections(
     reference = None
     if image_dir is not None:
         affine, shape, uids = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
-        _say_unnamed(p, ds, image_dir, uids)
+        _say_unnamed(p, referenced_series(ds)[1], image_dir, uids)
         reference = (affine, shape)
         pixel_spacing = None
     try:
@@ -549,7 +543,7 @@ def read_rtstruct_annotation(
         reference = None
         if image_dir is not None:
             affine, shape, uids = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
-            _say_unnamed(p, ds, image_dir, uids)
+            _say_unnamed(p, referenced_series(ds)[1], image_dir, uids)
             reference = (affine, shape)
         try:
             annotation = annotation_from_polygons(

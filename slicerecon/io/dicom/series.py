@@ -219,8 +219,6 @@ def referenced_series(ds: Any) -> tuple[set[str], set[str]]:
         + items(seg_series, "ReferencedInstanceSequence")
     )
     instances = uids(images, "ReferencedSOPInstanceUID")
-    series.discard("")
-    instances.discard("")
     return series, instances
 
 
