@@ -185,6 +185,14 @@ class Annotation:
         grid: ``{value: (affine, shape)}``. Several inputs combined give a
         structure drawn by one input only that input's grid
         (:func:`slicerecon.combine.combine_cases`); see :meth:`of_structure`.
+    gap_ends : frozenset of int
+        Structures whose outer planes stand for half their own plane spacing:
+        contours read without an image, each standing for the slab half-way to
+        its neighbours, end half the smallest gap between the structure's
+        planes beyond its outer ones, whatever the grid's step (several
+        structures share a grid as fine as the finest spacing). The others end
+        half a voxel of the grid beyond them: a drawn slice stands for its own
+        voxels.
     """
 
     planes: tuple[AnnotatedPlane, ...]
@@ -197,6 +205,7 @@ class Annotation:
     grids: Mapping[int, tuple[NDArray[np.float64], tuple[int, int, int]]] = field(
         default_factory=dict
     )
+    gap_ends: frozenset[int] = frozenset()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "planes", tuple(self.planes))
@@ -216,6 +225,12 @@ class Annotation:
         if not set(grids) <= set(values):
             raise InputError(f"grids for structures the annotation does not hold: {sorted(grids)}")
         object.__setattr__(self, "grids", grids)
+        gap_ends = frozenset(int(v) for v in self.gap_ends)
+        if not gap_ends <= set(values):
+            raise InputError(
+                f"gap_ends names structures the annotation does not hold: {sorted(gap_ends)}"
+            )
+        object.__setattr__(self, "gap_ends", gap_ends)
 
     # -- what it holds -------------------------------------------------------------------
     @property
@@ -262,6 +277,7 @@ class Annotation:
             self.coordinates,
             self.exclusive,
             self.source,
+            gap_ends=self.gap_ends & {value},
         )
 
     def orientations(self) -> list[tuple[NDArray[np.float64], list[int]]]:
@@ -347,6 +363,7 @@ class Annotation:
             self.exclusive,
             self.source,
             {v: g for v, g in self.grids.items() if v in keep},
+            self.gap_ends & keep,
         )
 
     # -- the parallel case ---------------------------------------------------------------

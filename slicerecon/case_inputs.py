@@ -719,6 +719,8 @@ def _contour_input(
         annotation,
         source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}"
         f"{annotation.describe_fewer()}",
+        # without an image, each structure's contours stand for half their own spacing
+        gap_ends=frozenset(annotation.values) if built else frozenset(),
     )
     return CaseInput(
         annotation,

@@ -113,6 +113,7 @@ def combine_cases(
     # input's grid (it is reconstructed as that input alone would reconstruct it)
     drawers: dict[int, set[int]] = {v: {0} for v in own_first}
     grids: dict[int, tuple[NDArray[np.float64], tuple[int, int, int]]] = {}
+    gap_ends = set(first.annotation.gap_ends)
     for n, case in enumerate(cases[1:], start=1):
         earlier = list(structures)
         taken = {s.value for s in earlier} | set(case.annotation.values)
@@ -172,6 +173,7 @@ def combine_cases(
         own_affine = LPS_TO_RAS @ case.annotation.affine if flip else case.annotation.affine
         for value in remap.values():
             grids[value] = (own_affine, case.annotation.grid_shape)
+        gap_ends |= {remap[v] for v in case.annotation.gap_ends}
         for plane in case.annotation.planes:
             masks = {remap[v]: m for v, m in plane.masks.items()}
             own = (
@@ -215,6 +217,8 @@ def combine_cases(
         first.annotation.coordinates,
         exclusive,
         grids=grids,
+        # a structure drawn by one contour file only ends as it would alone
+        gap_ends=frozenset(v for v in gap_ends if len(drawers[v]) == 1),
     )
     annotation = merge_repeated_planes(annotation, origins, first.crop_lo + lo)
     names = ", ".join(str(c.input_path) for c in given)

@@ -452,6 +452,37 @@ def test_contour_file_version_2_holds_planes_of_any_orientation_and_several_stru
     assert main(["run", str(path), "-o", str(tmp_path / "o1")]) == 2
 
 
+def _disk(radius: float, z: float, centre: tuple[float, float] = (0.0, 0.0)) -> list:
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    return np.stack(
+        [centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t), np.full(t.size, z)], 1
+    ).tolist()
+
+
+@pytest.mark.parametrize("second", [False, True])
+def test_contours_without_an_image_end_half_their_own_spacing_beside_other_structures(
+    second: bool, tmp_path: Path
+) -> None:
+    # A ball contoured every 3 mm ends 1.5 mm beyond its end contours, alone or beside a
+    # structure contoured every 4 mm (whose planes make the shared grid finer than either)
+    def ball(r: float, zs: np.ndarray, x: float) -> list:
+        return [_disk(float(np.sqrt(r * r - z * z)), float(z), (x, 0.0)) for z in zs]
+
+    small = ball(8.0, np.arange(-6.0, 6.1, 3.0), 50.0)
+    big = ball(20.0, np.arange(-16.0, 16.1, 4.0), 0.0)
+    structures = [{"value": 1, "name": "small"}] + ([{"value": 2, "name": "big"}] * second)
+    planes = [{"structure": 1, "polygons": [p]} for p in small]
+    planes += [{"structure": 2, "polygons": [p]} for p in big] if second else []
+    doc = {"format": "slicerecon-contours", "version": 2, "units": "mm"}
+    path = tmp_path / "balls.json"
+    path.write_text(json.dumps({**doc, "structures": structures, "planes": planes}))
+    result = reconstruct_structures(path)
+    ends = {r.structure.name: r.mesh.bounds[:, 2] for r in result.results}
+    assert ends["small"] == pytest.approx([-7.5, 7.5], abs=0.2)
+    if second:
+        assert ends["big"] == pytest.approx([-18.0, 18.0], abs=0.2)
+
+
 def test_info_describes_every_structure_of_a_contour_file_of_any_orientation(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -42,7 +42,9 @@ liver_003`). `run -q` shows neither.
 drawn between the slices of their image series keep their exact positions: all
 the same fraction of a slice off, each stands for one slice, as on the slices;
 otherwise the surface spans the contours plus half a contour spacing at each
-end, as when the contours are read without the image.
+end, as when the contours are read without the image (there each structure
+ends half its own contour spacing beyond its end contours, beside structures
+drawn at other spacings too).
 """
 
 COMMANDS = [

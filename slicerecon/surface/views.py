@@ -7,8 +7,9 @@ view with the most planes (when it has two or more, or is the only view) is
 interpolation does (:func:`slicerecon.surface.across_planes.fill_between`: the
 in-plane signed distances, linear or monotone cubic along the view's normal),
 and the structure ends beyond its outer planes by half a voxel (a label map's
-slice) or half the plane spacing (contours, each standing for the slab half-way
-to its neighbours).
+slice, a contour on its image's slice) or, for contours read without an image,
+half the structure's own plane spacing (each contour standing for the slab
+half-way to its neighbours; :attr:`~slicerecon.annotation.Annotation.gap_ends`).
 
 Every other view **corrects** that interpolation: on each of its planes the
 *residual* is the drawn in-plane signed distance less the complete view's
@@ -64,7 +65,8 @@ VIEW_WEIGHT_EXPONENT = 6.0
 END_REACH = 0.5
 """How far a structure goes on beyond a complete view's outer plane, in voxels of the
 reference grid: a drawn slice stands for its own voxels (a label map's slice; a contour
-on its image slice, or on the grid built on the contours' smallest gap)."""
+on its image slice). Contours read without an image end half their own spacing beyond
+(:attr:`~slicerecon.annotation.Annotation.gap_ends`)."""
 BEYOND_PENALTY = 2.0
 """Factor on the distance of a sample beyond the outer planes of a view that is
 extruded there (no complete view to correct; chosen on the development shapes)."""
@@ -226,9 +228,15 @@ def views_field(
         return key == main and (counts[key] >= 2 or len(counts) == 1)
 
     spacing = np.linalg.norm(annotation.affine[:3, :3], axis=0)
-    reach = {axis: END_REACH if complete(axis) else None for axis in views}
+    own_gap = value in annotation.gap_ends
+    reach = {
+        axis: _end_reach([i for i, _ in planes], END_REACH, own_gap) if complete(axis) else None
+        for axis, planes in views.items()
+    }
     oblique_reach = [
-        END_REACH * float(spacing.min()) if complete(-1 - n) else None
+        _end_reach([o for o, _, _ in view.planes], END_REACH * float(spacing.min()), own_gap)
+        if complete(-1 - n)
+        else None
         for n, view in enumerate(oblique)
     ]
     pad = np.full(3, CROP_PAD, dtype=np.int64)
@@ -304,6 +312,15 @@ def views_field(
     to_index[along, 3] = lo[along] - 0.5 + (0.5 - 1) / upsample
     affine = annotation.affine @ to_index
     return SdfField(padded, affine, (int(lo[0]), int(lo[1]), int(lo[2])), upsample, along)
+
+
+def _end_reach(positions: list[float], voxel: float, own_gap: bool) -> float:
+    """How far a complete view's structure goes on beyond its outer planes (the units of
+    ``positions``): half a voxel (``voxel``), or with ``own_gap`` half the smallest gap
+    between its planes (contours read without an image; :attr:`Annotation.gap_ends`)."""
+    gaps = np.diff(np.sort(np.asarray(positions, dtype=np.float64)))
+    gaps = gaps[gaps > 1e-6]
+    return float(gaps.min()) / 2 if own_gap and gaps.size else voxel
 
 
 def _view(
