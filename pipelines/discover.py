@@ -80,6 +80,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import NamedTuple
 
+from slicerecon.dataset import MANIFEST, load_manifest
 from slicerecon.errors import InputError
 from slicerecon.io import kind_of_name, same_frame, series_below
 from slicerecon.io.dicom.sniff import DICOM_SUFFIXES, dicom_role
@@ -196,6 +197,7 @@ MESH_REASON = "a mesh: meshes are outputs or ground truths, not batch inputs"
 NOT_INPUT_REASON = "not an input format (NIfTI, NRRD, VTI, contours or DICOM)"
 OTHER_DICOM_REASON = "a DICOM object that is not an image, SEG or RTSTRUCT"
 OUTPUT_REASON = "a reconstruction's outputs (it holds plan.json, or a batch's summary.csv)"
+MANIFEST_REASON = "the dataset's manifest (slicerecon dataset make), not a contour file"
 
 
 def safe_case_name(relpath: str | os.PathLike[str]) -> str:
@@ -276,6 +278,9 @@ def _folder_cases(
     for f in files:
         rel = _relpath(f, root)
         named = kind_of_name(f.name)
+        if f.name == MANIFEST and _is_manifest(f):
+            skipped.append(SkippedInput(rel, MANIFEST_REASON))
+            continue
         if named is not None:
             kind, suffix = named
             if kind in FILE_KINDS:
@@ -320,6 +325,15 @@ def _folder_cases(
             )
             found.append((_strip_suffix(rel), case))
     return found, skipped
+
+
+def _is_manifest(path: Path) -> bool:
+    """Whether ``path`` is a dataset's manifest (``slicerecon dataset make``)."""
+    try:
+        load_manifest(path.parent)
+    except (OSError, ValueError, InputError):
+        return False
+    return True
 
 
 def _pair_series_below(

@@ -329,6 +329,19 @@ def parse_json(text: str, path: Path) -> Parsed:
         raise FormatError(
             f"{path} is not valid JSON: {type(exc).__name__}: {str(exc)[:200]}"
         ) from exc
+    if isinstance(doc, dict) and doc.get("format") != CONTOUR_FORMAT:
+        # another JSON document: say what it is before any key of ours is missing
+        if doc.get("format") == "slicerecon-dataset":
+            raise FormatError(
+                f"{path} is the manifest of a dataset (slicerecon dataset make), not a "
+                "contour file: pass its folder to 'slicerecon batch', or one of its masks "
+                "to 'slicerecon run'"
+            )
+        got = f'"format" is {doc["format"]!r}' if "format" in doc else 'no "format" key'
+        raise FormatError(
+            f"{path} is not a contour file: {got}, where a contour file has "
+            f'"format": "{CONTOUR_FORMAT}" (docs/formats.md)'
+        )
     try:
         model = ContourFile.model_validate(doc)
     except ValidationError as exc:

@@ -178,7 +178,12 @@ def test_non_parallel_planes_raise_geometry_error(tmp_path):
         ("{not json", r"not valid JSON: .* line 1, column 2"),
         ([], "top level must be a JSON object"),
         ({"format": "slicerecon-contours", "version": 1, "units": "mm"}, "missing key 'planes'"),
-        (_json_doc([]) | {"format": "other"}, "format: expected 'slicerecon-contours'"),
+        (_json_doc([]) | {"format": "other"}, "not a contour file: \"format\" is 'other'"),
+        ({"cases": []}, 'not a contour file: no "format" key'),
+        (
+            {"format": "slicerecon-dataset", "version": 1, "cases": []},
+            "the manifest of a dataset .* pass its folder to 'slicerecon batch'",
+        ),
         (_json_doc([]) | {"version": 3}, "version: version 3 is not supported"),
         (_json_doc([]) | {"units": "cm"}, 'units: must be "mm"'),
         (_json_doc([]) | {"colour": "red"}, "unknown key 'colour'"),

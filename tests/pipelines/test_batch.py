@@ -1100,3 +1100,18 @@ def test_the_report_of_a_batch_counts_only_the_cases_of_its_run(tmp_path):
     again = run_batch(tmp_path / "in", out, CONFIG, workers=0)
     assert [c.case for c in again.cases] == ["a"] and (out / "b").is_dir()
     assert json.loads((out / "summary.json").read_text())["n_cases"] == 1
+
+
+def test_a_dataset_folder_is_a_batch_without_its_manifest(tmp_path, capsys):
+    """``slicerecon dataset make`` then ``slicerecon batch`` on its folder (the documented
+    workflow) failed one case: the dataset's own manifest.json, read as a contour file."""
+    assert main(["dataset", "make", str(tmp_path / "in"), "--shapes", "sphere"]) == 0
+    found = discover(tmp_path / "in")
+    assert [c.kind for c in found.cases] == ["nifti"]
+    left = {s.relpath: s.reason for s in found.skipped}
+    assert "dataset's manifest" in left["manifest.json"]
+    # named alone, it is refused in one line that says what to pass
+    capsys.readouterr()
+    assert main(["run", str(tmp_path / "in" / "manifest.json"), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pass its folder to 'slicerecon batch'" in err[0]
