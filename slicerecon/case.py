@@ -49,7 +49,7 @@ from .errors import InputError, OptionError
 from .evaluation import mean_metrics
 from .inputs import axis_upsample
 from .io.projections import read_projection_files
-from .labels import LabelMap, Structure, StructureMasks, check_label_values
+from .labels import LabelMap, Structure, StructureMasks, check_label_values, labels_dtype
 from .metrics import evaluate
 from .metrics.inputs import place
 from .options import ReconstructOptions
@@ -536,7 +536,7 @@ def _label_map(
     structure's ``volume_mm3`` is set from its own voxels.
     """
     values = [r.structure.value for r in results] or [0]
-    dtype = np.uint8 if 0 <= min(values) and max(values) < 256 else np.int32
+    dtype = labels_dtype(values)
     labels = np.zeros(case.output_shape, dtype=dtype)
     voxel = float(abs(np.linalg.det(case.output_affine[:3, :3])))
     claimed = np.zeros(case.output_shape, dtype=bool)

@@ -42,7 +42,7 @@ from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks, segmen
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
-from .labels import LabelMap, Structure, StructureMasks
+from .labels import LabelMap, Structure, StructureMasks, labels_dtype
 from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
 from .reconstruct import ReconstructConfig
 from .sections import AXIS_NAMES, CrossSections, Volume, axis_index, in_plane_axes
@@ -59,7 +59,7 @@ that it may be drawn on groups of slices (one gap: two pieces, which dense masks
 
 def _as_label_map(volume: Volume, structure: Structure | None = None) -> LabelMap:
     value = 1 if structure is None else structure.value
-    labels = volume.mask.astype(np.uint8 if 0 <= value < 256 else np.int32) * value
+    labels = volume.mask.astype(labels_dtype([value])) * value
     return LabelMap(labels, volume.affine, (structure or Structure(value),))
 
 

@@ -202,7 +202,7 @@ class LabelMap:
         Raises
         ------
         LabelError
-            Not a 3-D array of integer values.
+            Not a 3-D array of integer values, or values above :data:`MAX_LABEL`.
         GeometryError
             A bad affine.
         """
@@ -215,6 +215,11 @@ class LabelMap:
             not np.all(np.isfinite(data)) or np.any(data != np.round(data))
         ):
             raise LabelError("a label map holds integer values; this array does not")
+        if data.size and data.dtype.kind in "iuf" and float(data.max()) > MAX_LABEL:
+            raise LabelError(
+                f"a label map's values fit 32-bit unsigned integers (at most {MAX_LABEL}); "
+                f"this array holds {data.max().item():.10g}: renumber its structures"
+            )
         values = as_labels(data.astype(np.uint8) if data.dtype.kind == "b" else data)
         return cls(values, affine, _structures_of(values, names, colours), coordinates)
 
@@ -357,6 +362,30 @@ def as_labels(values: NDArray[Any]) -> NDArray[np.integer]:
         return data
     lo, hi = (int(data.min()), int(data.max())) if data.size else (0, 0)
     return data.astype(np.result_type(np.min_scalar_type(lo), np.min_scalar_type(hi)))
+
+
+MAX_LABEL = 2**32 - 1
+"""The largest label value (a ``uint32`` label map's; also what the file readers accept)."""
+
+
+def labels_dtype(values: Sequence[int]) -> np.dtype[Any]:
+    """The smallest integer type holding every one of ``values`` (label values and 0).
+
+    Parameters
+    ----------
+    values : sequence of int
+
+    Returns
+    -------
+    numpy.dtype
+        ``uint8``, ``uint16`` or ``uint32`` for values that are all >= 0 (a
+        label map's: values up to 2**32 - 1, the largest a reader accepts);
+        ``int16`` or ``int32`` otherwise.
+    """
+    lo, hi = min(values, default=0), max(values, default=0)
+    if lo >= 0:
+        return np.dtype(np.uint8 if hi < 2**8 else np.uint16 if hi < 2**16 else np.uint32)
+    return np.dtype(np.int16 if -(2**15) <= lo and hi < 2**15 else np.int32)
 
 
 # ------------------------------------------------------------------ is it a label map?

@@ -182,3 +182,21 @@ def test_info_describes_float_images_as_it_describes_negative_ones(
     assert details["shape"] == [20, 18, 16] and details["spacing_mm"] == [0.8, 0.8, 2.5]
     assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_label_values_above_int32_are_kept_and_above_uint32_refused(tmp_path: Path) -> None:
+    """A uint32 label map valued 2**31 + 5 crashed after the whole reconstruction
+    (OverflowError writing an int32 map); the NIfTI writer wrapped such values."""
+    from slicerecon.labels import LabelMap
+
+    big = 2**31 + 5
+    labels = np.zeros((30, 30, 30), np.uint32)
+    labels[10:20, 10:20, 5:25:4] = big
+    path = tmp_path / "big.nii.gz"
+    nib.save(nib.Nifti1Image(labels, np.eye(4), dtype=np.uint32), path)
+    assert main(["run", str(path), "-o", str(tmp_path / "out"), "-q"]) == 0
+    written = np.asarray(nib.load(tmp_path / "out" / "labels.nii.gz").dataobj)
+    assert set(np.unique(written)) == {0, big}
+    assert (written == big).sum() > (labels == big).sum()  # filled between the planes
+    with pytest.raises(LabelError, match=r"at most 4294967295\); this array holds 4294967297"):
+        LabelMap.from_array(labels.astype(np.int64) * 0 + 2**32 + 1, np.eye(4))

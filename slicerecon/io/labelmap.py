@@ -24,7 +24,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import EmptyMaskError, LabelError, OptionError
-from ..labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks, as_labels, check_label_values
+from ..labels import (
+    LPS_TO_RAS,
+    LabelMap,
+    Structure,
+    StructureMasks,
+    as_labels,
+    check_label_values,
+    labels_dtype,
+)
 from . import detect_kind
 from .atomic import atomic_path
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
@@ -265,7 +273,8 @@ def write_label_map(
 
     values = as_labels(np.asarray(labels))
     if values.dtype.itemsize > 2 or values.dtype.kind == "i" and values.min() >= 0:
-        values = values.astype(np.uint16 if values.max() < 2**16 else np.int32)
+        # the smallest type that holds them (values above 2**31 in uint32, never wrapped)
+        values = values.astype(labels_dtype([int(values.min()), int(values.max()), 2**8]))
     aff = np.asarray(affine, dtype=np.float64)
     if coordinates == "LPS":
         aff = LPS_TO_RAS @ aff

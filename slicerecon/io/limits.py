@@ -40,6 +40,7 @@ from ..errors import (
     OptionError,
     SlicereconError,
 )
+from ..labels import MAX_LABEL
 
 __all__ = [
     "DEFAULT_MEMORY_BUDGET_GB",
@@ -174,7 +175,7 @@ def check_bytes(n_bytes: int, *, what: str, memory_budget_gb: float) -> None:
 
 MIN_LABEL_VALUE = -(2**31)
 """Smallest label value accepted (32-bit signed)."""
-MAX_LABEL_VALUE = 2**32 - 1
+MAX_LABEL_VALUE = MAX_LABEL
 """Largest label value accepted (32-bit unsigned): a larger one is not a label of a map."""
 
 

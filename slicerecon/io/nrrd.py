@@ -61,7 +61,7 @@ from ..errors import (
     InputError,
     LabelError,
 )
-from ..labels import LabelMap, Structure, StructureMasks
+from ..labels import LabelMap, Structure, StructureMasks, labels_dtype
 from ..sections import Volume
 from ..selection import choose_structure, parse_selector
 from .limits import (
@@ -85,7 +85,6 @@ from .nrrd_header import (
 __all__ = [
     "NrrdInfo",
     "NrrdSegment",
-    "labels_dtype",
     "label_values",
     "nrrd_info",
     "pynrrd_module",
@@ -254,13 +253,6 @@ def _integer_values(p: Path, data: NDArray[Any]) -> NDArray[np.integer]:
     check_label_range(data, what=str(p))
     lo, hi = (int(data.min()), int(data.max())) if data.size else (0, 0)
     return data.astype(np.result_type(np.min_scalar_type(lo), np.min_scalar_type(hi)))
-
-
-def labels_dtype(values: Sequence[int]) -> np.dtype[Any]:
-    lo, hi = min(values, default=0), max(values, default=0)
-    if lo >= 0:
-        return np.dtype(np.uint8 if hi < 2**8 else np.uint16 if hi < 2**16 else np.uint32)
-    return np.dtype(np.int16 if -(2**15) <= lo and hi < 2**15 else np.int32)
 
 
 def label_values(layer: NDArray[np.integer]) -> set[int]:

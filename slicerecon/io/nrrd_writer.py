@@ -20,10 +20,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import LabelError, OptionError
-from ..labels import LPS_TO_RAS, Structure, layer_of_values, structure_colour, structure_name
+from ..labels import (
+    LPS_TO_RAS,
+    Structure,
+    labels_dtype,
+    layer_of_values,
+    structure_colour,
+    structure_name,
+)
 from ..sections import check_affine
 from .atomic import atomic_path
-from .nrrd import labels_dtype
 from .nrrd_header import escape
 
 __all__ = ["write_seg_nrrd"]
