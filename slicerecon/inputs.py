@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import OptionError
+from .errors import InputError, OptionError
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.projections import read_projection_files
 from .plane_detection import detect_planes
@@ -118,6 +118,8 @@ def prepare_inputs(
     OptionError
         ``--slices`` / ``--every`` on a sparse input; a mask annotated along
         several axes; projections that cannot be had.
+    InputError
+        ``data`` is neither a Volume nor CrossSections.
     """
 
     if isinstance(projections, str):
@@ -167,9 +169,15 @@ def prepare_inputs(
                 slices, every = None, 1
             sections = sample_sections(volume, n=slices, every=every, axis=ax)
             truth = volume
-    else:
+    elif isinstance(data, CrossSections):
         sections = data
         refuse_plane_options(slices, every, "this input is already sparse")
+    else:
+        raise InputError(
+            f"prepare_inputs takes a Volume or CrossSections (got {type(data).__name__}): "
+            "read a file with slicerecon.io.load_input, or wrap an array with "
+            "slicerecon.Volume(mask, affine)"
+        )
     sections.require_foreground()
     samples = list(sections.grid_shape)
     samples[sections.axis] *= axis_upsample(sections)  # the sdf surface's field samples

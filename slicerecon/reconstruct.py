@@ -14,16 +14,17 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from numbers import Integral
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import trimesh
 
-from .errors import OptionError
+from .errors import InputError, OptionError
 from .inputs import (
     DEFAULT_SLICES,
     MAX_AXIS_UPSAMPLE,
@@ -116,9 +117,9 @@ class ReconstructConfig(ReconstructOptions):
     (:func:`slicerecon.io.projections.read_projection_files`)."""
     mesh_format: str = "stl"
     """Output mesh format: stl, ply or obj."""
-    label: int | str | None = None
-    """The structures to keep, by number or name, comma-separated: label
-    values, SEG segment numbers or labels, RTSTRUCT ROI numbers or names
+    label: int | str | Sequence[int | str] | None = None
+    """The structures to keep, by number or name, comma-separated (or a list):
+    label values, SEG segment numbers or labels, RTSTRUCT ROI numbers or names
     (default: every structure)."""
     roi: str | None = None
     """RTSTRUCT ROI name or number (another name for ``label``)."""
@@ -169,6 +170,16 @@ class ReconstructConfig(ReconstructOptions):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        for name in ("label", "roi"):  # a list of values or names, as Python callers give it
+            chosen = getattr(self, name)
+            if isinstance(chosen, (list, tuple)):
+                object.__setattr__(self, name, ",".join(str(v) for v in chosen) or None)
+        for name in ("slices", "every"):
+            count = getattr(self, name)
+            if count is not None and (isinstance(count, bool) or not isinstance(count, Integral)):
+                raise OptionError(f"--{name} must be a whole number (got {count!r})")
+            if count is not None:
+                object.__setattr__(self, name, int(count))
         if self.union and (self.label is not None or self.roi is not None):
             raise OptionError("give --label or --union, not both")
         if self.label is not None and self.roi is not None:
@@ -347,9 +358,17 @@ def reconstruct(
         A bad option.
     EmptyMaskError
         No section holds foreground.
+    InputError
+        ``sections`` or ``projections`` of another type (given in the wrong order).
     """
     from .surface.part import reconstruct_surface
 
+    if not isinstance(sections, CrossSections) or not isinstance(projections, Projections):
+        raise InputError(
+            "reconstruct takes (sections, projections), a CrossSections and Projections "
+            f"(got {type(sections).__name__}, {type(projections).__name__}): make them with "
+            "slicerecon.reconstruct.prepare_inputs"
+        )
     options = (options or ReconstructOptions()).with_changes(**changes)
     entry = options.method_entry
     if not entry.per_part:

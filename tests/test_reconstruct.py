@@ -180,3 +180,23 @@ def test_lookahead_planner_end_to_end_and_on_a_pooled_grid() -> None:
     surface = _planning_surface(result.sections, hull, ReconstructOptions())
     pooled = plan_partition(occupancy, planner="lookahead", max_grid=16, surface=surface)
     assert pooled.covers(occupancy) and pooled.grid_shape == occupancy.shape
+
+
+def test_python_callers_mistakes_get_one_error_that_says_what_to_pass() -> None:
+    """Arguments in the wrong order or of the wrong type gave an AttributeError or a
+    TypeError deep inside, or a message about something else ("already sparse")."""
+    from slicerecon.errors import InputError, OptionError
+    from slicerecon.reconstruct import ReconstructConfig
+
+    mask = make_shape("sphere", resolution=32)
+    with pytest.raises(InputError, match="takes a Volume or CrossSections .*Volume\\(mask"):
+        prepare_inputs(mask.mask, slices=4)
+    sections, projections, _ = prepare_inputs(mask, slices=6)
+    with pytest.raises(InputError, match=r"takes \(sections, projections\).*got Projections"):
+        reconstruct(projections, sections)
+    with pytest.raises(OptionError, match="--slices must be a whole number \\(got '12'\\)"):
+        ReconstructConfig(slices="12")
+    assert ReconstructConfig(slices=np.int64(12)).slices == 12
+    # a list of structures, as Python callers give it, is the comma-separated selection
+    assert ReconstructConfig(label=[3, "Liver"]).selectors == [3, "Liver"]
+    assert ReconstructConfig(roi=("GTV",)).selectors == ["GTV"]
