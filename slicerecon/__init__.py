@@ -1,9 +1,14 @@
-"""slicerecon: watertight 3D surfaces from parallel planar cross-sections.
+"""slicerecon: watertight 3D surfaces and dense label maps from planar cross-sections.
 
 An implementation of *Cut-and-Approximate: 3D Shape Reconstruction from Planar
 Cross-sections with Deep Reinforcement Learning*: sections and orthographic
 projections in, a partition into cuboid parts planned by a heuristic expert or a
-learned policy, a lofted surface per part, and one merged watertight mesh out.
+learned policy, a signed-distance surface per part (or the paper's lofting), and
+one merged watertight mesh out. Sparse annotations (label maps drawn on some
+slices, in one or several views, and contours on planes of any orientation) are
+reconstructed from all their planes at once:
+:func:`slicerecon.case.reconstruct_structures` reads any input and reconstructs
+every structure.
 """
 
 from __future__ import annotations
@@ -17,21 +22,31 @@ from .errors import (
     GeometryError,
     InputError,
     LabelError,
+    MemoryBudgetError,
     OptionError,
     SlicereconError,
 )
 
 __version__ = "0.1.0"
 
-_SECTIONS = ("AXIS_NAMES", "Box", "Contour", "CrossSections", "Projection", "Projections", "Volume")
+_LAZY = {
+    **dict.fromkeys(
+        ("AXIS_NAMES", "Box", "Contour", "CrossSections", "Projection", "Projections", "Volume"),
+        "sections",
+    ),
+    "LabelMap": "labels",
+    "ReconstructConfig": "reconstruct",
+    "reconstruct_structures": "case",
+}
 
 
 def __getattr__(name: str) -> object:
-    """The data model, imported on first use so that ``slicerecon --help`` needs no numpy."""
-    if name in _SECTIONS:
-        from . import sections
+    """The data model and the entry point, imported on first use so that ``slicerecon
+    --help`` needs no numpy."""
+    if name in _LAZY:
+        import importlib
 
-        return getattr(sections, name)
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module 'slicerecon' has no attribute {name!r}")
 
 
@@ -48,10 +63,14 @@ __all__ = [
     "GeometryError",
     "InputError",
     "LabelError",
+    "LabelMap",
+    "MemoryBudgetError",
     "OptionError",
     "Projection",
     "Projections",
+    "ReconstructConfig",
     "SlicereconError",
     "Volume",
     "__version__",
+    "reconstruct_structures",
 ]

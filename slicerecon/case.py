@@ -683,18 +683,21 @@ def run_case(
 
 
 def reconstruct_structures(
-    source: str | os.PathLike[str] | LabelMap | tuple[ArrayLike, ArrayLike],
+    source: str | os.PathLike[str] | LabelMap | Volume | tuple[ArrayLike, ArrayLike] | Any,
     config: ReconstructConfig | None = None,
     **changes: Any,
 ) -> CaseReconstruction:
-    """Reconstruct every structure of a label map: the Python entry point.
+    """Reconstruct every structure of an input: the Python entry point of ``slicerecon run``.
 
     Parameters
     ----------
-    source : path-like, LabelMap or (array, affine)
-        A label map file (any format :func:`slicerecon.io.labelmap.read_label_map`
-        reads), a :class:`~slicerecon.labels.LabelMap`, or an integer array of
-        shape (I, J, K) with its 4×4 voxel → world mm affine (RAS). 0 is
+    source : path-like, LabelMap, Volume, nibabel image or (array, affine)
+        Any input ``slicerecon run`` reads (a label map file, a DICOM SEG or
+        RTSTRUCT, a DICOM folder, a contour file; :func:`load_case`), a
+        :class:`~slicerecon.labels.LabelMap`, a
+        :class:`~slicerecon.sections.Volume` (one structure), a nibabel image
+        (its ``dataobj`` and ``affine``, RAS), or an integer array of shape
+        (I, J, K) with its 4×4 voxel → world mm affine (RAS). 0 is
         background; every other value is one structure.
     config : ReconstructConfig, optional
         Plane choice, structures and reconstruction options (default: the defaults).
@@ -720,12 +723,17 @@ def reconstruct_structures(
     if isinstance(source, str | os.PathLike):
         case = load_case(source, config)
     else:
+        if isinstance(source, Volume):
+            source = (source.mask.astype(np.uint8), source.affine)
+        elif hasattr(source, "dataobj") and hasattr(source, "affine"):  # a nibabel image
+            source = (np.asarray(source.dataobj), np.asarray(source.affine))
         if isinstance(source, LabelMap):
             label_map = source
         else:
             if not isinstance(source, tuple | list) or len(source) != 2:
                 raise InputError(
-                    "reconstruct_structures takes a path, a LabelMap, or (array, affine) "
+                    "reconstruct_structures takes a path, a LabelMap, a Volume, a nibabel "
+                    "image, or (array, affine) "
                     f"(got {type(source).__name__}"
                     + (f" of {len(source)} items)" if isinstance(source, tuple | list) else ")")
                 )

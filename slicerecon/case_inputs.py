@@ -58,9 +58,8 @@ that it may be drawn on groups of slices (one gap: two pieces, which dense masks
 
 
 def _as_label_map(volume: Volume, structure: Structure | None = None) -> LabelMap:
-    value = 1 if structure is None else structure.value
-    labels = volume.mask.astype(labels_dtype([value])) * value
-    return LabelMap(labels, volume.affine, (structure or Structure(value),))
+    s = structure or Structure(1)
+    return LabelMap(volume.mask.astype(labels_dtype([s.value])) * s.value, volume.affine, (s,))
 
 
 def load_case(
@@ -695,10 +694,10 @@ def _contour_input(
     Contours on parallel planes are reconstructed on a grid sampled along the
     plane normal as finely as in plane (:func:`_upsampled`): that grid, not only
     the rasterized planes, must fit ``--max-memory``. On a grid built on the
-    contours (``built``: no image's grid; its slice step is the gap between
-    planes), the label maps are written on that sampling too, so that they hold
-    the surface between the planes and not only the drawn slices.
-    """
+    contours (``built``: no image's grid), the label maps are written on that
+    sampling too (they hold the surface between the planes, not only the drawn
+    slices), and each structure ends half its own plane spacing beyond its end
+    planes (:attr:`~slicerecon.annotation.Annotation.gap_ends`)."""
     first = annotation.grid_axis()
     output_affine, output_shape = annotation.affine, annotation.grid_shape
     if first is not None:
@@ -719,8 +718,7 @@ def _contour_input(
         annotation,
         source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}"
         f"{annotation.describe_fewer()}",
-        # without an image, each structure's contours stand for half their own spacing
-        gap_ends=frozenset(annotation.values) if built else frozenset(),
+        gap_ends=frozenset(annotation.values if built else ()),
     )
     return CaseInput(
         annotation,

@@ -144,7 +144,8 @@ def prepare_inputs(
                     f"the mask is a {reading.describe(volume.spacing)}: several views are "
                     "reconstructed by slicerecon run (slicerecon.case.reconstruct_structures)"
                 )
-            logger.info("the mask is a %s", reading.describe(volume.spacing))
+            if not reading.stated:  # a stated reading is the caller's (load_case says it)
+                logger.info("the mask is a %s", reading.describe(volume.spacing))
             (only,) = reading.axes
             refuse_plane_options(
                 slices, every, f"this input is already sparse ({reading.describe(volume.spacing)})"

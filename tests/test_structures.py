@@ -274,3 +274,20 @@ def test_evaluate_scores_each_label_of_a_label_map(four: Path, tmp_path: Path) -
     # one mesh against a multi-label truth: one clear line, exit 2
     one = next((out / "meshes").glob("*.stl"))
     assert main(["evaluate", str(one), str(four)]) == 2
+
+
+def test_the_python_entry_point_takes_what_a_library_user_holds(tmp_path) -> None:
+    """``slicerecon.reconstruct_structures`` at the top level takes a nibabel image and a
+    Volume as it takes (array, affine); they were refused."""
+    import slicerecon
+
+    x, y, z = np.mgrid[:40, :40, :40]
+    ball = (x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 100
+    sparse = (ball & (z % 4 == 0)).astype(np.uint8)
+    affine = np.diag([0.8, 0.8, 2.0, 1.0])
+    want = slicerecon.reconstruct_structures((sparse, affine)).labels
+    for given in (nib.Nifti1Image(sparse, affine), slicerecon.Volume(sparse > 0, affine)):
+        got = slicerecon.reconstruct_structures(given)
+        assert np.array_equal(got.labels, want) and np.allclose(got.affine, affine)
+    with pytest.raises(slicerecon.InputError, match="a Volume, a nibabel image"):
+        slicerecon.reconstruct_structures(sparse)
