@@ -28,6 +28,7 @@ __all__ = [
     "check_drawings_meet",
     "covering_grid",
     "merge_repeated_planes",
+    "nested_apart",
     "planes_of_each_structure",
     "views_disagreement",
     "warn_coinciding",
@@ -220,6 +221,74 @@ def _nested_in(
     for y, x in seen - broken:
         inside.setdefault(y, set()).add(x)
     return {y: frozenset(xs) for y, xs in inside.items()}
+
+
+NESTED_SHARE = 0.9
+"""Share of a structure's drawn pixels that must lie inside another's drawings on that
+other's planes either side for it to be read as drawn inside it (:func:`nested_apart`)."""
+
+
+def nested_apart(annotation: Annotation) -> dict[int, int]:
+    """Structures drawn inside another on planes of their own: ``{inner: outer}``.
+
+    A lesion drawn on slices of its own inside its organ, drawn on other
+    slices: the two are drawn apart (no plane holds both, directly or through
+    structures drawn with them), every plane of the inner lies strictly
+    between two of the outer's, and at least :data:`NESTED_SHARE` of the
+    inner's drawn pixels lie inside the outer's drawings on its nearest planes
+    either side. The outer's planes then say nothing of the inner: it is inside
+    the outer's interpolation, not beside it. Of several outers the one with
+    the fewest drawn pixels is given. Planes of one orientation on the grid's
+    slices only (otherwise nothing is found).
+
+    Parameters
+    ----------
+    annotation : Annotation
+
+    Returns
+    -------
+    dict of int to int
+        The inner structures' values and their outer one's.
+    """
+    axis = annotation.grid_axis()
+    planes = annotation.planes
+    holding = [frozenset(v for v, m in p.masks.items() if m.any()) for p in planes]
+    groups = _drawn_together(annotation.values, holding)
+    if axis is None or len(groups) < 2:
+        return {}
+    group = {v: g for g in groups for v in g}
+    inverse = np.linalg.inv(annotation.affine)
+    index = [float((inverse[:3, :3] @ p.pose.affine[:3, 3] + inverse[:3, 3])[axis]) for p in planes]
+    own = {
+        v: sorted((index[n], n) for n, h in enumerate(holding) if v in h) for v in annotation.values
+    }
+    masks: dict[tuple[int, int], NDArray[np.bool_]] = {}
+
+    def drawn(n: int, value: int) -> NDArray[np.bool_]:
+        if (n, value) not in masks:
+            masks[n, value] = annotation.grid_mask(planes[n], value, axis)
+        return masks[n, value]
+
+    found: dict[int, tuple[int, int]] = {}
+    for inner, mine in own.items():
+        for outer, theirs in own.items():
+            if not mine or len(theirs) < 2 or outer in group[inner]:
+                continue
+            if not theirs[0][0] < mine[0][0] <= mine[-1][0] < theirs[-1][0]:
+                continue
+            inside = total = 0
+            for k, n in mine:
+                # the outer's nearest planes either side
+                above = min((i, m) for i, m in theirs if i > k)[1]
+                below = max((i, m) for i, m in theirs if i < k)[1]
+                pixels = drawn(n, inner)
+                total += int(np.count_nonzero(pixels))
+                inside += int(np.count_nonzero(pixels & drawn(below, outer) & drawn(above, outer)))
+            size = sum(int(np.count_nonzero(drawn(m, outer))) for _, m in theirs)
+            smallest = size < found.get(inner, (0, size + 1))[1]
+            if total and inside >= NESTED_SHARE * total and smallest:
+                found[inner] = (outer, size)
+    return {inner: outer for inner, (outer, _) in found.items()}
 
 
 def _between(pose: PlanePose, own: Sequence[PlanePose]) -> bool:

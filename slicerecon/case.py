@@ -41,7 +41,7 @@ import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
 
-from .annotated_planes import MAX_VIEW_DISAGREEMENT, views_disagreement
+from .annotated_planes import MAX_VIEW_DISAGREEMENT, nested_apart, views_disagreement
 from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
@@ -58,7 +58,7 @@ from .rasterize import mesh_to_mask
 from .reconstruct import ReconstructConfig, reconstruct
 from .sampling import projections_from_sections, projections_from_volume
 from .sections import Box, CrossSections, Projections, Volume
-from .surface.joint import keep_drawn_sections, resolve
+from .surface.joint import cut_nested, keep_drawn_sections, resolve
 from .surface.smooth import taubin_smooth
 from .surface.views import views_surface
 
@@ -409,7 +409,7 @@ def reconstruct_case(
             )
     if joint:
         start = time.perf_counter()
-        _resolve(results, fields, annotation, smooth=options.smooth)
+        _resolve(results, fields, annotation, smooth=options.smooth, source=case.input_path)
         timings["resolve"] = time.perf_counter() - start
     results += [StructureResult(s, NO_CONTOURS) for s in case.missing]
     labels, overlap, layers = _label_map(case, results)
@@ -501,10 +501,30 @@ def _shared_sections(annotation: Annotation, one_axis: bool) -> CrossSections | 
 
 
 def _resolve(
-    results: list[StructureResult], fields: list[Any], annotation: Annotation, *, smooth: bool
+    results: list[StructureResult],
+    fields: list[Any],
+    annotation: Annotation,
+    *,
+    smooth: bool,
+    source: str | os.PathLike[str],
 ) -> None:
-    """Resolve a partition's structures on their fields: meshes and shares in place."""
-    keep_drawn_sections(fields, [r.structure.value for r in results], annotation)
+    """Resolve a partition's structures on their fields: meshes and shares in place. A
+    structure drawn inside another on planes of its own is cut out of it (said in one
+    line: the other's drawn pixels around it change hands)."""
+    values = [r.structure.value for r in results]
+    nested = nested_apart(annotation)
+    if nested:
+        label = {r.structure.value: r.structure.label for r in results}
+        logger.warning(
+            "%s: structure(s) %s drawn on planes of their own: each is cut out of the "
+            "structure around it, also on that structure's own planes (a label map holds "
+            "one structure per voxel); to keep both whole, save them as overlapping "
+            "segments (.seg.nrrd layers or DICOM SEG)",
+            source,
+            ", ".join(f"{label[i]} inside {label[o]}" for i, o in nested.items()),
+        )
+    keep_drawn_sections(fields, values, annotation, nested)
+    cut_nested(fields, values, nested)
     joint = resolve(fields, annotation.grid_shape)
     for i, item in enumerate(results):
         if fields[i] is None:

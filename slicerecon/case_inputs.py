@@ -22,9 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .annotated_planes import (
-    planes_of_each_structure,
-)
+from .annotated_planes import nested_apart, planes_of_each_structure
 from .annotation import (
     AnnotatedPlane,
     Annotation,
@@ -37,8 +35,8 @@ from .errors import EmptyMaskError, OptionError
 from .inputs import axis_upsample, prepare_inputs, refuse_plane_options
 from .io import InputKind, detect_kind, load_ground_truth, load_input
 from .io.contours import contour_file_grid, read_contour_annotation
-from .io.dicom import dicom_info, dicom_series_geometry
-from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks, segment_structure
+from .io.dicom import dicom_series_geometry
+from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks, seg_segment
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
@@ -46,7 +44,6 @@ from .labels import LabelMap, Structure, StructureMasks, labels_dtype
 from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
 from .reconstruct import ReconstructConfig
 from .sections import AXIS_NAMES, CrossSections, Volume, axis_index, in_plane_axes
-from .selection import choose_structure
 
 __all__ = ["CaseInput", "case_from_label_map", "combine_cases", "load_case", "reading_of"]
 
@@ -205,14 +202,15 @@ def _load_label_map(
     if kind.kind == "dicom-seg" and len(selectors) == 1 and not config.union:
         # one segment, whole: SEG segments may overlap, and the label map of
         # every segment gives overlapping voxels to one of them
-        structure, number = _seg_segment(kind, selectors[0])
+        structure, number = seg_segment(kind.path, selectors[0])
         volume = load_input(kind.path, label=number, memory_budget_gb=config.max_memory_gb)
         assert isinstance(volume, Volume)
         label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
         return case_from_label_map(on(label_map), replace(config, label=None, roi=None), kind=kind)
-    if not config.union and (kind.kind == "dicom-seg" or _layered_nrrd(kind)):
-        # SEG segments, and segments in different layers of a .seg.nrrd, may overlap or
-        # nest: kept whole, each reconstructed on its own
+    # SEG segments, and segments in different layers of a .seg.nrrd, may overlap or
+    # nest: kept whole, each reconstructed on its own
+    may_overlap = not config.union and (kind.kind == "dicom-seg" or _layered_nrrd(kind))
+    if may_overlap:
         if kind.kind == "dicom-seg":
             masks = read_seg_masks(kind.path, memory_budget_gb=config.max_memory_gb)
         else:
@@ -231,7 +229,7 @@ def _load_label_map(
         chosen=bool(selectors) or config.union,
     )
     assert label_map is not None
-    return case_from_label_map(on(label_map), config, kind=kind)
+    return case_from_label_map(on(label_map), config, kind=kind, may_overlap=may_overlap)
 
 
 def _on_series(
@@ -314,21 +312,12 @@ def _layered_nrrd(kind: InputKind) -> bool:
     return bool(info.is_segmentation and info.layers > 1)
 
 
-def _seg_segment(kind: InputKind, selector: int | str) -> tuple[Structure, int]:
-    """The SEG segment a selector names (headers only), or LabelError listing them: the
-    structure (its label value, name, colour) and its SegmentNumber."""
-    segments = dicom_info(kind.path)["segments"]
-    by_value = {int(s.get("value", s["number"])): s for s in segments}
-    names = {value: str(s["label"]) for value, s in by_value.items()}
-    value = choose_structure(names, selector, kind="label", source=kind.path)
-    return segment_structure(by_value[value]), int(by_value[value]["number"])
-
-
 def case_from_label_map(
     label_map: LabelMap | StructureMasks,
     config: ReconstructConfig,
     *,
     kind: InputKind | None = None,
+    may_overlap: bool = False,
 ) -> CaseInput:
     """The case of a label map: planes chosen over all its structures when it is dense.
 
@@ -342,6 +331,10 @@ def case_from_label_map(
         map; ``label`` / ``union`` choose the structures.
     kind : InputKind, optional
         The file it was read from (default: an array in memory).
+    may_overlap : bool
+        A partition read from segments that may overlap (SEG, .seg.nrrd layers):
+        segments drawn inside others on planes of their own
+        (:func:`~slicerecon.annotated_planes.nested_apart`) make it overlapping.
 
     Returns
     -------
@@ -431,6 +424,8 @@ def case_from_label_map(
             label_map, on_planes, grid_affine, grid_shape, reading.planes, exclusive, every_slice
         )
     dense = cropped is not None
+    if not dense and may_overlap and exclusive and nested_apart(annotation):
+        annotation = replace(annotation, exclusive=False)  # each reconstructed whole
     if not dense:
         annotation = planes_of_each_structure(annotation, kind.path)
     how = "dense mask" if dense else reading.describe(affine=crop.affine)

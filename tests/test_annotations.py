@@ -1302,3 +1302,60 @@ def test_the_read_line_names_grid_axes_that_are_not_the_world_axes() -> None:
     sheared[0, 2] = 0.36  # the slices' origins move sideways: a CT gantry tilt
     assert reading.describe(affine=sheared).endswith("6 planes along z (spacing 7.5 mm)")
     assert reading.describe(affine=np.diag([1, 1, 1.5, 1])).endswith("along z (spacing 7.5 mm)")
+
+
+def _organ_and_lesion() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """An organ drawn on every 4th slice and a lesion inside it drawn on 4 slices of its
+    own between them (another annotator's): the dense truths and the two drawings."""
+    x, y, z = np.meshgrid(np.arange(60), np.arange(60), np.arange(60), indexing="ij")
+    organ = (x - 30) ** 2 + (y - 30) ** 2 + (z - 30) ** 2 <= 22**2
+    lesion = ((x - 34) / 7.0) ** 2 + ((y - 28) / 8.0) ** 2 + ((z - 30) / 9.0) ** 2 <= 1
+    drawn_organ = np.zeros(organ.shape, np.uint8)
+    drawn_lesion = np.zeros(organ.shape, np.uint8)
+    for k in range(10, 52, 4):
+        drawn_organ[:, :, k] = organ[:, :, k]
+    for k in (24, 28, 32, 36):
+        drawn_lesion[:, :, k] = 3 * lesion[:, :, k]
+    return organ, lesion, drawn_organ, drawn_lesion
+
+
+def test_a_lesion_drawn_inside_its_organ_on_slices_of_its_own_is_interpolated(
+    tmp_path: Path,
+) -> None:
+    """The organ's interpolation covered the lesion, so the lesion kept its three drawn
+    slices only (Dice 0.39 on a user's file), in a one-layer label map and in a Slicer
+    segmentation with the lesion in a layer of its own alike, with exit 0."""
+    organ, lesion, drawn_organ, drawn_lesion = _organ_and_lesion()
+    flat = np.where(drawn_lesion > 0, drawn_lesion, drawn_organ)
+    nib.save(nib.Nifti1Image(flat, np.eye(4)), tmp_path / "flat.nii.gz")
+    header = {
+        "space": "left-posterior-superior",
+        "space directions": np.vstack([np.full(3, np.nan), np.eye(3)]),
+        "space origin": np.zeros(3),
+        "kinds": ["list", "domain", "domain", "domain"],
+        **{
+            f"Segment{n}_{k}": v
+            for n, s in enumerate(("organ", "lesion"))
+            for k, v in (
+                ("ID", s),
+                ("Name", s),
+                ("LabelValue", "1" if n == 0 else "3"),
+                ("Layer", str(n)),
+            )
+        },
+    }
+    nrrd.write(str(tmp_path / "layers.seg.nrrd"), np.stack([drawn_organ, drawn_lesion]), header)
+
+    def dice(a: np.ndarray, b: np.ndarray) -> float:
+        return 2 * np.count_nonzero(a & b) / (np.count_nonzero(a) + np.count_nonzero(b))
+
+    flat_result = reconstruct_structures(tmp_path / "flat.nii.gz")
+    assert dice(flat_result.labels == 3, lesion) > 0.9  # 0.40 before
+    assert dice(flat_result.labels == 1, organ & ~lesion) > 0.98  # a partition: cut out (0.97)
+    layered = reconstruct_structures(tmp_path / "layers.seg.nrrd")
+    meshes = {r.structure.name: r.mesh for r in layered.results}
+    # its drawn slices alone are a third of it; it ends half a slice beyond its end slices
+    assert 0.85 < meshes["lesion"].volume / np.count_nonzero(lesion) < 1.0
+    # segments of their own layers may overlap: the organ stays whole around it
+    assert meshes["organ"].volume == pytest.approx(np.count_nonzero(organ), rel=0.05)
+    assert meshes["organ"].body_count == 1 and meshes["lesion"].body_count == 1

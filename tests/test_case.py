@@ -149,7 +149,9 @@ def test_a_malformed_source_is_one_input_error() -> None:
 
     labels = np.zeros((8, 8, 8), np.uint8)
     for source in (labels, (labels, np.eye(4), 1)):
-        with pytest.raises(InputError, match=r"a path, a LabelMap, or \(array, affine\)"):
+        with pytest.raises(
+            InputError, match=r"a path, a LabelMap, a Volume, a nibabel image, or \(array, affine\)"
+        ):
             reconstruct_structures(source)  # type: ignore[arg-type]
 
 

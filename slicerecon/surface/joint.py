@@ -21,7 +21,7 @@ the meshes share the interface surface, without overlap or gap.
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -79,7 +79,10 @@ def _extent(field: SdfField) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
 
 
 def keep_drawn_sections(
-    fields: Sequence[SdfField | None], values: Sequence[int], annotation: Annotation
+    fields: Sequence[SdfField | None],
+    values: Sequence[int],
+    annotation: Annotation,
+    nested: Mapping[int, int] | None = None,
 ) -> int:
     """Keep every drawn section in a partition: its pixels go to the structure drawn there.
 
@@ -100,6 +103,10 @@ def keep_drawn_sections(
         The structures' values, in the order of ``fields``.
     annotation : Annotation
         The planes, and the structures each speaks for.
+    nested : mapping of int to int, optional
+        Inner structure → outer one (:func:`cut_nested`): the outer's drawn
+        pixels on its own planes do not make the inner outside (they were
+        drawn without it, not beside it).
 
     Returns
     -------
@@ -120,6 +127,10 @@ def keep_drawn_sections(
         for value, field in zip(values, fields, strict=True):
             if field is None or plane.annotates(value):
                 continue
+            outer = (nested or {}).get(value)
+            here = drawn
+            if outer is not None and outer in plane.masks:
+                here = drawn & ~annotation.grid_mask(plane, outer, axis)
             to_grid = inverse @ field.affine  # sample index -> grid index (diagonal)
             along = to_grid[axis, axis] * np.arange(field.values.shape[axis]) + to_grid[axis, 3]
             layer = np.flatnonzero(np.abs(along - index) <= 0.5 + 1e-6)
@@ -129,12 +140,12 @@ def keep_drawn_sections(
             cols = np.rint(to_grid[b, b] * np.arange(field.values.shape[b]) + to_grid[b, 3]).astype(
                 np.int64
             )
-            ok_rows = (rows >= 0) & (rows < drawn.shape[0])
-            ok_cols = (cols >= 0) & (cols < drawn.shape[1])
+            ok_rows = (rows >= 0) & (rows < here.shape[0])
+            ok_cols = (cols >= 0) & (cols < here.shape[1])
             if not layer.size or not ok_rows.any() or not ok_cols.any():
                 continue
             mask = np.zeros((rows.size, cols.size), dtype=bool)
-            mask[np.ix_(ok_rows, ok_cols)] = drawn[np.ix_(rows[ok_rows], cols[ok_cols])]
+            mask[np.ix_(ok_rows, ok_cols)] = here[np.ix_(rows[ok_rows], cols[ok_cols])]
             if not mask.any():
                 continue
             view = np.moveaxis(field.values, (axis, a, b), (0, 1, 2))  # writes through
@@ -144,6 +155,46 @@ def keep_drawn_sections(
                 changed += int(np.count_nonzero(flip))
                 section[flip] = -section[flip]
     return changed
+
+
+def cut_nested(
+    fields: Sequence[SdfField | None], values: Sequence[int], nested: Mapping[int, int]
+) -> None:
+    """Cut each inner structure out of its outer one, in a partition. In place.
+
+    A structure drawn inside another on planes of its own
+    (:func:`slicerecon.annotated_planes.nested_apart`: a lesion inside its
+    organ) lies deep inside the outer's interpolation, and :func:`resolve`
+    would give every sample to the outer. The outer's field becomes the
+    difference of the two, ``max(outer, -inner)`` (constructive solid
+    geometry on signed distances), so the inner wins where it is inside.
+
+    Parameters
+    ----------
+    fields : sequence of SdfField or None
+        One per structure, on one reference grid (as for :func:`resolve`).
+    values : sequence of int
+        The structures' values, in the order of ``fields``.
+    nested : mapping of int to int
+        Inner structure → outer structure.
+    """
+    where = {v: i for i, v in enumerate(values)}
+    for inner, outer in nested.items():
+        cut, kept = fields[where[inner]], fields[where[outer]]
+        if cut is None or kept is None:
+            continue
+        (start_cut, size_cut), (start_kept, size_kept) = _extent(cut), _extent(kept)
+        lo = np.maximum(start_cut, start_kept)
+        hi = np.minimum(start_cut + size_cut, start_kept + size_kept)
+        if np.any(hi <= lo):
+            continue
+        in_cut = tuple(
+            slice(int(a), int(b)) for a, b in zip(lo - start_cut, hi - start_cut, strict=True)
+        )
+        in_kept = tuple(
+            slice(int(a), int(b)) for a, b in zip(lo - start_kept, hi - start_kept, strict=True)
+        )
+        np.maximum(kept.values[in_kept], -cut.values[in_cut], out=kept.values[in_kept])
 
 
 def resolve(fields: Sequence[SdfField | None], grid_shape: tuple[int, int, int]) -> JointResult:
