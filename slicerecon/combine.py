@@ -29,14 +29,11 @@ from .io.labelmap import LABEL_MAP_KINDS
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.outputs import dicom_image_series
 from .labels import LPS_TO_RAS, Structure
+from .selection import name_key
 
 __all__ = ["combine_cases"]
 
 logger = logging.getLogger(__name__)
-
-
-def _key(structure: Structure) -> str:
-    return " ".join(structure.name.split()).casefold()
 
 
 def combine_cases(
@@ -124,7 +121,7 @@ def combine_cases(
                 (
                     s
                     for s in earlier
-                    if (structure.name and s.name and _key(s) == _key(structure))
+                    if (structure.name and s.name and name_key(s.name) == name_key(structure.name))
                     or (not structure.name and not s.name and s.value == structure.value)
                 ),
                 None,

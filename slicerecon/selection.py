@@ -16,7 +16,24 @@ import numpy as np
 
 from .errors import LabelError, OptionError
 
-__all__ = ["choose_structure", "choose_structures", "parse_selector"]
+__all__ = ["choose_structure", "choose_structures", "name_key", "parse_selector"]
+
+
+def name_key(name: str) -> str:
+    """A structure name as names are matched: case, spaces, ``_`` and ``-`` ignored.
+
+    ``"Right kidney"``, ``"right_kidney"`` and ``"RightKidney"`` are one name
+    (3D Slicer, RT planning systems and file names spell them differently).
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    str
+    """
+    return "".join(c for c in name.casefold() if not c.isspace() and c not in "_-")
 
 
 def parse_selector(value: int | str | None) -> int | str | None:
@@ -103,9 +120,7 @@ def choose_structure(
     if isinstance(selector, str):
         exact = [n for n, name in structures.items() if name == selector]
         folded = exact or [
-            n
-            for n, name in structures.items()
-            if name and " ".join(name.split()).casefold() == " ".join(selector.split()).casefold()
+            n for n, name in structures.items() if name and name_key(name) == name_key(selector)
         ]
         if len(folded) == 1:
             return folded[0]

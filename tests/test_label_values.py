@@ -200,3 +200,17 @@ def test_label_values_above_int32_are_kept_and_above_uint32_refused(tmp_path: Pa
     assert (written == big).sum() > (labels == big).sum()  # filled between the planes
     with pytest.raises(LabelError, match=r"at most 4294967295\); this array holds 4294967297"):
         LabelMap.from_array(labels.astype(np.int64) * 0 + 2**32 + 1, np.eye(4))
+
+
+def test_names_match_ignoring_case_spaces_underscores_and_hyphens() -> None:
+    """The docs said names match ignoring case and spaces; "RightKidney" did not name
+    "Right kidney" (spaces were collapsed, not ignored), and two files naming one organ
+    so became two structures."""
+    from slicerecon.selection import choose_structure, name_key
+
+    names = {1: "Liver", 2: "Right kidney", 3: "GTV-1"}
+    for given, value in (("RightKidney", 2), ("right_kidney", 2), ("gtv 1", 3), ("LIVER", 1)):
+        assert choose_structure(names, given, kind="label", source="x") == value
+    assert name_key("Right  Kidney") == name_key("right-kidney") != name_key("Left kidney")
+    with pytest.raises(LabelError, match="names several"):
+        choose_structure({1: "GTV1", 2: "GTV_1"}, "gtv 1", kind="label", source="x")

@@ -38,6 +38,7 @@ from pydantic_core import ErrorDetails, PydanticCustomError
 
 from ..errors import FormatError
 from ..labels import Structure
+from ..selection import name_key
 from .plane_groups import ANGLE_TOLERANCE_DEG
 from .polygons import polygon_normal
 
@@ -363,7 +364,7 @@ def parse_json(text: str, path: Path) -> Parsed:
             raise fail(path, newer, 'belongs to version 2: write "version": 2')
     parsed.structures = _structures(model, path)
     values = {s.value for s in parsed.structures}
-    names = {" ".join(s.name.split()).casefold(): s.value for s in parsed.structures if s.name}
+    names = {name_key(s.name): s.value for s in parsed.structures if s.name}
     if model.normal is not None:
         normal = np.array(model.normal)
         parsed.normal = normal / np.linalg.norm(normal)
@@ -434,6 +435,8 @@ def _structures(model: ContourFile, path: Path) -> list[Structure]:
     for n, item in enumerate(model.structures):
         if any(s.value == item.value for s in out):
             raise fail(path, f"structures[{n}].value", f"value {item.value} is listed twice")
+        if item.name and any(s.name and name_key(s.name) == name_key(item.name) for s in out):
+            raise fail(path, f"structures[{n}].name", f"{item.name!r} names an earlier structure")
         colour = None if item.colour is None else tuple(item.colour)
         if colour is not None and len(colour) != 3:
             raise fail(path, f"structures[{n}].colour", "expected [r, g, b]")
@@ -458,6 +461,6 @@ def _owner(
         return next(iter(values))
     if isinstance(selector, int) and selector in values:
         return selector
-    if isinstance(selector, str) and " ".join(selector.split()).casefold() in names:
-        return names[" ".join(selector.split()).casefold()]
+    if isinstance(selector, str) and name_key(selector) in names:
+        return names[name_key(selector)]
     raise fail(path, f"{where}.structure", f"names no structure of the file (got {selector!r})")
