@@ -346,7 +346,8 @@ def check_drawings_meet(
     drawing: two views of one structure overlap, or nearly (an axial plane near its
     top may end short of a sagittal plane). Boxes further apart than half the larger
     one's diagonal cannot be one study in one frame (refused: such a gap gave a mesh
-    in dozens of pieces); a smaller gap (more than one pixel) is warned about.
+    in dozens of pieces); a smaller gap (more than one pixel) between drawings on
+    planes that cross is warned about (two inputs' parallel planes never meet).
 
     Raises
     ------
@@ -354,7 +355,10 @@ def check_drawings_meet(
         A structure's drawings in two inputs lie further apart than half their size.
     """
     boxes: dict[int, dict[str, tuple[NDArray[np.float64], NDArray[np.float64], float]]] = {}
+    poses: dict[str, list[PlanePose]] = {}  # each input's orientations
     for plane, origin in zip(planes, origins, strict=True):
+        if not any(plane.pose.is_parallel(q) for q in poses.setdefault(origin, [])):
+            poses[origin].append(plane.pose)
         pixel = float(np.max(plane.pose.pixel_spacing))
         for value in plane.masks:
             corners = _drawn_corners(plane, value)
@@ -382,7 +386,8 @@ def check_drawings_meet(
                         "views of one structure in one frame; check that the files belong "
                         "to one study, or give them another structure name"
                     )
-                if gap > max(astep, bstep):
+                crossing = any(not p.is_parallel(q) for p in poses[a] for q in poses[b])
+                if gap > max(astep, bstep) and crossing:
                     logger.warning(
                         "structure %s: its drawings in %s and %s do not meet (%.1f mm apart); "
                         "check that the files belong to one study and frame",

@@ -1359,3 +1359,16 @@ def test_a_lesion_drawn_inside_its_organ_on_slices_of_its_own_is_interpolated(
     # segments of their own layers may overlap: the organ stays whole around it
     assert meshes["organ"].volume == pytest.approx(np.count_nonzero(organ), rel=0.05)
     assert meshes["organ"].body_count == 1 and meshes["lesion"].body_count == 1
+
+
+def test_two_files_of_parallel_slices_are_not_said_to_miss_each_other(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two sagittal slices of one organ in two files: "its drawings do not meet (28.8 mm
+    apart); check that the files belong to one study", though parallel planes never meet."""
+    mask = _ellipsoid()
+    paths = [str(tmp_path / f"{x}.nii.gz") for x in (18, 30)]
+    for path, x in zip(paths, (18, 30), strict=True):
+        nib.save(nib.Nifti1Image(_keep(mask, {0: [x]}).astype(np.uint8), np.eye(4)), path)
+    assert main(["run", *paths, "-o", str(tmp_path / "o")]) == 0
+    assert "do not meet" not in capsys.readouterr().err
