@@ -360,7 +360,7 @@ def reconstruct_case(
         if not crossed:
             logger.warning(
                 "%s: structure %s %s: not reconstructed",
-                case.input_path,
+                case.source_of(structure.value),
                 structure.label,
                 "lies between the kept planes" if case.dense else "is drawn on no plane",
             )
@@ -371,7 +371,7 @@ def reconstruct_case(
             alone = len(annotation.planes_of(structure.value)) == 1
             logger.warning(
                 "%s: structure %s is drawn on one plane only: %s",
-                case.input_path,
+                case.source_of(structure.value),
                 structure.label,
                 "its reconstruction is a slab one slice thick"
                 if alone
@@ -409,7 +409,7 @@ def reconstruct_case(
             )
     if joint:
         start = time.perf_counter()
-        _resolve(results, fields, annotation, smooth=options.smooth, source=case.input_path)
+        _resolve(results, fields, annotation, smooth=options.smooth, source=case.named)
         timings["resolve"] = time.perf_counter() - start
     results += [StructureResult(s, NO_CONTOURS) for s in case.missing]
     labels, overlap, layers = _label_map(case, results)
@@ -448,7 +448,7 @@ def _from_views(
             "%s: structure %s is drawn differently by its views where their planes meet "
             "(%d of %d points on those lines differ): the result blends the drawings "
             "between the planes; check that the views belong to one study and frame",
-            case.input_path,
+            case.source_of(structure.value),
             structure.label,
             differ,
             drawn,

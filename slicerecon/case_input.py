@@ -7,7 +7,8 @@ reconstructs from it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +55,8 @@ class CaseInput:
     inputs : tuple of Path
         Every input of a case combined from several (:func:`slicerecon.combine.combine_cases`);
         empty for one input.
+    drawn_by : mapping of int to tuple of Path
+        In a combined case, the inputs that draw each structure (see :meth:`source_of`).
     """
 
     annotation: Annotation
@@ -66,6 +69,12 @@ class CaseInput:
     truth: Any = None
     missing: tuple[Structure, ...] = ()
     inputs: tuple[Path, ...] = ()
+    drawn_by: Mapping[int, tuple[Path, ...]] = field(default_factory=dict)
+
+    def source_of(self, value: int) -> str:
+        """The input that draws structure ``value`` (of a combined case: those that do),
+        for messages about that structure."""
+        return " and ".join(str(p) for p in self.drawn_by.get(value, (self.input_path,)))
 
     @property
     def named(self) -> str:

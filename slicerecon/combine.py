@@ -235,6 +235,9 @@ def combine_cases(
         annotation=annotation,
         missing=missing,
         inputs=tuple(Path(c.input_path) for c in given),
+        drawn_by={
+            v: tuple(Path(cases[n].input_path) for n in sorted(d)) for v, d in drawers.items()
+        },
         output_affine=output_affine,
         output_shape=output_shape,
         crop_lo=first.crop_lo + lo - start,

@@ -1372,3 +1372,10 @@ def test_two_files_of_parallel_slices_are_not_said_to_miss_each_other(
         nib.save(nib.Nifti1Image(_keep(mask, {0: [x]}).astype(np.uint8), np.eye(4)), path)
     assert main(["run", *paths, "-o", str(tmp_path / "o")]) == 0
     assert "do not meet" not in capsys.readouterr().err
+    # a structure the second file alone draws: a message about it names that file
+    second = _keep(mask, {0: [30]}).astype(np.uint8)
+    second[30, 5:9, 5:9] = 2
+    nib.save(nib.Nifti1Image(second, np.eye(4)), paths[1])
+    assert main(["run", *paths, "-o", str(tmp_path / "o2")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "one plane only" in line]
+    assert len(said) == 1 and said[0].startswith(f"warning: {paths[1]}: structure 2 ")
