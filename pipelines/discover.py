@@ -82,7 +82,7 @@ from typing import NamedTuple
 
 from slicerecon.dataset import MANIFEST, load_manifest
 from slicerecon.errors import InputError
-from slicerecon.io import kind_of_name, same_frame, series_below
+from slicerecon.io import DETACHED_NRRD, kind_of_name, same_frame, series_below
 from slicerecon.io.dicom.sniff import DICOM_SUFFIXES, dicom_role
 from slicerecon.results import SUMMARY_COLUMNS, SUMMARY_CSV
 
@@ -289,6 +289,9 @@ def _folder_cases(
                 skipped.append(SkippedInput(rel, MESH_REASON))
             continue
         if not dicom_files:
+            continue
+        if f.name.lower().endswith(".nhdr"):
+            skipped.append(SkippedInput(rel, DETACHED_NRRD))
             continue
         role = dicom_role(f)
         if role is None:

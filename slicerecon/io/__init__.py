@@ -31,6 +31,7 @@ from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid, reading
 
 __all__ = [
     "DICOM_KINDS",
+    "DETACHED_NRRD",
     "INPUT_SUFFIXES",
     "InputKind",
     "MESH_SUFFIXES",
@@ -52,6 +53,12 @@ CONTOUR_SUFFIXES = (".json", ".csv")
 DICOM_KINDS = ("dicom-series", "dicom-seg", "rtstruct")
 """Input kinds in DICOM patient coordinates (LPS)."""
 DICOM_SUFFIXES = (".dcm", ".dicom", "")
+DETACHED_NRRD = (
+    "a NRRD header whose voxels are in a separate file (.nhdr) is not read; save it as one "
+    ".nrrd file with attached data (3D Slicer: Save, file format .seg.nrrd or .nrrd)"
+)
+"""What is said of a ``.nhdr`` file (run refuses it, batch leaves it out)."""
+
 INPUT_SUFFIXES: tuple[tuple[str, str], ...] = (
     (".nii.gz", "nifti"),
     (".nii", "nifti"),
@@ -356,6 +363,8 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         raise InputError(
             f"{p} is a single DICOM {modality} image; pass the directory of its series"
         )
+    if p.name.lower().endswith(".nhdr"):
+        raise FormatError(f"{p}: {DETACHED_NRRD}")
     raise FormatError(
         f"cannot tell the format of {p}: expected .nii/.nii.gz, a DICOM series directory, "
         "a DICOM SEG or RTSTRUCT file, a contour file (.json/.csv), a VTK image (.vti), "

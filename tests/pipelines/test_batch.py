@@ -1115,3 +1115,18 @@ def test_a_dataset_folder_is_a_batch_without_its_manifest(tmp_path, capsys):
     assert main(["run", str(tmp_path / "in" / "manifest.json"), "-o", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "pass its folder to 'slicerecon batch'" in err[0]
+
+
+def test_a_nrrd_header_with_detached_voxels_is_said_to_be_one_in_run_and_batch(tmp_path, capsys):
+    """A Slicer .seg.nhdr got "cannot tell the format ... expected NRRD (.nrrd/.seg.nrrd)"
+    from run, and "not an input format" from batch."""
+    import nrrd
+
+    (tmp_path / "in").mkdir()
+    header = tmp_path / "in" / "liver.seg.nhdr"
+    nrrd.write(str(header), np.zeros((4, 4, 4), np.uint8), detached_header=True)
+    assert main(["run", str(header), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "save it as one .nrrd file with attached data" in err[0]
+    left = {s.relpath: s.reason for s in discover(tmp_path / "in").skipped}
+    assert "separate file (.nhdr)" in left["liver.seg.nhdr"]
