@@ -144,7 +144,13 @@ SlicesOpt = Annotated[
     int | None, typer.Option("--slices", help="Keep N evenly spaced planes (default 16).")
 ]
 EveryOpt = Annotated[int | None, typer.Option("--every", help="Keep every K-th plane.")]
-AxisOpt = Annotated[str, typer.Option(help="Plane normal axis: x, y or z.")]
+AxisOpt = Annotated[
+    str,
+    typer.Option(
+        help="Grid axis a dense mask is cut across: x, y or z, the array's 1st, 2nd or 3rd "
+        "index (the read line names the world axis the planes are normal to)."
+    ),
+]
 PlannerOpt = Annotated[
     str,
     typer.Option(
