@@ -90,10 +90,15 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
     group = {v: g for g in groups for v in g}
 
     extra = _extra_planes(planes)
+    # structures that may overlap (segments in layers of their own): a plane holding
+    # others only speaks for a structure when it lies on the lattice of that structure's
+    # own planes (a lesion drawn on every 2nd slice says nothing of the organs drawn on
+    # every 4th, in another layer, on the slices between theirs)
+    off_lattice = set() if annotation.exclusive else _off_lattice(planes, holding, own)
 
     def speaks_for(n: int, value: int) -> bool:
         held = holding[n]
-        if not planes[n].annotates(value) or value in silent[n]:
+        if not planes[n].annotates(value) or value in silent[n] or (n, value) in off_lattice:
             return False
         if n in extra and value not in held:
             return False  # a slice added between two regular ones: for what it holds
@@ -134,13 +139,49 @@ def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
             annotation.structure(value).label,
             count,
         )
-    if not interleaved and not extra and not any(silent):
+    if not interleaved and not extra and not any(silent) and not off_lattice:
         return annotation
     rebuilt = []
     for n, plane in enumerate(planes):
         speaks = frozenset(v for v in values if speaks_for(n, v))
         rebuilt.append(AnnotatedPlane(plane.pose, plane.masks, speaks))
     return replace(annotation, planes=tuple(rebuilt))
+
+
+def _off_lattice(
+    planes: Sequence[AnnotatedPlane],
+    holding: Sequence[frozenset[int]],
+    own: dict[int, list[int]],
+) -> set[tuple[int, int]]:
+    """``(plane, structure)`` pairs where a plane holding others lies off the lattice of
+    the structure's own planes (parallel to it, spaced by their smallest gap): more than
+    :data:`EXTRA_GAP_TOLERANCE` of a gap from it."""
+    found: set[tuple[int, int]] = set()
+    for value, mine in own.items():
+        if len(mine) < 2:
+            continue
+        pose = planes[mine[0]].pose
+        offsets = np.sort(
+            [
+                planes[n].pose.offset_mm * np.sign(planes[n].pose.normal @ pose.normal)
+                for n in mine
+                if planes[n].pose.is_parallel(pose)
+            ]
+        )
+        gaps = np.diff(offsets)
+        gaps = gaps[gaps > _EPS_MM]
+        if not gaps.size:
+            continue
+        step = float(gaps.min())
+        for n, held in enumerate(holding):
+            other = planes[n].pose
+            if value in held or not held or not other.is_parallel(pose):
+                continue
+            at = other.offset_mm * np.sign(other.normal @ pose.normal)
+            phase = (at - offsets[0]) / step
+            if abs(phase - round(phase)) > EXTRA_GAP_TOLERANCE:
+                found.add((n, value))
+    return found
 
 
 EXTRA_GAP_TOLERANCE = 0.25
