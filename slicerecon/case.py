@@ -705,6 +705,8 @@ def run_case(
 def reconstruct_structures(
     source: str | os.PathLike[str] | LabelMap | Volume | tuple[ArrayLike, ArrayLike] | Any,
     config: ReconstructConfig | None = None,
+    *,
+    score: bool = False,
     **changes: Any,
 ) -> CaseReconstruction:
     """Reconstruct every structure of an input: the Python entry point of ``slicerecon run``.
@@ -721,6 +723,11 @@ def reconstruct_structures(
         background; every other value is one structure.
     config : ReconstructConfig, optional
         Plane choice, structures and reconstruction options (default: the defaults).
+    score : bool
+        Score each structure against its ground truth, as ``run`` does
+        (:func:`score_case`; a dense input is its own, a sparse one has none):
+        its :attr:`StructureResult.metrics` (volume IoU, Dice, surface IoU,
+        Chamfer and HD95 in mm).
     **changes
         Fields of :class:`~slicerecon.reconstruct.ReconstructConfig` to change
         (``slices=12``, ``method="loft"``, ``label="2,5"`` ...).
@@ -763,4 +770,7 @@ def reconstruct_structures(
             )
             label_map = LabelMap.from_array(array, affine)
         case = case_from_label_map(label_map, config)
-    return reconstruct_case(case, config)
+    result = reconstruct_case(case, config)
+    if score:
+        score_case(case, result, config)
+    return result

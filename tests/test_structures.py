@@ -291,3 +291,20 @@ def test_the_python_entry_point_takes_what_a_library_user_holds(tmp_path) -> Non
         assert np.array_equal(got.labels, want) and np.allclose(got.affine, affine)
     with pytest.raises(slicerecon.InputError, match="a Volume, a nibabel image"):
         slicerecon.reconstruct_structures(sparse)
+
+
+def test_the_python_entry_point_scores_a_dense_input_when_asked() -> None:
+    """StructureResult.metrics was always None from reconstruct_structures; scoring
+    needed the CaseInput it never returns."""
+    import slicerecon
+
+    x, y, z = np.mgrid[:40, :40, :40]
+    ball = ((x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 196).astype(np.uint8)
+    scored = slicerecon.reconstruct_structures((ball, np.eye(4)), slices=8, score=True)
+    assert 0.9 < scored.results[0].metrics["volume_iou"] < 1.0
+    assert slicerecon.reconstruct_structures((ball, np.eye(4)), slices=8).results[0].metrics is None
+    sparse = ball * (z % 4 == 0)
+    assert (
+        slicerecon.reconstruct_structures((sparse, np.eye(4)), score=True).results[0].metrics
+        is None
+    )
