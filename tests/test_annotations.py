@@ -942,7 +942,8 @@ def test_views_that_disagree_where_they_meet_are_warned_about(
     assert "drawn differently" not in capsys.readouterr().err
     assert main([*run, str(tmp_path / "disagree.nii.gz"), "-o", str(tmp_path / "o2")]) == 0
     err = [line for line in capsys.readouterr().err.splitlines() if "drawn differently" in line]
-    assert len(err) == 1 and "axial.nii.gz: structure 1" in err[0]
+    assert len(err) == 1 and "axial.nii.gz and " in err[0]  # the two inputs drawing it
+    assert "disagree.nii.gz: structure 1" in err[0]
     # on a grid of its own (1.3 mm voxels), shifted 8 mm: compared all the same
     x, y, z = (np.indices((36, 34, 46)).T * 1.3).T
     shifted = ((x - 32) / 17) ** 2 + ((y - 22) / 13) ** 2 + ((z - 30) / 22) ** 2 < 1
