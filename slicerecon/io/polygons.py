@@ -593,7 +593,10 @@ def sections_from_polygons(
     masks, crossing = _rasterize_planes(polys, members, grid, one_structure)
     if not masks.any():
         raise EmptyMaskError(
-            "the contours cover no pixel centre: they are smaller than a pixel; "
+            "the contours cover no pixel centre of the image grid: they lie beside it in "
+            "its planes, or are smaller than its pixels (contour points are world mm)"
+            if reference is not None
+            else "the contours cover no pixel centre: they are smaller than a pixel; "
             "choose a smaller pixel_spacing"
         )
     for p, (mask, group) in enumerate(zip(masks, members, strict=True)):

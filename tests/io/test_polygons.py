@@ -142,6 +142,18 @@ def test_reference_grid_indices_and_pixels():
     np.testing.assert_array_equal(cs.to_volume().occupied_planes(), [2, 5, 6])
 
 
+def test_contours_beside_the_reference_grid_are_not_said_to_be_too_small():
+    """Contours given in voxel indices, not mm, lay beside the image grid in its planes:
+    the error said "smaller than a pixel; choose a smaller pixel_spacing", an option that
+    a reference grid ignores."""
+    affine = np.diag([0.5, 0.5, 2.0, 1.0])
+    affine[:3, 3] = (-20.0, -20.0, -10.0)
+    polys = [square(30.0, 38.0, z) for z in (-6.0, 0.0)]  # in-plane beyond -20 .. 20 mm
+    with pytest.raises(EmptyMaskError, match="lie beside it in its planes") as info:
+        sections_from_polygons(polys, reference=(affine, (80, 80, 12)))
+    assert "pixel_spacing" not in str(info.value)
+
+
 def test_reference_grid_along_another_axis():
     affine = np.diag([2.0, 1.0, 1.0, 1.0])
     polys = [np.array([[x, 2, 2], [x, 8, 2], [x, 8, 9], [x, 2, 9]], float) for x in (4.0, 10.0)]
