@@ -479,6 +479,11 @@ def test_contours_without_an_image_end_half_their_own_spacing_beside_other_struc
     result = reconstruct_structures(path)
     ends = {r.structure.name: r.mesh.bounds[:, 2] for r in result.results}
     assert ends["small"] == pytest.approx([-7.5, 7.5], abs=0.2)
+    # the label map's grid holds them (it stopped at the end contours: flat-cut voxels)
+    voxel = abs(np.linalg.det(result.affine[:3, :3]))
+    for item in result.results:
+        found = np.count_nonzero(result.labels == item.structure.value) * voxel
+        assert found == pytest.approx(item.mesh.volume, rel=0.02)
     if second:
         assert ends["big"] == pytest.approx([-18.0, 18.0], abs=0.2)
 

@@ -110,16 +110,33 @@ def plane_count(polygons: Sequence[ArrayLike], plane_tolerance_mm: float = 0.01)
 
 
 def _built_reference(
-    points: NDArray[np.float64], pixel_spacing: float | None
+    points: NDArray[np.float64], pixel_spacing: float | None, reach_mm: float = 0.0
 ) -> tuple[NDArray[np.float64], tuple[int, int, int]]:
+    """An isotropic grid around ``points`` and ``reach_mm`` beyond them (how far a
+    structure goes on beyond its end contours), :data:`MARGIN_PX` pixels of margin."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     step = pixel_spacing or float(np.max(hi - lo)) / DEFAULT_PIXELS_ACROSS
     if not np.isfinite(step) or step <= 0:
         raise GeometryError("the contours span no extent: cannot build a grid around them")
+    lo, hi = lo - reach_mm, hi + reach_mm
     shape = tuple(int(v) for v in np.ceil((hi - lo) / step) + 1 + 2 * MARGIN_PX)
     affine = np.diag([step, step, step, 1.0])
     affine[:3, 3] = lo - MARGIN_PX * step
     return affine, shape  # type: ignore[return-value]
+
+
+def _half_gap(items: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]]) -> float:
+    """Half the largest of the structures' smallest gaps between their planes, mm, over
+    every orientation (``items``: value, points, unit normal)."""
+    largest = 0.0
+    for value in {v for v, _, _ in items}:
+        own = [(p, n) for v, p, n in items if v == value]
+        for normal, members in _groups([n for _, n in own]):
+            offsets = np.unique(np.round([own[m][0].mean(axis=0) @ normal for m in members], 3))
+            gaps = np.diff(offsets)
+            if gaps.size:
+                largest = max(largest, float(gaps.min()))
+    return largest / 2
 
 
 def _grid_axis(affine: NDArray[np.float64], normal: NDArray[np.float64]) -> int | None:
@@ -202,7 +219,8 @@ def annotation_from_polygons(
     if reference is not None:
         affine, shape = check_affine(reference[0]), tuple(int(s) for s in reference[1])
     else:
-        affine, shape = _built_reference(everything, pixel_spacing)
+        # each structure ends half its own plane gap beyond its end contours (gap_ends)
+        affine, shape = _built_reference(everything, pixel_spacing, _half_gap(items))
     check_grid(shape, what="the contours' grid", memory_budget_gb=memory_budget_gb)
     planes: list[AnnotatedPlane] = []
     for normal, members in _groups([n for _, _, n in items]):
