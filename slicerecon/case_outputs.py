@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -176,11 +177,56 @@ def write_case(
     -------
     dict
         The case summary (what ``slicerecon run`` prints).
+
+    Every file is written into a hidden staging folder inside ``outdir`` first
+    and moved into place only when all are written: a run interrupted or
+    failing while it writes leaves an earlier run's outputs as they were, never
+    a mix of the two (the staging folder is removed).
     """
+    outdir.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=".slicerecon-writing-", dir=outdir))
+    try:
+        summary, files = _write_case_files(
+            staging, outdir, case, result, metrics, config, ground_truth, image_dir, timings
+        )
+        earlier_run = (outdir / PLAN_FILE).is_file()  # a folder slicerecon wrote before
+        moved = _commit(staging, outdir, files)
+        if earlier_run:
+            inputs = [case.input_path, case.kind.path, *case.inputs]
+            _remove_stale(outdir, moved + [Path(p) for p in inputs])
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return summary
+
+
+def _commit(staging: Path, outdir: Path, files: list[Path]) -> list[Path]:
+    """Move the staged ``files`` into ``outdir`` (same relative paths); their new paths."""
+    moved = []
+    for path in files:
+        target = outdir / path.relative_to(staging)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(path, target)
+        moved.append(target)
+    return moved
+
+
+def _write_case_files(
+    outdir: Path,
+    final: Path,
+    case: CaseInput,
+    result: CaseReconstruction,
+    metrics: dict[str, Any] | None,
+    config: ReconstructConfig,
+    ground_truth: str | os.PathLike[str] | None,
+    image_dir: str | os.PathLike[str] | None,
+    timings: dict[str, float] | None,
+) -> tuple[dict[str, Any], list[Path]]:
+    """Every output of a case written into ``outdir`` (the staging folder), and the
+    summary naming them as they will lie in ``final``."""
+
     import time
 
     times = dict(timings or {})
-    earlier_run = (outdir / PLAN_FILE).is_file()  # a folder slicerecon wrote before
     start = time.perf_counter()
     several = len(case.annotation.structures) > 1
     records = []
@@ -255,15 +301,12 @@ def write_case(
     files += [Path(p) for p in outputs.written.values()]
     if metrics is not None:
         files.append(outdir / METRICS_FILE)
-    if earlier_run:
-        inputs = [case.input_path, case.kind.path, *case.inputs]
-        _remove_stale(outdir, files + [Path(p) for p in inputs])
     mesh_path = (
-        outdir / mesh_file(result.results[0].structure.label, config.mesh_format, several=False)
+        final / mesh_file(result.results[0].structure.label, config.mesh_format, several=False)
         if not several
-        else outdir / "meshes"
+        else final / "meshes"
     )
-    return {
+    summary = {
         "input": str(case.input_path),
         "mesh": str(mesh_path),
         "parts": len(plan["parts"]),
@@ -275,6 +318,7 @@ def write_case(
         "overlap": overlap,
         "timings_s": plan["timings_s"],
     }
+    return summary, files
 
 
 def _remove_stale(outdir: Path, written: list[Path]) -> None:

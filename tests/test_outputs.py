@@ -267,6 +267,33 @@ def test_a_run_into_an_earlier_runs_folder_leaves_nothing_of_it(
     assert (out / "mesh.stl").is_file() and (out / "notes.txt").read_text() == "mine"
 
 
+def test_a_run_interrupted_while_writing_leaves_the_earlier_run_whole(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C while a rerun wrote its files left the folder a mix of the two runs (the new
+    structures.json and meshes beside the old plan.json and stale meshes)."""
+    import slicerecon.case_outputs as outputs
+
+    x, y, z = np.meshgrid(*[np.arange(40)] * 3, indexing="ij")
+    ball = ((x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 100).astype(np.uint8)
+    three = ball.copy()
+    three[(x > 20) & (ball > 0)] = 2
+    three[(x < 14) & (ball > 0)] = 5
+    nib.save(nib.Nifti1Image(three, np.eye(4)), tmp_path / "three.nii.gz")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "three.nii.gz"), "-o", str(out), "-q"]) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(outputs, "_write_preview", interrupted)  # after meshes and maps
+    run = ["run", str(tmp_path / "three.nii.gz"), "--label", "1,2", "--slices", "6"]
+    assert main([*run, "-o", str(out), "-q"]) == 130
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before  # nothing of the interrupted run, no staging folder
+
+
 def test_an_input_in_the_output_folder_is_never_removed(tmp_path: Path) -> None:
     """A SEG named seg.dcm, reconstructed into its own folder twice: the input stays."""
     x, y, z = np.meshgrid(*[np.arange(24)] * 3, indexing="ij")
