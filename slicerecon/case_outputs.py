@@ -235,7 +235,7 @@ def _write_case_files(
         record = item.to_dict()
         if item.mesh is not None:
             name = mesh_file(item.structure.label, config.mesh_format, several=several)
-            write_mesh(item.mesh, outdir / name)
+            write_mesh(item.mesh, outdir / name, coordinates=result.coordinates)
             record["mesh"] = name
             written.append(outdir / name)
         if item.metrics is not None:

@@ -133,6 +133,13 @@ def test_a_nifti_label_map_gets_a_slicer_segmentation_and_no_dicom(tmp_path: Pat
         else seg_nrrd.affine
     )
     np.testing.assert_allclose(ras, written_affine, atol=1e-5)
+    # the meshes are RAS, and say so as 3D Slicer reads it (untagged, it reads LPS: a
+    # NIfTI's meshes came out mirrored in x and y there)
+    for mesh in (out / "meshes").iterdir():
+        assert mesh.read_bytes()[:80].rstrip() == b"SPACE=RAS"
+    assert main(["run", str(path), "--format", "ply", "-o", str(tmp_path / "ply"), "-q"]) == 0
+    header = (tmp_path / "ply" / "meshes" / "2.ply").read_bytes()[:200]
+    assert b"\ncomment SPACE=RAS\n" in header
 
 
 def test_non_ascii_names_survive_every_output_of_a_run(tmp_path: Path) -> None:

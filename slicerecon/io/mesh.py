@@ -99,6 +99,7 @@ def write_mesh(
     path: str | os.PathLike[str],
     *,
     file_format: str | None = None,
+    coordinates: str | None = None,
 ) -> Path:
     """Write a triangle mesh atomically as STL (binary), PLY (binary), OBJ or OFF.
 
@@ -111,6 +112,10 @@ def write_mesh(
         or not at all.
     file_format : {"stl", "ply", "obj", "off"}, optional
         Output format; default from the suffix of ``path``.
+    coordinates : {"RAS", "LPS"}, optional
+        The world frame of the vertices, recorded as 3D Slicer records it
+        (``SPACE=RAS`` in the STL header, a PLY or OBJ comment; OFF has no
+        place for it). Slicer reads a mesh without it as LPS.
 
     Returns
     -------
@@ -155,10 +160,30 @@ def write_mesh(
                 f"file_format {fmt!r} contradicts the suffix of {p.name!r}; make them agree"
             )
     options = {"include_texture": False} if fmt == "obj" else {}
+    if coordinates not in (None, "RAS", "LPS"):
+        raise OptionError(f"coordinates must be RAS or LPS (got {coordinates!r})")
     with atomic_path(p) as tmp:
         mesh.export(tmp, file_type=fmt, **options)
+        if coordinates is not None:
+            _tag_space(Path(tmp), fmt, coordinates)
     logger.info("wrote %s (%s, %d faces)", p, fmt, len(mesh.faces))
     return p
+
+
+def _tag_space(path: Path, fmt: str, coordinates: str) -> None:
+    """Record the world frame in a written mesh file the way 3D Slicer reads it."""
+    tag = f"SPACE={coordinates}".encode()
+    if fmt == "stl":  # binary: an 80-byte free header (never starting with "solid")
+        with path.open("r+b") as handle:
+            handle.write(tag.ljust(80, b" "))
+    elif fmt in ("ply", "obj"):
+        data = path.read_bytes()
+        if fmt == "ply":
+            line_end = data.index(b"\n", data.index(b"\nformat ") + 1) + 1
+            data = data[:line_end] + b"comment " + tag + b"\n" + data[line_end:]
+        else:
+            data = b"# " + tag + b"\n" + data
+        path.write_bytes(data)
 
 
 def mesh_file_closed(path: str | os.PathLike[str]) -> bool:
