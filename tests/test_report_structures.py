@@ -185,3 +185,30 @@ def test_metrics_csv_gives_each_structure_the_planes_that_hold_it(tmp_path: Path
     with (tmp_path / "out" / "metrics.csv").open(newline="") as handle:
         rows = {r["structure"]: r for r in csv.DictReader(handle)}
     assert int(rows["1"]["planes"]) == own["1"] and int(rows["2"]["planes"]) == own["2"]
+
+
+def test_metrics_csv_lists_a_sparse_cases_structures_in_value_order(tmp_path: Path) -> None:
+    """A sparse case of 3 structures had one row with an empty structure (the docs promise
+    one per structure), and scored rows were sorted as text (2, 40, 7)."""
+    from slicerecon.cli import main
+
+    x, y, z = np.meshgrid(*[np.arange(40)] * 3, indexing="ij")
+    ball = (x - 20) ** 2 + (y - 20) ** 2 + (z - 20) ** 2 < 150
+    labels = np.zeros(ball.shape, np.uint8)
+    labels[ball & (x < 16)], labels[ball & (x >= 16) & (x < 24)], labels[ball & (x >= 24)] = (
+        7,
+        40,
+        2,
+    )
+    for name, data in (("dense", labels), ("sparse", labels * (z % 4 == 0))):
+        write_label_map(data, np.eye(4), tmp_path / f"{name}.nii.gz")
+        assert (
+            main(["run", str(tmp_path / f"{name}.nii.gz"), "-o", str(tmp_path / "r" / name), "-q"])
+            == 0
+        )
+    write_report(tmp_path / "r")
+    rows = list(csv.DictReader((tmp_path / "r" / "metrics.csv").open()))
+    listed = {
+        case: [r["structure"] for r in rows if r["case"] == case] for case in ("dense", "sparse")
+    }
+    assert listed == {"dense": ["2", "7", "40", "mean"], "sparse": ["2", "7", "40"]}

@@ -180,8 +180,8 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
         ``seconds`` (the sum of the stage timings), ``error``. A case with
         several structures has one row per structure (``structure`` is its
         ``<value>_<name>``, ``planes`` the planes holding it) and a row of
-        their ``mean`` (``planes``: the case's); other cases one row with an
-        empty ``structure``.
+        their ``mean`` when they were scored (``planes``: the case's), in the
+        order of their values; other cases one row with an empty ``structure``.
     """
     names = metric_names(cases)
     buffer = io.StringIO()
@@ -192,9 +192,13 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
     for c in cases:
         seconds = c.stage_seconds
         rows = [("", c.metrics or {})]
-        if c.structure_metrics:  # one row per structure, then their mean
-            rows = [*sorted(c.structure_metrics.items()), ("mean", c.metrics or {})]
         own_planes = {s.label: s.planes for s in c.structures}
+        scored = dict(c.structure_metrics or {})
+        if scored or len(c.structures) > 1:  # one row per structure (by value), their mean
+            labels = [s.label for s in sorted(c.structures, key=lambda s: s.value)]
+            labels += sorted(set(scored) - set(labels))
+            rows = [(label, scored.get(label, {})) for label in labels]
+            rows += [("mean", c.metrics or {})] if scored else []
         for structure, metrics in rows:
             planes = own_planes.get(structure, c.planes) if structure else c.planes
             writer.writerow(
