@@ -103,10 +103,10 @@ def kind_of(value: Any) -> str:
 
 
 def closed_polygon(points: NDArray[np.float64], path: Path, where: str) -> NDArray[np.float64]:
-    if points.shape[0] > 1 and np.array_equal(points[0], points[-1]):
-        points = points[:-1]
     if points.shape[0] < 3:
         raise fail(path, where, f"needs at least 3 points (got {points.shape[0]})")
+    if points.shape[0] > 3 and np.array_equal(points[0], points[-1]):
+        points = points[:-1]  # closed implicitly; three points stay three (a line, a point)
     return points
 
 
@@ -140,10 +140,10 @@ def _not_null(what: str) -> BeforeValidator:
 
 
 def _polygon_points(points: list[list[float]]) -> list[list[float]]:
-    if len(points) > 1 and points[0] == points[-1]:
-        points = points[:-1]  # closed implicitly: a repeated first point is dropped
     if len(points) < 3:
         raise _refuse(f"needs at least 3 points (got {len(points)})")
+    if len(points) > 3 and points[0] == points[-1]:
+        points = points[:-1]  # closed implicitly: a repeated first point is dropped
     return points
 
 

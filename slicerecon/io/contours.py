@@ -80,7 +80,12 @@ from .contour_schema import (
 )
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_coordinates, reading
 from .plane_groups import annotation_from_polygons, orientation_count
-from .polygons import polygons_from_sections, sections_from_polygons
+from .polygons import (
+    encloses_area,
+    polygon_normal,
+    polygons_from_sections,
+    sections_from_polygons,
+)
 
 __all__ = [
     "CONTOUR_FORMAT",
@@ -161,14 +166,15 @@ def _parallel_sections(
     reference = parsed.grid if pixel_spacing is None else None
     if parsed.grid is not None and pixel_spacing is not None:
         logger.info("%s: pixel_spacing given, so the file's grid is not used", p)
+    polygons, names, normal, empty = _ends_drawn_as_lines(p, parsed)
     try:
         sections = sections_from_polygons(
-            parsed.polygons,
+            polygons,
             pixel_spacing=pixel_spacing,
             reference=reference,
-            normal=parsed.normal,
-            empty_positions=parsed.empty_positions,
-            polygon_names=parsed.names,
+            normal=normal,
+            empty_positions=empty,
+            polygon_names=names,
             memory_budget_gb=memory_budget_gb,
         )
     except OptionError:
@@ -183,6 +189,54 @@ def _parallel_sections(
             "same (a plane whose only polygon encloses no area has no position)"
         )
     return sections
+
+
+_PLANE_TOLERANCE_MM = 0.01
+"""Polygons this close along the normal are on one plane (as ``sections_from_polygons``)."""
+
+
+def _ends_drawn_as_lines(
+    p: Path, parsed: Parsed
+) -> tuple[list[NDArray[np.float64]], list[str], NDArray[np.float64] | None, list[float]]:
+    """The polygons that enclose an area, their names, the normal, and the empty planes:
+    a plane whose only polygons enclose none (a line or a point marking where the
+    structure ends) is a plane where it is absent, said in one line per plane."""
+    areas = [polygon_normal(poly) for poly in parsed.polygons]
+    kept = [n for n, poly in enumerate(parsed.polygons) if encloses_area(poly)]
+    if len(kept) == len(areas) or not kept:
+        return parsed.polygons, parsed.names, parsed.normal, parsed.empty_positions
+    largest = max(kept, key=lambda n: areas[n][1])
+    normal = parsed.normal if parsed.normal is not None else areas[largest][0]
+    at = [float(poly.mean(axis=0) @ normal) for poly in parsed.polygons]
+    empty = list(parsed.empty_positions)
+    said = []
+    for n in sorted(set(range(len(areas))) - set(kept), key=lambda n: at[n]):
+        if any(abs(at[n] - at[k]) <= _PLANE_TOLERANCE_MM for k in kept):
+            continue  # beside polygons of its plane: skipped with the usual warning
+        if not any(abs(at[n] - e) <= _PLANE_TOLERANCE_MM for e in empty):
+            empty.append(at[n])
+            said.append(parsed.names[n])
+    if said:
+        one = len(said) == 1
+        logger.warning(
+            "%s: %s %s no area (a line or a point, where the structure ends): read as %s "
+            "where the structure is absent",
+            p,
+            ", ".join(said),
+            "encloses" if one else "enclose",
+            "a plane" if one else "planes",
+        )
+    keep = [
+        n
+        for n in range(len(areas))
+        if n in kept or any(abs(at[n] - at[k]) <= _PLANE_TOLERANCE_MM for k in kept)
+    ]
+    return (
+        [parsed.polygons[n] for n in keep],
+        [parsed.names[n] for n in keep],
+        normal,
+        empty,
+    )
 
 
 def read_contour_annotation(

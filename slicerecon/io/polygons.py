@@ -125,6 +125,24 @@ def polygon_normal(points: ArrayLike) -> tuple[NDArray[np.float64], float]:
     return (vector / area if area > 0 else np.zeros(3)), area
 
 
+def encloses_area(points: ArrayLike) -> bool:
+    """Whether a polygon encloses an area: False for collinear points, a repeated point, or
+    lobes of opposite turn that cancel (a symmetric figure 8).
+
+    Parameters
+    ----------
+    points : array_like of shape (N, 3)
+        Vertices, mm.
+
+    Returns
+    -------
+    bool
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    diameter = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    return bool(np.linalg.norm(_vector_area(pts)) > DEGENERATE_REL * diameter**2)
+
+
 def _vector_area(points: NDArray[np.float64]) -> NDArray[np.float64]:
     centred = points - points.mean(axis=0)
     return 0.5 * np.cross(centred, np.roll(centred, -1, axis=0)).sum(axis=0)
@@ -150,7 +168,7 @@ def _as_polygons(polygons: Sequence[ArrayLike], names: Sequence[str] | None) -> 
         check_coordinates(pts, what=name)
         diameter = float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
         vector = _vector_area(pts)
-        if np.linalg.norm(vector) <= DEGENERATE_REL * diameter**2:
+        if not encloses_area(pts):
             logger.warning(
                 "%s encloses no area (its points are collinear, or it crosses itself into "
                 "lobes of opposite turn, a figure 8); skipped",

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+import trimesh
 
 from slicerecon.errors import EmptyMaskError, FormatError, GeometryError, InputError
 from slicerecon.io.contours import read_contours, write_contours_csv, write_contours_json
@@ -353,3 +354,29 @@ def test_the_schema_is_published_as_json_schema():
     assert schema["required"] == ["format", "version", "units", "planes"]
     assert schema["additionalProperties"] is False
     assert schema["properties"]["format"]["const"] == "slicerecon-contours"
+
+
+@pytest.mark.parametrize("end", ["line", "point"])
+def test_a_structures_end_drawn_as_a_line_or_a_point_is_a_plane_where_it_is_absent(
+    tmp_path, capsys, end
+):
+    """An ellipsoid whose apex contours are a stroke (3 collinear points) or one point
+    clicked 3 times: the file was refused ("lists 10 planes but its polygons lie at 8
+    distinct positions", "needs at least 3 points (got 2)")."""
+    from slicerecon.cli import main
+
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    planes = []
+    for z in np.arange(-18.0, 18.1, 4.0):
+        r = np.sqrt(max(0.0, 1 - (z / 18) ** 2))
+        ring = np.stack([20 * r * np.cos(t), 14 * r * np.sin(t), np.full(t.size, z)], 1)
+        apex = [[-3.0, 0.0, z], [0.0, 0.0, z], [3.0, 0.0, z]] if end == "line" else [[0, 0, z]] * 3
+        planes.append({"position": z, "polygons": [apex if abs(z) == 18 else ring.tolist()]})
+    path = _write_json(tmp_path, _json_doc(planes, normal=[0, 0, 1]))
+    assert main(["run", str(path), "-o", str(tmp_path / "o")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "no area" in line]
+    assert len(said) == 1 and "planes[0].polygons[0], planes[9].polygons[0]" in said[0]
+    mesh = trimesh.load(tmp_path / "o" / "mesh.stl")
+    assert mesh.volume == pytest.approx(4 / 3 * np.pi * 20 * 14 * 18, rel=0.04)
+    sections = read_contours(path)
+    assert sections.n_planes == 10 and not sections.masks[0].any()
