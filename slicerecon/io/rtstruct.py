@@ -41,7 +41,7 @@ from .dicom.series import dicom_series_geometry, referenced_series
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
 from .plane_groups import annotation_from_polygons, orientation_count
-from .polygons import sections_from_polygons
+from .polygons import encloses_area, sections_from_polygons
 
 __all__ = [
     "list_rois",
@@ -157,7 +157,8 @@ def _roi_polygons(
     names: list[str] = []
     image_uids: set[str] = set()
     skipped: dict[str, int] = {}
-    for n, contour in enumerate(contours):
+    flat: list[str] = []  # contours that enclose no area
+    for n, contour in enumerate(contours, start=1):  # numbered as ContourSequence items
         where = f"{label} contour {n}"
         kind = str(contour.get("ContourGeometricType", "") or "").strip().upper()
         if kind != "CLOSED_PLANAR":
@@ -166,13 +167,8 @@ def _roi_polygons(
         points = _contour_points(contour, where, path)
         if points.shape[0] > 1 and np.array_equal(points[0], points[-1]):
             points = points[:-1]
-        if points.shape[0] < 3:
-            logger.warning(
-                "%s: %s has %d points, too few to enclose an area; skipped",
-                path,
-                where,
-                points.shape[0],
-            )
+        if points.shape[0] < 3 or not encloses_area(points):
+            flat.append(str(n))
             continue
         polygons.append(points)
         names.append(where)
@@ -180,6 +176,15 @@ def _roi_polygons(
             uid = str(ref.get("ReferencedSOPInstanceUID", "") or "")
             if uid:
                 image_uids.add(uid)
+    if flat:
+        logger.warning(
+            "%s: %s contour%s %s enclose%s no area (a point or a line); skipped",
+            path,
+            label,
+            "s" if len(flat) > 1 else "",
+            ", ".join(flat),
+            "" if len(flat) > 1 else "s",
+        )
     listed = ", ".join(f"{count} {kind}" for kind, count in skipped.items())
     if not polygons:  # one line: what it has instead (a POINT isocentre marker)
         instead = f" ({listed} contours skipped: only CLOSED_PLANAR bound an area)"

@@ -15,7 +15,7 @@ from pydicom.uid import ExplicitVRLittleEndian, generate_uid
 
 from slicerecon.errors import EmptyMaskError, FormatError, GeometryError, InputError, LabelError
 from slicerecon.io import load_input
-from slicerecon.io.rtstruct import list_rois, read_rtstruct
+from slicerecon.io.rtstruct import list_rois, read_rtstruct, read_rtstruct_annotation
 
 RTSTRUCT_STORAGE = "1.2.840.10008.5.1.4.1.1.481.3"
 N_VERTICES = 720
@@ -274,3 +274,22 @@ def test_truncated_file_is_one_clear_error(case, tmp_path, keep):
     with pytest.raises((FormatError, InputError)) as info:
         read_rtstruct(cut, roi="Tumour", image_dir=case["series"])
     assert str(cut) in str(info.value) or "truncated" in str(info.value)
+
+
+def test_contours_that_enclose_no_area_are_named_once_by_roi_and_item(tmp_path, caplog):
+    """A clicked point and a stroke were said in two ways ("contour 0 has 1 points",
+    "polygon 7 encloses no area"): numbered differently, one without its ROI, each said
+    again for every grid the ROIs are rasterized on."""
+    affine = np.eye(4)
+    rings = [_contour_item(_ring(8.0, [0, 0], affine, k)) for k in range(0, 12, 3)]
+    point = _contour_item(np.array([[0.0, 0.0, 12.0]]))
+    line = _contour_item(np.array([[-2.0, 0, -3.0], [0.0, 0, -3.0], [2.0, 0, -3.0]]))
+    other = [_contour_item(_ring(4.0, [30, 0], affine, k)) for k in range(0, 12, 2)]
+    path = write_rtstruct(
+        tmp_path / "rt.dcm", {(1, "Org"): [point, *rings, line], (2, "Other"): other}
+    )
+    with caplog.at_level("WARNING"):
+        annotation, _ = read_rtstruct_annotation(path)
+    said = [r.getMessage() for r in caplog.records if "no area" in r.getMessage()]
+    assert len(said) == 1 and "ROI 1 (Org) contours 1, 6 enclose no area" in said[0]
+    assert len(annotation.planes_of(1)) == 4
