@@ -485,6 +485,8 @@ class Annotation:
             offsets = np.sort([self.planes[n].pose.offset_mm for n in members])
             gaps = np.diff(offsets)
             spacing = f", spacing {np.median(gaps):.3g} mm" if gaps.size else ""
+            if gaps.size and np.ptp(gaps) > max(0.1 * np.median(gaps), 0.05):
+                spacing += ", irregular"  # 2, 2, 5 mm: not the median alone
             axis = self._axis_of(self.planes[members[0]].pose)
             towards = "normal (" + ", ".join(f"{c:.2f}" for c in normal + 0.0) + ")"
             if axis is None:

@@ -380,3 +380,22 @@ def test_a_structures_end_drawn_as_a_line_or_a_point_is_a_plane_where_it_is_abse
     assert mesh.volume == pytest.approx(4 / 3 * np.pi * 20 * 14 * 18, rel=0.04)
     sections = read_contours(path)
     assert sections.n_planes == 10 and not sections.masks[0].any()
+
+
+def test_the_read_line_says_when_contour_planes_are_irregularly_spaced(tmp_path):
+    """Planes 2, 2, 5, 2 mm apart read as "spacing 2 mm" (the median) and nothing else;
+    label maps said ", irregular"."""
+    from slicerecon.io.contours import read_contour_annotation
+
+    zs = [0.0, 2.0, 4.0, 9.0, 11.0]
+    planes = [{"polygons": [_circle(5.0, (0, 0, z), n=64).tolist()]} for z in zs]
+    described = read_contour_annotation(_write_json(tmp_path, _json_doc(planes))).describe()
+    assert described == "5 planes along z, spacing 2 mm, irregular"
+    jittered = [
+        {"polygons": [_circle(5.0, (0, 0, z + 0.004 * (n % 2)), n=64).tolist()]}
+        for n, z in enumerate((0.0, 4.0, 8.0, 12.0))
+    ]
+    described = read_contour_annotation(
+        _write_json(tmp_path, _json_doc(jittered), "j.json")
+    ).describe()
+    assert described == "4 planes along z, spacing 4 mm"
