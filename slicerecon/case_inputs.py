@@ -713,7 +713,7 @@ def _contour_input(
         annotation,
         source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}"
         f"{annotation.describe_fewer()}",
-        gap_ends=frozenset(annotation.values if built else ()),
+        gap_ends=annotation.gap_ends | frozenset(annotation.values if built else ()),
     )
     return CaseInput(
         annotation,

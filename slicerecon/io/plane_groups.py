@@ -54,7 +54,13 @@ from .polygons import (
     warn_crossing,
 )
 
-__all__ = ["ANGLE_TOLERANCE_DEG", "annotation_from_polygons", "orientation_count", "plane_count"]
+__all__ = [
+    "ANGLE_TOLERANCE_DEG",
+    "annotation_from_polygons",
+    "grid_axis_of",
+    "orientation_count",
+    "plane_count",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -139,7 +145,23 @@ def _half_gap(items: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]])
     return largest / 2
 
 
-def _grid_axis(affine: NDArray[np.float64], normal: NDArray[np.float64]) -> int | None:
+def grid_axis_of(affine: ArrayLike, normal: ArrayLike) -> int | None:
+    """The grid axis whose slices are parallel to planes of unit ``normal`` (within
+    :data:`ANGLE_TOLERANCE_DEG`), or None: planes oblique to the grid.
+
+    Parameters
+    ----------
+    affine : array_like of shape (4, 4)
+        Voxel index → world mm.
+    normal : array_like of shape (3,)
+        Unit normal of the planes.
+
+    Returns
+    -------
+    int or None
+    """
+    affine = np.asarray(affine, dtype=np.float64)
+    normal = np.asarray(normal, dtype=np.float64)
     limit = np.sin(np.radians(ANGLE_TOLERANCE_DEG))
     for axis in range(3):
         a, b = in_plane_axes(axis)
@@ -225,7 +247,7 @@ def annotation_from_polygons(
     planes: list[AnnotatedPlane] = []
     for normal, members in _groups([n for _, _, n in items]):
         chosen = [items[m] for m in members]
-        axis = _grid_axis(affine, normal)
+        axis = grid_axis_of(affine, normal)
         poses = _plane_poses(chosen, normal, affine, shape, axis, plane_tolerance_mm)
         for pose, polys in poses:
             to_px = np.linalg.inv(pose.affine)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -40,8 +41,8 @@ from ..selection import choose_structure, parse_selector
 from .dicom.series import dicom_series_geometry, referenced_series
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
-from .plane_groups import annotation_from_polygons, orientation_count
-from .polygons import encloses_area, sections_from_polygons
+from .plane_groups import annotation_from_polygons, grid_axis_of, orientation_count
+from .polygons import encloses_area, polygon_normal, sections_from_polygons
 
 __all__ = [
     "list_rois",
@@ -488,6 +489,18 @@ def _shared_grid_sections(
     return sections, union
 
 
+def _oblique_to(
+    polygons: list[NDArray[np.float64]], image_dir: str | os.PathLike[str] | None
+) -> bool:
+    """Whether parallel contours lie on planes oblique to their image series' slices
+    (drawn on a tilted reformat): then read as planes of any orientation on its grid."""
+    if image_dir is None or not polygons:
+        return False
+    normal = max((polygon_normal(p) for p in polygons), key=lambda found: found[1])[0]
+    affine, _, _ = dicom_series_geometry(image_dir, allow_irregular=True)
+    return grid_axis_of(affine, normal) is None
+
+
 def read_rtstruct_annotation(
     path: str | os.PathLike[str],
     *,
@@ -532,7 +545,8 @@ def read_rtstruct_annotation(
         everything = [poly for group in polygons for poly in group]
         missing = tuple(s for s, group in zip(structures, polygons, strict=True) if not group)
         drawn = [(s, group) for s, group in zip(structures, polygons, strict=True) if group]
-        if orientation_count(everything) <= 1:
+        oblique = _oblique_to(everything, image_dir)
+        if orientation_count(everything) <= 1 and not oblique:
             sections, _ = _shared_grid_sections(
                 p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb, ds
             )
@@ -562,4 +576,6 @@ def read_rtstruct_annotation(
             )
         except SlicereconError as exc:
             raise type(exc)(f"{p}: {exc}") from exc
+        if oblique:  # not on the image's slices: each stands for half-way to its neighbours
+            annotation = replace(annotation, gap_ends=frozenset(annotation.values))
         return annotation, missing

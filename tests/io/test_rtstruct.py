@@ -246,6 +246,11 @@ def test_contours_not_parallel_to_the_image_grid(case, tmp_path):
         read_rtstruct(path, image_dir=case["series"], roi=1)
     cs = read_rtstruct(path, pixel_spacing=1.0)  # on their own grid they are fine
     np.testing.assert_allclose(cs.normal, [0.0, -s, c], atol=1e-9)
+    # the pipeline reads them beside their series as planes of any orientation on its grid
+    # (drawn on a tilted reformat: the run was refused, "do not belong to this image")
+    annotation, _ = read_rtstruct_annotation(path, image_dir=case["series"])
+    assert annotation.grid_axis() is None and annotation.gap_ends == {1}
+    assert np.allclose(annotation.affine, case["affine"])
 
 
 def test_file_errors(case, tmp_path):
