@@ -185,8 +185,12 @@ def _parallel_sections(
         raise FormatError(
             f"{p}: the file lists {parsed.n_planes} planes but its polygons lie at "
             f"{sections.n_planes} distinct positions along the normal (tolerance 0.01 mm); "
-            "each plane entry must hold the polygons of one plane, and no two entries the "
-            "same (a plane whose only polygon encloses no area has no position)"
+            + (
+                "each plane id must hold the polygons of one plane, and no two ids the same"
+                if p.suffix.lower() == ".csv"
+                else "each plane entry must hold the polygons of one plane, and no two "
+                "entries the same"
+            )
         )
     return sections
 
