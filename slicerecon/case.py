@@ -466,7 +466,11 @@ def _from_views(
     lo = np.maximum(np.asarray(field.lo), 0)
     hi = np.minimum(np.asarray(field.lo) + size, annotation.grid_shape)
     box = Box(tuple(int(v) for v in lo), tuple(int(v) for v in np.maximum(hi, lo + 1)))
-    voxels = 0 if made.occupancy is None else int(np.count_nonzero(made.occupancy.mask))
+    voxels = (  # inside samples, counted on the grid's voxels (the field may be finer)
+        int(np.count_nonzero(made.occupancy.mask))
+        if made.occupancy is not None
+        else round(np.count_nonzero(field.values < 0) / field.upsample)
+    )
     return StructureResult(
         structure,
         RECONSTRUCTED,

@@ -490,14 +490,16 @@ def _shared_grid_sections(
 
 
 def _oblique_to(
-    polygons: list[NDArray[np.float64]], image_dir: str | os.PathLike[str] | None
+    polygons: list[NDArray[np.float64]],
+    image_dir: str | os.PathLike[str] | None,
+    allow_irregular: bool,
 ) -> bool:
     """Whether parallel contours lie on planes oblique to their image series' slices
     (drawn on a tilted reformat): then read as planes of any orientation on its grid."""
     if image_dir is None or not polygons:
         return False
     normal = max((polygon_normal(p) for p in polygons), key=lambda found: found[1])[0]
-    affine, _, _ = dicom_series_geometry(image_dir, allow_irregular=True)
+    affine, _, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
     return grid_axis_of(affine, normal) is None
 
 
@@ -545,7 +547,7 @@ def read_rtstruct_annotation(
         everything = [poly for group in polygons for poly in group]
         missing = tuple(s for s, group in zip(structures, polygons, strict=True) if not group)
         drawn = [(s, group) for s, group in zip(structures, polygons, strict=True) if group]
-        oblique = _oblique_to(everything, image_dir)
+        oblique = _oblique_to(everything, image_dir, allow_irregular)
         if orientation_count(everything) <= 1 and not oblique:
             sections, _ = _shared_grid_sections(
                 p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb, ds
