@@ -252,6 +252,7 @@ def _write_case_files(
             kind.kind, kind.path, image_dir if image_dir is not None else kind.image_dir
         ),
         rtstruct=kind.path if kind.kind == "rtstruct" else None,
+        seg=kind.path if kind.kind == "dicom-seg" else None,
         allow_irregular=config.allow_irregular,
         source=kind.path if kind.kind == "nifti" else None,
         layers=result.layers,

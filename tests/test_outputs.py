@@ -77,8 +77,21 @@ def test_rtstruct_beside_its_series_writes_seg_and_rtstruct_that_read_back(tmp_p
     back.mkdir()
     for path in (tmp_path / "ct").glob("slice_*.dcm"):
         (back / path.name).write_bytes(path.read_bytes())
-    (back / "seg.dcm").write_bytes((out / "seg.dcm").read_bytes())
+    coded = pydicom.dcmread(out / "seg.dcm")
+    for item in coded.SegmentSequence:  # an input SEG that says what its segments are
+        if item.SegmentLabel == "Left":
+            item.SegmentedPropertyCategoryCodeSequence[0].CodeValue = "123037004"
+            item.SegmentedPropertyCategoryCodeSequence[0].CodeMeaning = "Anatomical Structure"
+            item.SegmentedPropertyTypeCodeSequence[0].CodeValue = "10200004"
+            item.SegmentedPropertyTypeCodeSequence[0].CodeMeaning = "Liver"
+    coded.save_as(back / "seg.dcm")
     assert main(["run", str(back), "-o", str(tmp_path / "again"), "-q"]) == 0
+    # its seg.dcm keeps those codes (every segment was written "Tissue")
+    kept = {
+        item.SegmentLabel: item.SegmentedPropertyTypeCodeSequence[0].CodeMeaning
+        for item in pydicom.dcmread(tmp_path / "again" / "seg.dcm").SegmentSequence
+    }
+    assert kept == {"Left": "Liver", "Right": "Tissue"}
     again = json.loads((tmp_path / "again" / "structures.json").read_text())["structures"]
     first = record["structures"]
     assert [(r["value"], r["name"], r["colour"]) for r in again] == [

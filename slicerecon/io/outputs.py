@@ -123,6 +123,7 @@ def write_label_outputs(
     allow_irregular: bool = False,
     source: str | os.PathLike[str] | None = None,
     layers: NDArray[np.integer] | None = None,
+    seg: str | os.PathLike[str] | None = None,
 ) -> LabelOutputs:
     """Write the reconstructed label map in every format the input's workflow reads.
 
@@ -157,6 +158,9 @@ def write_label_outputs(
         each), ``seg.dcm`` (overlapping segments) and ``rtstruct.dcm`` are
         written from it; ``labels.nii.gz`` holds ``labels``, one structure per
         voxel.
+    seg : path-like, optional
+        The DICOM SEG the structures were read from: ``seg.dcm`` keeps each
+        segment's category and type codes.
 
     Returns
     -------
@@ -211,7 +215,7 @@ def write_label_outputs(
 
     try:
         with writing(out / _SEG):
-            result.written["seg"] = write_seg(whole, lps, chosen, images, out / _SEG)
+            result.written["seg"] = write_seg(whole, lps, chosen, images, out / _SEG, reference=seg)
     except SlicereconError as exc:
         logger.warning("seg.dcm not written: %s", exc)
         result.skipped["seg"] = str(exc)

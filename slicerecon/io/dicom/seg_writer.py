@@ -20,9 +20,11 @@ Segments
 * RecommendedDisplayCIELabValue: the structure's colour (RGB converted to
   CIELab by highdicom), else one of
   :data:`~slicerecon.labels.DEFAULT_COLOURS`.
-* SegmentedPropertyCategory / Type: SCT 85756007 "Tissue" / SCT 85756007
-  "Tissue" (3D Slicer's code for a segment of unknown kind: slicerecon does
-  not know what a structure is).
+* SegmentedPropertyCategory / Type: those of the input SEG's segment of the
+  same label when the input was a SEG (``reference``: Liver / Organ stays
+  Liver / Organ); else SCT 85756007 "Tissue" / SCT 85756007 "Tissue" (3D
+  Slicer's code for a segment of unknown kind: slicerecon does not know what a
+  structure is).
 * SegmentAlgorithmType SEMIAUTOMATIC (the surface is computed from a person's
   cross-sections), algorithm "slicerecon" of family "Artificial Intelligence"
   (CID 7162) with slicerecon's version.
@@ -59,6 +61,7 @@ from .derived import (
     load_source_series,
     structure_mask,
 )
+from .sniff import PARSE_ERRORS, read_dicom_header
 
 __all__ = ["SEG_ALGORITHM_NAME", "write_seg"]
 
@@ -68,7 +71,35 @@ SEG_ALGORITHM_NAME = "slicerecon"
 """AlgorithmName of every segment written."""
 
 
-def _segment_descriptions(structures: Sequence[Structure]) -> list[Any]:
+def _reference_codes(reference: str | os.PathLike[str] | None) -> dict[str, tuple[Any, Any]]:
+    """The segmented property category and type of each segment of an input SEG, by
+    SegmentLabel (none for a SEG whose codes cannot be read: the default is written)."""
+    if reference is None:
+        return {}
+    from highdicom.sr import CodedConcept
+
+    def concept(item: Any) -> Any:
+        return CodedConcept(
+            str(item.CodeValue), str(item.CodingSchemeDesignator), str(item.CodeMeaning)
+        )
+
+    found = {}
+    try:
+        ds = read_dicom_header(reference)
+        for item in ds.get("SegmentSequence", []):
+            found[str(item.SegmentLabel)] = (
+                concept(item.SegmentedPropertyCategoryCodeSequence[0]),
+                concept(item.SegmentedPropertyTypeCodeSequence[0]),
+            )
+    except (*PARSE_ERRORS, FormatError, ValueError, TypeError, IndexError):
+        logger.info("%s: its segments' codes cannot be read; Tissue is written", reference)
+        return {}
+    return found
+
+
+def _segment_descriptions(
+    structures: Sequence[Structure], codes_of: dict[str, tuple[Any, Any]]
+) -> list[Any]:
     from highdicom import AlgorithmIdentificationSequence
     from highdicom.color import CIELabColor
     from highdicom.seg import SegmentDescription
@@ -81,11 +112,12 @@ def _segment_descriptions(structures: Sequence[Structure]) -> list[Any]:
     )
     out = []
     for number, structure in enumerate(structures, start=1):
+        category, kind = codes_of.get(structure.name, (codes.SCT.Tissue, codes.SCT.Tissue))
         description = SegmentDescription(
             segment_number=number,
             segment_label=dicom_name(structure),
-            segmented_property_category=codes.SCT.Tissue,
-            segmented_property_type=codes.SCT.Tissue,
+            segmented_property_category=category,
+            segmented_property_type=kind,
             algorithm_type="SEMIAUTOMATIC",
             algorithm_identification=algorithm,
             display_color=CIELabColor.from_rgb(*display_colour(structure, number - 1)),
@@ -105,6 +137,7 @@ def write_seg(
     allow_irregular: bool = False,
     series_number: int = 901,
     series_description: str = "slicerecon reconstruction",
+    reference: str | os.PathLike[str] | None = None,
 ) -> Path:
     """Write a label map as a BINARY DICOM SEG referring to its image series.
 
@@ -134,6 +167,9 @@ def write_seg(
         SeriesNumber of the new SEG series.
     series_description : str
         SeriesDescription of the new SEG series.
+    reference : path-like, optional
+        The SEG the structures were read from: each segment keeps the
+        category and type codes of its segment of the same label.
 
     Returns
     -------
@@ -195,7 +231,12 @@ def write_seg(
             )
     try:
         segmentation = _segmentation(
-            Segmentation, series, frames, ordered, series_number, series_description
+            Segmentation,
+            series,
+            frames,
+            _segment_descriptions(ordered, _reference_codes(reference)),
+            series_number,
+            series_description,
         )
     except (ValueError, TypeError, KeyError, AttributeError) as exc:
         raise FormatError(
@@ -259,7 +300,7 @@ def _segmentation(
     segmentation_class: Any,
     series: Any,
     frames: Any,
-    ordered: Sequence[Structure],
+    descriptions: list[Any],
     series_number: int,
     series_description: str,
 ) -> Any:
@@ -271,7 +312,7 @@ def _segmentation(
         source_images=_with_type2_attributes(series.images),
         pixel_array=frames,
         segmentation_type="BINARY",
-        segment_descriptions=_segment_descriptions(ordered),
+        segment_descriptions=descriptions,
         series_instance_uid=generate_uid(),
         series_number=series_number,
         sop_instance_uid=generate_uid(),
