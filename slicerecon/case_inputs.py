@@ -645,7 +645,7 @@ def _load_rtstruct(
     )
     # the reader has said which ROIs have no (closed planar) contour, and why
     series = image_dir if image_dir is not None else kind.image_dir
-    case = _contour_input(annotation, kind, config, missing, built=series is None)
+    case = _contour_input(annotation, kind, config, missing, built=series is None, series=series)
     if series is not None:
         affine, shape, _ = dicom_series_geometry(series, allow_irregular=config.allow_irregular)
         if not _same_lattice(case.output_affine, affine):
@@ -683,6 +683,7 @@ def _contour_input(
     missing: tuple[Structure, ...],
     *,
     built: bool = False,
+    series: str | os.PathLike[str] | None = None,
 ) -> CaseInput:
     """The case input of contours read as ``annotation``, its sampled grid inside the budget.
 
@@ -711,7 +712,8 @@ def _contour_input(
             output_shape = (int(sampled[0]), int(sampled[1]), int(sampled[2]))
     annotation = replace(
         annotation,
-        source=f"contours, {len(annotation.structures)} structure(s): {annotation.describe()}"
+        source=f"contours{f' on the images in {series}' if series else ''}, "
+        f"{len(annotation.structures)} structure(s): {annotation.describe()}"
         f"{annotation.describe_fewer()}",
         gap_ends=annotation.gap_ends | frozenset(annotation.values if built else ()),
     )

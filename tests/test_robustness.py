@@ -374,6 +374,8 @@ def test_allow_irregular_reaches_the_series_of_an_rtstruct(
     assert "--allow-irregular" in _one_error_line(capsys)
     assert main(["run", str(tmp_path / "ct"), "--allow-irregular", "-o", str(tmp_path / "b")]) == 0
     assert trimesh.load(tmp_path / "b" / "mesh.stl").is_watertight
+    # the read line names the series the contours were placed on
+    assert f"read as: contours on the images in {tmp_path / 'ct'}," in capsys.readouterr().out
 
 
 # -- 7 and 8. info describes; real files as they exist -----------------------------------
