@@ -193,7 +193,8 @@ def describe_sections(sections: CrossSections) -> dict[str, Any]:
         "gap_mm": None
         if gaps.size == 0
         else {"min": round(float(gaps.min()), 4), "max": round(float(gaps.max()), 4)},
-        "uniform_spacing": bool(gaps.size == 0 or np.ptp(gaps) < 1e-6),
+        # positions within 0.01 mm are one plane: gaps within twice that are one spacing
+        "uniform_spacing": bool(gaps.size == 0 or np.ptp(gaps) <= 0.02),
         "area_mm2": _round(areas, 2),
         "in_plane_shape": list(sections.masks.shape[1:]),
         "grid_shape": list(sections.grid_shape),

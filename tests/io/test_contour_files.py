@@ -399,3 +399,18 @@ def test_the_read_line_says_when_contour_planes_are_irregularly_spaced(tmp_path)
         _write_json(tmp_path, _json_doc(jittered), "j.json")
     ).describe()
     assert described == "4 planes along z, spacing 4 mm"
+
+
+def test_info_calls_planes_jittered_within_the_plane_tolerance_uniformly_spaced(tmp_path):
+    """Planes 4 mm apart, each off by up to 0.004 mm (an export's rounding): info said
+    uniform_spacing false, though positions within 0.01 mm count as one elsewhere."""
+    from slicerecon.io.describe import describe_sections
+
+    zs = [0.0, 4.004, 7.996, 12.004]
+    planes = [{"polygons": [_circle(5.0, (0, 0, z), n=64).tolist()]} for z in zs]
+    described = describe_sections(read_contours(_write_json(tmp_path, _json_doc(planes))))
+    assert described["uniform_spacing"]
+    planes = [{"polygons": [_circle(5.0, (0, 0, z), n=64).tolist()]} for z in (0, 2, 4, 9)]
+    assert not describe_sections(read_contours(_write_json(tmp_path, _json_doc(planes))))[
+        "uniform_spacing"
+    ]
