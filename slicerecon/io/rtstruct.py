@@ -425,9 +425,8 @@ def _read_structures(
 ) -> tuple[list[Structure], list[CrossSections | None], CrossSections]:
     ds, p = _read_dataset(path)
     structures, polygons = _chosen_polygons(ds, p, rois)
-    sections, union = _shared_grid_sections(
-        p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb, ds
-    )
+    reference = _series_reference(p, ds, image_dir, allow_irregular)
+    sections, union = _shared_grid_sections(p, polygons, reference, pixel_spacing, memory_budget_gb)
     return structures, sections, union
 
 
@@ -446,27 +445,32 @@ def _say_unnamed(
         )
 
 
+def _series_reference(
+    p: Path, ds: Any, image_dir: str | os.PathLike[str] | None, allow_irregular: bool
+) -> tuple[NDArray[np.float64], tuple[int, int, int]] | None:
+    """The grid of the image series the contours go on (None without one), read once;
+    one warning when the contours name none of its images (:func:`_say_unnamed`)."""
+    if image_dir is None:
+        return None
+    affine, shape, uids = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
+    _say_unnamed(p, referenced_series(ds)[1], image_dir, uids)
+    return affine, shape
+
+
 def _shared_grid_sections(
     p: Path,
     polygons: list[list[NDArray[np.float64]]],
-    image_dir: str | os.PathLike[str] | None,
+    reference: tuple[NDArray[np.float64], tuple[int, int, int]] | None,
     pixel_spacing: float | None,
-    allow_irregular: bool,
     memory_budget_gb: float,
-    ds: Any,
 ) -> tuple[list[CrossSections | None], CrossSections]:
-    """Each ROI's parallel polygons rasterized on the grid of all of them (or the series')."""
+    """Each ROI's parallel polygons rasterized on the grid of all of them (or the series',
+    ``reference``: then ``pixel_spacing`` is not used)."""
     everything = [poly for group in polygons for poly in group]
-    reference = None
-    if image_dir is not None:
-        affine, shape, uids = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
-        _say_unnamed(p, referenced_series(ds)[1], image_dir, uids)
-        reference = (affine, shape)
-        pixel_spacing = None
     try:
         union = sections_from_polygons(
             everything,
-            pixel_spacing=pixel_spacing,
+            pixel_spacing=None if reference is not None else pixel_spacing,
             reference=reference,
             memory_budget_gb=memory_budget_gb,
             own_planes=True,
@@ -491,16 +495,14 @@ def _shared_grid_sections(
 
 def _oblique_to(
     polygons: list[NDArray[np.float64]],
-    image_dir: str | os.PathLike[str] | None,
-    allow_irregular: bool,
+    reference: tuple[NDArray[np.float64], tuple[int, int, int]] | None,
 ) -> bool:
     """Whether parallel contours lie on planes oblique to their image series' slices
     (drawn on a tilted reformat): then read as planes of any orientation on its grid."""
-    if image_dir is None or not polygons:
+    if reference is None or not polygons:
         return False
     normal = max((polygon_normal(p) for p in polygons), key=lambda found: found[1])[0]
-    affine, _, _ = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
-    return grid_axis_of(affine, normal) is None
+    return grid_axis_of(reference[0], normal) is None
 
 
 def read_rtstruct_annotation(
@@ -547,10 +549,11 @@ def read_rtstruct_annotation(
         everything = [poly for group in polygons for poly in group]
         missing = tuple(s for s, group in zip(structures, polygons, strict=True) if not group)
         drawn = [(s, group) for s, group in zip(structures, polygons, strict=True) if group]
-        oblique = _oblique_to(everything, image_dir, allow_irregular)
+        reference = _series_reference(p, ds, image_dir, allow_irregular)
+        oblique = _oblique_to(everything, reference)
         if orientation_count(everything) <= 1 and not oblique:
             sections, _ = _shared_grid_sections(
-                p, polygons, image_dir, pixel_spacing, allow_irregular, memory_budget_gb, ds
+                p, polygons, reference, pixel_spacing, memory_budget_gb
             )
             own = [(s, x) for s, x in zip(structures, sections, strict=True) if x is not None]
             annotation = annotation_from_sections(
@@ -561,11 +564,6 @@ def read_rtstruct_annotation(
                 exclusive=False,
             )
             return annotation, missing
-        reference = None
-        if image_dir is not None:
-            affine, shape, uids = dicom_series_geometry(image_dir, allow_irregular=allow_irregular)
-            _say_unnamed(p, referenced_series(ds)[1], image_dir, uids)
-            reference = (affine, shape)
         try:
             annotation = annotation_from_polygons(
                 [s for s, _ in drawn],
