@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose
+from .annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose, smallest_gap
 from .errors import OptionError
 from .sections import AXIS_NAMES
 
@@ -161,24 +161,15 @@ def _off_lattice(
         if len(mine) < 2:
             continue
         pose = planes[mine[0]].pose
-        offsets = np.sort(
-            [
-                planes[n].pose.offset_mm * np.sign(planes[n].pose.normal @ pose.normal)
-                for n in mine
-                if planes[n].pose.is_parallel(pose)
-            ]
-        )
-        gaps = np.diff(offsets)
-        gaps = gaps[gaps > _EPS_MM]
-        if not gaps.size:
+        offsets = [_along(planes[n].pose, pose) for n in mine if planes[n].pose.is_parallel(pose)]
+        step = smallest_gap(offsets, _EPS_MM)
+        if step is None:
             continue
-        step = float(gaps.min())
         for n, held in enumerate(holding):
             other = planes[n].pose
             if value in held or not held or not other.is_parallel(pose):
                 continue
-            at = other.offset_mm * np.sign(other.normal @ pose.normal)
-            phase = (at - offsets[0]) / step
+            phase = (_along(other, pose) - min(offsets)) / step
             if abs(phase - round(phase)) > EXTRA_GAP_TOLERANCE:
                 found.add((n, value))
     return found
@@ -332,9 +323,14 @@ def nested_apart(annotation: Annotation) -> dict[int, int]:
     return {inner: outer for inner, (outer, _) in found.items()}
 
 
+def _along(pose: PlanePose, reference: PlanePose) -> float:
+    """Where a plane parallel to ``reference`` lies along ``reference``'s normal, mm."""
+    return float(pose.offset_mm * np.sign(pose.normal @ reference.normal))
+
+
 def _between(pose: PlanePose, own: Sequence[PlanePose]) -> bool:
     """Whether a plane lies strictly between two of ``own`` parallel to it."""
-    offsets = [p.offset_mm * np.sign(p.normal @ pose.normal) for p in own if p.is_parallel(pose)]
+    offsets = [_along(p, pose) for p in own if p.is_parallel(pose)]
     if len(offsets) < 2:
         return False
     return bool(min(offsets) + _EPS_MM < pose.offset_mm < max(offsets) - _EPS_MM)

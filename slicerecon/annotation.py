@@ -44,6 +44,7 @@ __all__ = [
     "PlanePose",
     "annotation_from_sections",
     "plane_pose",
+    "smallest_gap",
 ]
 
 ANGLE_TOLERANCE = 1e-3
@@ -521,6 +522,26 @@ class Annotation:
             return ""
         more = f" and {len(fewer) - limit} more on fewer" if len(fewer) > limit else ""
         return "; " + ", ".join(fewer[:limit]) + more
+
+
+def smallest_gap(positions: ArrayLike, tolerance: float = 1e-3) -> float | None:
+    """The smallest gap between planes at ``positions`` along their normal.
+
+    Parameters
+    ----------
+    positions : array_like of float
+        Plane positions (mm, or grid index units), in any order.
+    tolerance : float
+        Gaps at most this are one plane, not a gap.
+
+    Returns
+    -------
+    float or None
+        None for fewer than two distinct planes.
+    """
+    gaps = np.diff(np.sort(np.asarray(positions, dtype=np.float64).ravel()))
+    gaps = gaps[gaps > tolerance]
+    return float(gaps.min()) if gaps.size else None
 
 
 def window(mask: NDArray[Any], lo: ArrayLike, hi: ArrayLike) -> NDArray[Any]:

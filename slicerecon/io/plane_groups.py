@@ -39,7 +39,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose
+from ..annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose, smallest_gap
 from ..errors import EmptyMaskError, GeometryError
 from ..labels import Structure
 from ..sections import check_affine, in_plane_axes
@@ -138,10 +138,8 @@ def _half_gap(items: list[tuple[int, NDArray[np.float64], NDArray[np.float64]]])
     for value in {v for v, _, _ in items}:
         own = [(p, n) for v, p, n in items if v == value]
         for normal, members in _groups([n for _, n in own]):
-            offsets = np.unique(np.round([own[m][0].mean(axis=0) @ normal for m in members], 3))
-            gaps = np.diff(offsets)
-            if gaps.size:
-                largest = max(largest, float(gaps.min()))
+            gap = smallest_gap([own[m][0].mean(axis=0) @ normal for m in members])
+            largest = max(largest, gap or 0.0)
     return largest / 2
 
 

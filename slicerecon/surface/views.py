@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..annotation import Annotation, PlanePose, window
+from ..annotation import Annotation, PlanePose, smallest_gap, window
 from ..errors import EmptyMaskError, GeometryError
 from ..io.limits import check_grid
 from ..sections import Volume, in_plane_axes
@@ -318,9 +318,8 @@ def _end_reach(positions: list[float], voxel: float, own_gap: bool) -> float:
     """How far a complete view's structure goes on beyond its outer planes (the units of
     ``positions``): half a voxel (``voxel``), or with ``own_gap`` half the smallest gap
     between its planes (contours read without an image; :attr:`Annotation.gap_ends`)."""
-    gaps = np.diff(np.sort(np.asarray(positions, dtype=np.float64)))
-    gaps = gaps[gaps > 1e-6]
-    return float(gaps.min()) / 2 if own_gap and gaps.size else voxel
+    gap = smallest_gap(positions) if own_gap else None
+    return gap / 2 if gap is not None else voxel
 
 
 def _view(
