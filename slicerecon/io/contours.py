@@ -81,6 +81,7 @@ from .contour_schema import (
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_coordinates, reading
 from .plane_groups import annotation_from_polygons, orientation_count
 from .polygons import (
+    PLANE_TOLERANCE_MM,
     encloses_area,
     polygon_normal,
     polygons_from_sections,
@@ -195,10 +196,6 @@ def _parallel_sections(
     return sections
 
 
-_PLANE_TOLERANCE_MM = 0.01
-"""Polygons this close along the normal are on one plane (as ``sections_from_polygons``)."""
-
-
 def _ends_drawn_as_lines(
     p: Path, parsed: Parsed
 ) -> tuple[list[NDArray[np.float64]], list[str], NDArray[np.float64] | None, list[float]]:
@@ -215,9 +212,9 @@ def _ends_drawn_as_lines(
     empty = list(parsed.empty_positions)
     said = []
     for n in sorted(set(range(len(areas))) - set(kept), key=lambda n: at[n]):
-        if any(abs(at[n] - at[k]) <= _PLANE_TOLERANCE_MM for k in kept):
+        if any(abs(at[n] - at[k]) <= PLANE_TOLERANCE_MM for k in kept):
             continue  # beside polygons of its plane: skipped with the usual warning
-        if not any(abs(at[n] - e) <= _PLANE_TOLERANCE_MM for e in empty):
+        if not any(abs(at[n] - e) <= PLANE_TOLERANCE_MM for e in empty):
             empty.append(at[n])
             said.append(parsed.names[n])
     if said:
@@ -233,7 +230,7 @@ def _ends_drawn_as_lines(
     keep = [
         n
         for n in range(len(areas))
-        if n in kept or any(abs(at[n] - at[k]) <= _PLANE_TOLERANCE_MM for k in kept)
+        if n in kept or any(abs(at[n] - at[k]) <= PLANE_TOLERANCE_MM for k in kept)
     ]
     return (
         [parsed.polygons[n] for n in keep],

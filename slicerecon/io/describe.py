@@ -27,7 +27,7 @@ from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, reading
 from .nrrd import nrrd_info, read_nrrd_label_map
 from .plane_groups import orientation_count, plane_count
-from .polygons import polygon_normal
+from .polygons import PLANE_TOLERANCE_MM, polygon_normal
 from .rtstruct import roi_contours
 from .vti import read_vti
 
@@ -193,8 +193,8 @@ def describe_sections(sections: CrossSections) -> dict[str, Any]:
         "gap_mm": None
         if gaps.size == 0
         else {"min": round(float(gaps.min()), 4), "max": round(float(gaps.max()), 4)},
-        # positions within 0.01 mm are one plane: gaps within twice that are one spacing
-        "uniform_spacing": bool(gaps.size == 0 or np.ptp(gaps) <= 0.02),
+        # positions within the plane tolerance are one plane: gaps within twice it, one spacing
+        "uniform_spacing": bool(gaps.size == 0 or np.ptp(gaps) <= 2 * PLANE_TOLERANCE_MM),
         "area_mm2": _round(areas, 2),
         "in_plane_shape": list(sections.masks.shape[1:]),
         "grid_shape": list(sections.grid_shape),

@@ -48,6 +48,7 @@ from .polygons import (
     DEFAULT_PIXELS_ACROSS,
     MARGIN_PX,
     PLANARITY_REL,
+    PLANE_TOLERANCE_MM,
     polygon_normal,
     rasterize_polygons,
     rings_that_cross,
@@ -104,7 +105,9 @@ def orientation_count(polygons: Sequence[ArrayLike]) -> int:
     return len(_oriented(polygons)[1])
 
 
-def plane_count(polygons: Sequence[ArrayLike], plane_tolerance_mm: float = 0.01) -> int:
+def plane_count(
+    polygons: Sequence[ArrayLike], plane_tolerance_mm: float = PLANE_TOLERANCE_MM
+) -> int:
     """How many planes a set of polygons lies on, as :func:`annotation_from_polygons` groups
     them: by orientation, then by offset along the normal (``plane_tolerance_mm``)."""
     kept, groups = _oriented(polygons)
@@ -178,7 +181,7 @@ def annotation_from_polygons(
     pixel_spacing: float | None = None,
     coordinates: str = "LPS",
     exclusive: bool = False,
-    plane_tolerance_mm: float = 0.01,
+    plane_tolerance_mm: float = PLANE_TOLERANCE_MM,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
     source: str = "",
 ) -> Annotation:

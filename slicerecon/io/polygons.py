@@ -67,6 +67,8 @@ from .limits import DEFAULT_MEMORY_BUDGET_GB, check_coordinates, check_grid
 __all__ = [
     "DEFAULT_PIXELS_ACROSS",
     "MARGIN_PX",
+    "PLANE_TOLERANCE_MM",
+    "encloses_area",
     "polygon_normal",
     "polygons_from_sections",
     "rasterize_polygons",
@@ -81,6 +83,8 @@ MARGIN_PX = 2
 """Background pixels kept around the polygons on a built grid."""
 PLANARITY_REL = 1e-4
 """Allowed distance of a vertex from its polygon's plane, relative to the polygon diameter."""
+PLANE_TOLERANCE_MM = 0.01
+"""Polygons this close along their normal are on one plane (the default of every reader)."""
 DEGENERATE_REL = 1e-9
 """A polygon whose area is below this times its squared diameter is degenerate."""
 MAX_PIXELS_PER_AXIS = 16384
@@ -461,7 +465,7 @@ def sections_from_polygons(
     normal: ArrayLike | None = None,
     empty_positions: Sequence[float] = (),
     axis_tolerance_deg: float = 0.5,
-    plane_tolerance_mm: float = 0.01,
+    plane_tolerance_mm: float = PLANE_TOLERANCE_MM,
     polygon_names: Sequence[str] | None = None,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
     own_planes: bool = False,
