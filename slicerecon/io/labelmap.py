@@ -295,7 +295,9 @@ def write_label_map(
 
     values = as_labels(np.asarray(labels))
     if values.dtype.itemsize > 2 or values.dtype.kind == "i" and values.min() >= 0:
-        # the smallest type that holds them (values above 2**31 in uint32, never wrapped)
+        # the smallest type of at least 16 bits that holds them (2**8 among the values
+        # asks for 16 bits, as these maps were written before); above 2**31 uint32, never
+        # wrapped
         values = values.astype(labels_dtype([int(values.min()), int(values.max()), 2**8]))
     aff = np.asarray(affine, dtype=np.float64)
     if coordinates == "LPS":
