@@ -199,9 +199,10 @@ def _parallel_sections(
 def _ends_drawn_as_lines(
     p: Path, parsed: Parsed
 ) -> tuple[list[NDArray[np.float64]], list[str], NDArray[np.float64] | None, list[float]]:
-    """The polygons that enclose an area, their names, the normal, and the empty planes:
-    a plane whose only polygons enclose none (a line or a point marking where the
-    structure ends) is a plane where it is absent, said in one line per plane."""
+    """The polygons to rasterize, their names, the normal, and the empty planes: a plane
+    whose only polygons enclose no area (a line or a point marking where the structure
+    ends) is a plane where it is absent, said in one line; such a polygon beside others
+    of its plane is left to :func:`sections_from_polygons` (skipped with a warning)."""
     areas = [polygon_normal(poly) for poly in parsed.polygons]
     kept = [n for n, poly in enumerate(parsed.polygons) if encloses_area(poly)]
     if len(kept) == len(areas) or not kept:
@@ -209,12 +210,16 @@ def _ends_drawn_as_lines(
     largest = max(kept, key=lambda n: areas[n][1])
     normal = parsed.normal if parsed.normal is not None else areas[largest][0]
     at = [float(poly.mean(axis=0) @ normal) for poly in parsed.polygons]
+
+    def near(position: float, others: list[float]) -> bool:
+        return any(abs(position - o) <= PLANE_TOLERANCE_MM for o in others)
+
+    flat = sorted(set(range(len(areas))) - set(kept), key=lambda n: at[n])
+    alone = [n for n in flat if not near(at[n], [at[k] for k in kept])]
     empty = list(parsed.empty_positions)
     said = []
-    for n in sorted(set(range(len(areas))) - set(kept), key=lambda n: at[n]):
-        if any(abs(at[n] - at[k]) <= PLANE_TOLERANCE_MM for k in kept):
-            continue  # beside polygons of its plane: skipped with the usual warning
-        if not any(abs(at[n] - e) <= PLANE_TOLERANCE_MM for e in empty):
+    for n in alone:
+        if not near(at[n], empty):
             empty.append(at[n])
             said.append(parsed.names[n])
     if said:
@@ -227,17 +232,8 @@ def _ends_drawn_as_lines(
             "encloses" if one else "enclose",
             "a plane" if one else "planes",
         )
-    keep = [
-        n
-        for n in range(len(areas))
-        if n in kept or any(abs(at[n] - at[k]) <= PLANE_TOLERANCE_MM for k in kept)
-    ]
-    return (
-        [parsed.polygons[n] for n in keep],
-        [parsed.names[n] for n in keep],
-        normal,
-        empty,
-    )
+    keep = [n for n in range(len(areas)) if n not in alone]
+    return [parsed.polygons[n] for n in keep], [parsed.names[n] for n in keep], normal, empty
 
 
 def read_contour_annotation(
