@@ -41,17 +41,21 @@ from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
 from .labels import LabelMap, Structure, StructureMasks, labels_dtype
-from .plane_detection import PlaneReading, detect_planes, empty_runs_inside, parse_annotation
+from .plane_detection import (
+    MIN_GAPS_WARNED,
+    PlaneReading,
+    detect_planes,
+    empty_runs_inside,
+    has_gaps,
+    mixed_reading,
+    parse_annotation,
+)
 from .reconstruct import ReconstructConfig
-from .sections import AXIS_NAMES, CrossSections, Volume, axis_index, in_plane_axes
+from .sections import AXIS_NAMES, CrossSections, Volume, axis_index
 
 __all__ = ["CaseInput", "case_from_label_map", "combine_cases", "load_case", "reading_of"]
 
 logger = logging.getLogger(__name__)
-
-MIN_GAPS_WARNED = 2
-"""Runs of empty slices inside a dense-read mask along one axis from which a warning says
-that it may be drawn on groups of slices (one gap: two pieces, which dense masks have)."""
 
 
 def _as_label_map(volume: Volume, structure: Structure | None = None) -> LabelMap:
@@ -361,14 +365,14 @@ def case_from_label_map(
     # slice, the organs on every 4th): the sparse ones set the planes
     every_slice: frozenset[int] = frozenset()
     several = len(label_map.structures) > 1
-    if several and not reading.stated and (not reading.dense or _has_gaps(crop.mask)):
+    if several and not reading.stated and (not reading.dense or has_gaps(crop.mask)):
         first = np.rint(
             np.linalg.solve(label_map.affine[:3, :3], crop.affine[:3, 3] - label_map.affine[:3, 3])
         ).astype(np.int64)
         box = tuple(slice(int(a), int(a) + n) for a, n in zip(first, crop.shape, strict=True))
         # one structure's mask at a time: 25 structures of a 500 x 470 x 136 map held
         # together took 0.8 GB
-        mixed = _mixed_reading(
+        mixed = mixed_reading(
             [s.value for s in label_map.structures],
             lambda value: label_map.mask(value).mask[box],
         )
@@ -454,77 +458,6 @@ def case_from_label_map(
     )
 
 
-def _has_gaps(mask: NDArray[np.bool_]) -> bool:
-    """Whether a mask has :data:`MIN_GAPS_WARNED` runs of empty slices inside it along an
-    axis (what :func:`_warn_of_gaps` says)."""
-    return any(runs >= MIN_GAPS_WARNED for runs in empty_runs_inside(mask).values())
-
-
-def _mixed_reading(
-    values: Sequence[int], mask_of: Callable[[int], NDArray[np.bool_]]
-) -> tuple[PlaneReading, frozenset[int]] | None:
-    """A label map of several structures read one by one: some drawn on planes of one
-    axis with slices between them, the others on every slice they cross (a lesion
-    contoured on each slice, the organs on every 4th). Read together, such a map looks
-    dense, or sparse with the lesion's slices as planes of every structure.
-
-    Parameters
-    ----------
-    values : sequence of int
-        The structures.
-    mask_of : callable
-        ``mask_of(value)``: a structure's mask, ndarray of shape (I, J, K), bool, on one
-        box for all of them (asked for one at a time, each more than once).
-
-    Returns
-    -------
-    (PlaneReading, frozenset of int) or None
-        The planes of the structures drawn on some slices (read together), and the values
-        drawn on every slice; None when no structure, or every one, reads as sparse, or
-        the sparse ones are not planes of one axis with a slice between two of them.
-    """
-    own: dict[int, PlaneReading] = {}
-    held: dict[int, list[NDArray[np.bool_]]] = {}  # value -> slices holding it, per axis
-    for value in values:
-        mask = mask_of(value)
-        if mask.any():
-            own[value] = detect_planes(_boxed(mask))
-            held[value] = [mask.any(axis=in_plane_axes(a)) for a in range(3)]
-    sparse = [v for v, r in own.items() if not r.dense]
-    if not sparse:
-        return None
-    if len(sparse) == len(values):
-        # each is drawn on planes, all together are not (a lesion drawn on the two slices
-        # between two of the organs' planes): every structure's own planes, read alone
-        axes = {a for r in own.values() for a in r.axes}
-        if len(axes) != 1:
-            return None
-        axis = axes.pop()
-        union = np.logical_or.reduce([h[axis] for h in held.values()])
-        return PlaneReading(False, {axis: np.flatnonzero(union).astype(np.int64)}, 1.0), frozenset()
-    together = mask_of(sparse[0]).copy()
-    for value in sparse[1:]:
-        together |= mask_of(value)
-    reading = detect_planes(together)
-    if reading.dense or len(reading.axes) != 1:
-        return None
-    axis = reading.axes[0]
-    if np.all(np.diff(reading.planes[axis]) <= 1):  # no slice between: not an annotation
-        return None
-    rest = frozenset(values) - frozenset(sparse)
-    drawn = [held[v][axis] for v in rest if v in held]
-    slices = np.flatnonzero(np.logical_or.reduce(drawn)) if drawn else np.empty(0, np.int64)
-    planes = np.union1d(reading.planes[axis], slices).astype(np.int64)
-    return replace(reading, planes={axis: planes}), rest
-
-
-def _boxed(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """A mask cropped to its foreground with one empty voxel around it."""
-    lo = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[0]) for a in range(3)]
-    hi = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[-1]) + 1 for a in range(3)]
-    return np.pad(mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]], 1)
-
-
 def _warn_of_gaps(mask: NDArray[np.bool_], source: Any) -> None:
     """Say when a mask read as dense has runs of empty slices inside it along an axis."""
     for axis, runs in empty_runs_inside(mask).items():
@@ -607,8 +540,9 @@ def _views_annotation(
 ) -> Annotation:
     """A label map annotated along several axes: each annotated slice, every structure.
 
-    With ``every_slice`` (structures drawn on every slice, :func:`_mixed_reading`), a slice
-    that holds only those speaks for them alone: the others were not drawn there.
+    With ``every_slice`` (structures drawn on every slice,
+    :func:`~slicerecon.plane_detection.mixed_reading`), a slice that holds only those
+    speaks for them alone: the others were not drawn there.
     """
     drawn = []
     for axis in sorted(planes):

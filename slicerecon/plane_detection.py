@@ -37,7 +37,8 @@ were chosen on the development shapes (``docs/results.md``, "Annotations").
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,9 +51,12 @@ __all__ = [
     "MAX_SHEET_RUN",
     "EXPLAINED",
     "MIN_COVERED",
+    "MIN_GAPS_WARNED",
     "MIN_SHEET_FRACTION",
     "PlaneReading",
     "detect_planes",
+    "has_gaps",
+    "mixed_reading",
     "parse_annotation",
 ]
 
@@ -70,6 +74,9 @@ MAX_DEEP_SHARE = 0.5
 """A mask more than half of whose voxels have foreground two voxels away on both sides
 along every axis is a solid, read as dense without measuring its runs: annotated
 planes only hold such voxels where they cross."""
+MIN_GAPS_WARNED = 2
+"""Runs of empty slices inside a dense-read mask along one axis from which a warning says
+that it may be drawn on groups of slices (one gap: two pieces, which dense masks have)."""
 ANNOTATION_CHOICES = ("auto", "dense", "x", "y", "z")
 """``--annotation``: ``auto`` (the rule), ``dense``, or the axes (``z``, ``xz``, ``x,y,z``)."""
 
@@ -324,3 +331,74 @@ def _deep_share(data: NDArray[np.bool_]) -> float:
             edge[axis] = slice(n - step, None)
             deep[tuple(edge)] = False
     return float(np.count_nonzero(deep)) / max(int(np.count_nonzero(data)), 1)
+
+
+def has_gaps(mask: NDArray[np.bool_]) -> bool:
+    """Whether a mask has :data:`MIN_GAPS_WARNED` runs of empty slices inside it along an
+    axis (what ``slicerecon run`` warns of)."""
+    return any(runs >= MIN_GAPS_WARNED for runs in empty_runs_inside(mask).values())
+
+
+def mixed_reading(
+    values: Sequence[int], mask_of: Callable[[int], NDArray[np.bool_]]
+) -> tuple[PlaneReading, frozenset[int]] | None:
+    """A label map of several structures read one by one: some drawn on planes of one
+    axis with slices between them, the others on every slice they cross (a lesion
+    contoured on each slice, the organs on every 4th). Read together, such a map looks
+    dense, or sparse with the lesion's slices as planes of every structure.
+
+    Parameters
+    ----------
+    values : sequence of int
+        The structures.
+    mask_of : callable
+        ``mask_of(value)``: a structure's mask, ndarray of shape (I, J, K), bool, on one
+        box for all of them (asked for one at a time, each more than once).
+
+    Returns
+    -------
+    (PlaneReading, frozenset of int) or None
+        The planes of the structures drawn on some slices (read together), and the values
+        drawn on every slice; None when no structure, or every one, reads as sparse, or
+        the sparse ones are not planes of one axis with a slice between two of them.
+    """
+    own: dict[int, PlaneReading] = {}
+    held: dict[int, list[NDArray[np.bool_]]] = {}  # value -> slices holding it, per axis
+    for value in values:
+        mask = mask_of(value)
+        if mask.any():
+            own[value] = detect_planes(_boxed(mask))
+            held[value] = [mask.any(axis=in_plane_axes(a)) for a in range(3)]
+    sparse = [v for v, r in own.items() if not r.dense]
+    if not sparse:
+        return None
+    if len(sparse) == len(values):
+        # each is drawn on planes, all together are not (a lesion drawn on the two slices
+        # between two of the organs' planes): every structure's own planes, read alone
+        axes = {a for r in own.values() for a in r.axes}
+        if len(axes) != 1:
+            return None
+        axis = axes.pop()
+        union = np.logical_or.reduce([h[axis] for h in held.values()])
+        return PlaneReading(False, {axis: np.flatnonzero(union).astype(np.int64)}, 1.0), frozenset()
+    together = mask_of(sparse[0]).copy()
+    for value in sparse[1:]:
+        together |= mask_of(value)
+    reading = detect_planes(together)
+    if reading.dense or len(reading.axes) != 1:
+        return None
+    axis = reading.axes[0]
+    if np.all(np.diff(reading.planes[axis]) <= 1):  # no slice between: not an annotation
+        return None
+    rest = frozenset(values) - frozenset(sparse)
+    drawn = [held[v][axis] for v in rest if v in held]
+    slices = np.flatnonzero(np.logical_or.reduce(drawn)) if drawn else np.empty(0, np.int64)
+    planes = np.union1d(reading.planes[axis], slices).astype(np.int64)
+    return replace(reading, planes={axis: planes}), rest
+
+
+def _boxed(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """A mask cropped to its foreground with one empty voxel around it."""
+    lo = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[0]) for a in range(3)]
+    hi = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[-1]) + 1 for a in range(3)]
+    return np.pad(mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]], 1)
