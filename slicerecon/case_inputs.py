@@ -36,7 +36,7 @@ from .inputs import axis_upsample, prepare_inputs, refuse_plane_options
 from .io import InputKind, detect_kind, load_ground_truth, load_input
 from .io.contours import contour_file_grid, read_contour_annotation
 from .io.dicom import dicom_series_geometry
-from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks, seg_segment
+from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
@@ -44,11 +44,9 @@ from .labels import LabelMap, Structure, StructureMasks, labels_dtype
 from .plane_detection import (
     MIN_GAPS_WARNED,
     PlaneReading,
-    detect_planes,
     empty_runs_inside,
-    has_gaps,
-    mixed_reading,
     parse_annotation,
+    structures_reading,
 )
 from .reconstruct import ReconstructConfig
 from .sections import AXIS_NAMES, CrossSections, Volume, axis_index
@@ -203,14 +201,12 @@ def _load_label_map(
         volume = load_input(kind.path, label=config.label, memory_budget_gb=config.max_memory_gb)
         assert isinstance(volume, Volume)
         return case_from_label_map(_as_label_map(volume), config, kind=kind)
-    if kind.kind == "dicom-seg" and len(selectors) == 1 and not config.union:
-        # one segment, whole: SEG segments may overlap, and the label map of
-        # every segment gives overlapping voxels to one of them
-        structure, number = seg_segment(kind.path, selectors[0])
-        volume = load_input(kind.path, label=number, memory_budget_gb=config.max_memory_gb)
-        assert isinstance(volume, Volume)
-        label_map = replace(_as_label_map(volume, structure), coordinates="LPS")
-        return case_from_label_map(on(label_map), replace(config, label=None, roi=None), kind=kind)
+    if kind.kind == "dicom-seg" and selectors and not config.union:
+        # chosen segments kept whole (SEG segments may overlap, and the label map of every
+        # segment gives overlapping voxels to one of them), read beside every other
+        # segment: a segment drawn on each slice beside others drawn on some is sparse
+        masks = read_seg_masks(kind.path, memory_budget_gb=config.max_memory_gb)
+        return case_from_label_map(on(masks), config, kind=kind)
     # SEG segments, and segments in different layers of a .seg.nrrd, may overlap or
     # nest: kept whole, each reconstructed on its own
     may_overlap = not config.union and (kind.kind == "dicom-seg" or _layered_nrrd(kind))
@@ -349,7 +345,20 @@ def case_from_label_map(
         states) keeps its planes.
     """
     kind = kind if kind is not None else InputKind("array", Path("<array>"))
+    # read over every structure of the input, before any is chosen: a lesion drawn on
+    # each slice beside organs drawn on every 4th is an annotation also when the lesion
+    # alone is asked for (alone it looks dense, and was scored against itself)
+    whole = label_map.union()
+    if whole.is_empty:
+        raise EmptyMaskError(f"{kind.path} holds no foreground")
+    reading, every_slice = _read_structures(label_map, whole.crop(pad=3), config, kind.path)
     if config.union:
+        if every_slice:
+            raise OptionError(
+                f"--union merges structures drawn on every slice they cross "
+                f"({_named(label_map, every_slice)}) with structures drawn on some: their "
+                "union is drawn on neither; choose structures with --label"
+            )
         label_map = replace(_as_label_map(label_map.union()), coordinates=label_map.coordinates)
     elif config.selectors:
         label_map = label_map.select(config.selectors, source=kind.path)
@@ -358,26 +367,9 @@ def case_from_label_map(
         raise EmptyMaskError(f"{kind.path} holds no foreground for the chosen structures")
     crop = union.crop(pad=3)
     check_grid(crop.shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
-    reading = detect_planes(crop.mask, parse_annotation(config.annotation))
-    if reading.stated:
-        _say_stated(reading, detect_planes(crop.mask), crop.affine, config.annotation, kind.path)
-    # structures drawn on every slice beside others drawn on some (a lesion drawn on each
-    # slice, the organs on every 4th): the sparse ones set the planes
-    every_slice: frozenset[int] = frozenset()
-    several = len(label_map.structures) > 1
-    if several and not reading.stated and (not reading.dense or has_gaps(crop.mask)):
-        first = np.rint(
-            np.linalg.solve(label_map.affine[:3, :3], crop.affine[:3, 3] - label_map.affine[:3, 3])
-        ).astype(np.int64)
-        box = tuple(slice(int(a), int(a) + n) for a, n in zip(first, crop.shape, strict=True))
-        # one structure's mask at a time: 25 structures of a 500 x 470 x 136 map held
-        # together took 0.8 GB
-        mixed = mixed_reading(
-            [s.value for s in label_map.structures],
-            lambda value: label_map.mask(value).mask[box],
-        )
-        if mixed is not None:
-            reading, every_slice = mixed
+    if config.union or config.selectors:
+        reading = reading.within(_index_of(whole.crop(pad=3).affine, crop.affine), crop.shape)
+        every_slice &= frozenset(s.value for s in label_map.structures)
     if not reading.dense:
         _check_sparse_options(reading, config, crop.spacing)
     elif not reading.stated:
@@ -397,9 +389,7 @@ def case_from_label_map(
     else:
         sections, cropped = None, None
         grid_affine, grid_shape = crop.affine, crop.shape
-    crop_lo = np.rint(
-        np.linalg.solve(label_map.affine[:3, :3], grid_affine[:3, 3] - label_map.affine[:3, 3])
-    ).astype(np.int64)
+    crop_lo = _index_of(label_map.affine, grid_affine)
     region = tuple(slice(int(a), int(a) + n) for a, n in zip(crop_lo, grid_shape, strict=True))
     exclusive = isinstance(label_map, LabelMap)
     on_planes = _plane_masks(label_map, region)
@@ -434,8 +424,7 @@ def case_from_label_map(
         annotation = planes_of_each_structure(annotation, kind.path)
     how = "dense mask" if dense else reading.describe(affine=crop.affine)
     if every_slice:
-        names = ", ".join(s.label for s in label_map.structures if s.value in every_slice)
-        how += f"; structure(s) {names} drawn on every slice they cross"
+        how += f"; structure(s) {_named(label_map, every_slice)} drawn on every slice they cross"
     annotation = replace(
         annotation,
         source=f"{how}; {len(label_map.structures)} structure(s): {annotation.describe()}",
@@ -456,6 +445,39 @@ def case_from_label_map(
         label_map.shape,
         crop_lo,
     )
+
+
+def _read_structures(
+    label_map: LabelMap | StructureMasks, crop: Volume, config: ReconstructConfig, source: Path
+) -> tuple[PlaneReading, frozenset[int]]:
+    """How every structure of a label map is read on ``crop`` (their union's box), by
+    :func:`~slicerecon.plane_detection.structures_reading`; one warning line when
+    ``--annotation`` states another reading than the rule's."""
+    first = _index_of(label_map.affine, crop.affine)
+    box = tuple(slice(int(a), int(a) + n) for a, n in zip(first, crop.shape, strict=True))
+    values = [s.value for s in label_map.structures]
+
+    # one structure's mask at a time: 25 structures of a 500 x 470 x 136 map held
+    # together took 0.8 GB
+    def mask_of(value: int) -> NDArray[np.bool_]:
+        return label_map.mask(value).mask[box]
+
+    stated = parse_annotation(config.annotation)
+    reading, every_slice = structures_reading(values, mask_of, crop.mask, stated)
+    if reading.stated:
+        rule, _ = structures_reading(values, mask_of, crop.mask)
+        _say_stated(reading, rule, crop.affine, config.annotation, source)
+    return reading, every_slice
+
+
+def _index_of(affine: NDArray[np.float64], origin: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The voxel index, on the grid of ``affine``, of the first voxel of a grid of the same
+    spacing whose affine is ``origin``."""
+    return np.rint(np.linalg.solve(affine[:3, :3], origin[:3, 3] - affine[:3, 3])).astype(np.int64)
+
+
+def _named(label_map: LabelMap | StructureMasks, values: frozenset[int]) -> str:
+    return ", ".join(s.label for s in label_map.structures if s.value in values)
 
 
 def _warn_of_gaps(mask: NDArray[np.bool_], source: Any) -> None:

@@ -57,6 +57,7 @@ __all__ = [
     "detect_planes",
     "has_gaps",
     "mixed_reading",
+    "structures_reading",
     "parse_annotation",
 ]
 
@@ -108,6 +109,16 @@ class PlaneReading:
     def axes(self) -> tuple[int, ...]:
         """The axes that have annotated planes, increasing."""
         return tuple(sorted(a for a, p in self.planes.items() if p.size))
+
+    def within(self, first: ArrayLike, shape: tuple[int, ...]) -> PlaneReading:
+        """The reading on a box of the grid it was made on: the box's first voxel at
+        index ``first`` (shape (3,), int) and its ``shape``; planes outside it left out."""
+        if self.dense:
+            return self
+        offset = np.asarray(first, dtype=np.int64)
+        planes = {a: p - offset[a] for a, p in self.planes.items()}
+        planes = {a: p[(p >= 0) & (p < shape[a])] for a, p in planes.items()}
+        return replace(self, planes={a: p for a, p in planes.items() if p.size})
 
     def describe(self, spacing: ArrayLike | None = None, affine: ArrayLike | None = None) -> str:
         """One line: dense, or how many planes along which axes and their spacing.
@@ -337,6 +348,56 @@ def has_gaps(mask: NDArray[np.bool_]) -> bool:
     """Whether a mask has :data:`MIN_GAPS_WARNED` runs of empty slices inside it along an
     axis (what ``slicerecon run`` warns of)."""
     return any(runs >= MIN_GAPS_WARNED for runs in empty_runs_inside(mask).values())
+
+
+def structures_reading(
+    values: Sequence[int],
+    mask_of: Callable[[int], NDArray[np.bool_]],
+    union: NDArray[np.bool_],
+    annotation: str | tuple[int, ...] = "auto",
+) -> tuple[PlaneReading, frozenset[int]]:
+    """How a label map of several structures is read: their union by
+    :func:`detect_planes` (or as ``annotation`` states), and structures drawn on every
+    slice they cross beside others drawn on some by :func:`mixed_reading`.
+
+    A stated axis keeps the second rule: the lesion drawn on each slice is still not
+    drawn on behalf of the organs (``--annotation z`` on organs drawn on every 4th
+    axial slice and a lesion on each slice erased the organs on the lesion's slices).
+
+    Parameters
+    ----------
+    values : sequence of int
+        The structures' label values.
+    mask_of : callable
+        ``mask_of(value)``: a structure's mask, ndarray of shape (I, J, K), bool.
+    union : ndarray of shape (I, J, K), bool
+        Every structure's foreground, on the same box.
+    annotation : str or tuple of int
+        ``"auto"`` (the rule), ``"dense"`` or the annotated axes
+        (:func:`parse_annotation`).
+
+    Returns
+    -------
+    (PlaneReading, frozenset of int)
+        The reading, and the values of the structures drawn on every slice they cross
+        (empty unless the others are drawn on planes of one axis).
+    """
+    reading = detect_planes(union, annotation)
+    if len(values) < 2:
+        return reading, frozenset()
+    if reading.stated:
+        if reading.dense or len(reading.axes) != 1:
+            return reading, frozenset()
+    elif reading.dense and not has_gaps(union):
+        return reading, frozenset()
+    mixed = mixed_reading(values, mask_of)
+    if mixed is None:
+        return reading, frozenset()
+    if reading.stated:
+        if mixed[0].axes != reading.axes:
+            return reading, frozenset()
+        return replace(mixed[0], stated=True), mixed[1]
+    return mixed
 
 
 def mixed_reading(

@@ -1055,13 +1055,9 @@ def test_a_thin_structure_of_another_input_keeps_the_resolution_it_was_drawn_at(
     assert json.loads((both / "plan.json").read_text())["sections"]["n_planes"] == len(drawn) + 67
 
 
-def test_a_lesion_drawn_on_every_slice_beside_organs_drawn_on_some(
-    caplog: pytest.LogCaptureFixture,
-) -> None:
-    """Organs drawn on every 4th slice and a lesion inside one drawn on every slice it
-    crosses: read together, the label map looked dense (the liver came out as its own
-    drawn slices, IoU about 0.1, exit 0). Read one by one, the organs set the planes, the
-    lesion's slices speak for the lesion alone, and the organ is interpolated through them."""
+def _organs_and_a_lesion_drawn_on_every_slice() -> tuple[np.ndarray, np.ndarray]:
+    """Two organs drawn on every 4th axial slice and a lesion inside one drawn on every
+    slice it crosses: (truth, drawn), label maps 1, 2, 3."""
     organ = _ellipsoid()
     x, y, z = np.meshgrid(
         *[np.arange(n) * s for n, s in zip(organ.shape, SPACING, strict=True)], indexing="ij"
@@ -1073,6 +1069,17 @@ def test_a_lesion_drawn_on_every_slice_beside_organs_drawn_on_some(
     truth[organ], truth[other], truth[lesion] = 1, 2, 3
     drawn = _keep(truth * (truth < 3), {2: list(range(3, 30, 4))})
     drawn[lesion] = 3
+    return truth, drawn
+
+
+def test_a_lesion_drawn_on_every_slice_beside_organs_drawn_on_some(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Organs drawn on every 4th slice and a lesion inside one drawn on every slice it
+    crosses: read together, the label map looked dense (the liver came out as its own
+    drawn slices, IoU about 0.1, exit 0). Read one by one, the organs set the planes, the
+    lesion's slices speak for the lesion alone, and the organ is interpolated through them."""
+    truth, drawn = _organs_and_a_lesion_drawn_on_every_slice()
     result = reconstruct_structures((drawn, AFFINE))
     from slicerecon.case_inputs import case_from_label_map
     from slicerecon.labels import LabelMap
@@ -1084,6 +1091,44 @@ def test_a_lesion_drawn_on_every_slice_beside_organs_drawn_on_some(
     assert "missing from" not in caplog.text  # the lesion's slices are no gaps
     for value, floor in ((1, 0.85), (2, 0.8), (3, 0.7)):
         assert _iou(result.labels == value, truth == value) > floor
+
+
+def test_a_structure_is_read_as_the_whole_label_map_is_whether_chosen_or_stated(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The reading of a label map is made over all its structures, before any is chosen.
+    Chosen alone (``--label 3``), the lesion drawn on every slice read as a dense mask:
+    it was sampled and scored against itself (Dice 0.999, exit 0). ``--annotation z`` (the
+    axis it is drawn on) read the lesion's slices as planes of the organs too, and erased
+    them there: an organ 14 % small, in 3 pieces."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+
+    from slicerecon.case_inputs import case_from_label_map
+    from slicerecon.labels import LabelMap
+    from slicerecon.reconstruct import ReconstructConfig
+
+    truth, drawn = _organs_and_a_lesion_drawn_on_every_slice()
+    label_map = LabelMap.from_array(drawn, AFFINE)
+    case = case_from_label_map(label_map, ReconstructConfig(label=3))
+    assert case.annotation.source.startswith("sparse annotation")
+    assert case.labels is None  # no ground truth: nothing scored
+    auto = reconstruct_structures(label_map)
+    stated = reconstruct_structures(label_map, ReconstructConfig(annotation="z"))
+    for value in (1, 2):
+        assert np.array_equal(stated.labels == value, auto.labels == value)
+        assert _iou(stated.labels == value, truth == value) > 0.8
+    path = factory.write_seg(
+        tmp_path / "seg.dcm",
+        {1: drawn == 1, 2: drawn == 2, 3: drawn == 3},
+        AFFINE,
+        labels={1: "Organ", 2: "Other", 3: "Lesion"},
+    )
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--label", "Lesion", "-o", str(out)]) == 0
+    said = capsys.readouterr()
+    assert "read as: sparse annotation" in said.out + said.err
+    assert "quality" not in said.out
+    assert not (out / "metrics.csv").exists() or "dice" not in (out / "metrics.csv").read_text()
 
 
 def test_a_lesion_inside_an_organ_of_a_seg_says_nothing_of_the_organ_where_drawn_alone(

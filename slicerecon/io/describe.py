@@ -159,9 +159,9 @@ def _not_a_label_map(details: dict[str, Any], exc: LabelError) -> dict[str, Any]
 
 
 def describe_volume(volume: Volume) -> dict[str, Any]:
-    """Grid and foreground of a dense mask (shape, spacing, voxels, planes per axis)."""
+    """Grid and foreground of a voxel mask (shape, spacing, voxels, planes per axis)."""
     info: dict[str, Any] = {
-        "kind": "dense mask",
+        "kind": "voxel mask",  # what it holds; how run reads it is "read as"
         "shape": list(volume.shape),
         "spacing_mm": _round(volume.spacing, 6),
         "oblique": volume.is_oblique,

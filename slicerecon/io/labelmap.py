@@ -33,7 +33,6 @@ from ..labels import (
     check_label_values,
     labels_dtype,
 )
-from ..selection import choose_structure
 from . import detect_kind
 from .atomic import atomic_path
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
@@ -45,7 +44,6 @@ __all__ = [
     "LABEL_MAP_KINDS",
     "read_seg_masks",
     "read_label_map",
-    "seg_segment",
     "write_label_map",
 ]
 
@@ -212,36 +210,6 @@ def _read_seg_segments(path: Path, memory_budget_gb: float) -> LabelMap:
         colours={s.value: s.colour for s in found if s.colour is not None},
         coordinates="LPS",
     )
-
-
-def seg_segment(path: str | os.PathLike[str], selector: int | str) -> tuple[Structure, int]:
-    """The segment of a DICOM SEG a selector names (headers only).
-
-    Parameters
-    ----------
-    path : path-like
-        The SEG file.
-    selector : int or str
-        A label value (the one slicerecon's writer records, else the
-        SegmentNumber) or a segment label.
-
-    Returns
-    -------
-    structure : Structure
-        Its label value, name and colour.
-    number : int
-        Its SegmentNumber.
-
-    Raises
-    ------
-    LabelError
-        The selector names no segment (the message lists them).
-    """
-    segments = dicom_info(path)["segments"]
-    by_value = {int(s.get("value", s["number"])): s for s in segments}
-    names = {value: str(s["label"]) for value, s in by_value.items()}
-    segment = by_value[choose_structure(names, selector, kind="label", source=path)]
-    return segment_structure(segment), int(segment["number"])
 
 
 def segment_structure(segment: dict[str, Any]) -> Structure:
