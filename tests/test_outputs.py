@@ -184,6 +184,43 @@ def test_non_ascii_names_survive_every_output_of_a_run(tmp_path: Path) -> None:
     assert {str(r.ROIName) for r in rt.StructureSetROISequence} == {"Tête fémorale", "GTV"}
 
 
+def test_an_roi_in_another_frame_of_reference_is_left_out_and_the_others_written(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One ROI naming another FrameOfReferenceUID (registered from another study) was
+    placed on the CT anyway (exit 0), and seg.dcm and rtstruct.dcm of every ROI were
+    dropped with a warning blaming the whole RTSTRUCT. Now that ROI is left out in one
+    line, refused when chosen, and the others keep their DICOM outputs."""
+    import pydicom
+
+    _ct(tmp_path / "ct")
+    path = factory.write_rtstruct(
+        tmp_path / "ct" / "rs.dcm",
+        {
+            (3, "Left"): _rings(12.0, (-14.0, 0.0), 30.0),
+            (7, "GTV"): _rings(9.0, (15.0, 0.0), 27.0),
+        },
+        on_series=tmp_path / "ct",
+    )
+    ds = pydicom.dcmread(path)
+    ds.StructureSetROISequence[1].ReferencedFrameOfReferenceUID = pydicom.uid.generate_uid()
+    ds.save_as(path)
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "ct"), "-o", str(out)]) == 0
+    said = capsys.readouterr().err
+    assert "ROI 7 (GTV) lies in frame of reference" in said and "left out" in said
+    record = json.loads((out / "structures.json").read_text())
+    assert [s["name"] for s in record["structures"]] == ["Left"]
+    assert record["outputs"]["skipped"] == {}
+    rt = pydicom.dcmread(out / "rtstruct.dcm")
+    assert [str(r.ROIName) for r in rt.StructureSetROISequence] == ["Left"]
+    labels, _ = _nifti_labels(out / "labels.nii.gz")
+    assert set(np.unique(labels)) == {0, 3}
+    assert main(["run", str(tmp_path / "ct"), "--roi", "GTV", "-o", str(tmp_path / "x")]) == 2
+    said = capsys.readouterr().err.strip().splitlines()
+    assert len(said) == 1 and "choose ROIs of the set's frame" in said[0]
+
+
 @pytest.mark.parametrize(
     ("rtstruct", "reason"),
     [

@@ -207,7 +207,7 @@ def write_label_outputs(
     wanted = ["seg"] + (["rtstruct"] if rtstruct is not None else [])
     try:
         with reading(series):
-            images = _source_series(series, rtstruct, allow_irregular)
+            images = _source_series(series, rtstruct, allow_irregular, structures)
     except SlicereconError as exc:
         logger.warning("%s not written: %s", " and ".join(f"{w}.dcm" for w in wanted), exc)
         result.skipped.update(dict.fromkeys(wanted, str(exc)))
@@ -240,6 +240,7 @@ def _source_series(
     series: str | os.PathLike[str],
     rtstruct: str | os.PathLike[str] | None,
     allow_irregular: bool,
+    structures: Sequence[Structure],
 ) -> SourceSeries:
     """The image series the DICOM outputs refer to, checked against the input RTSTRUCT.
 
@@ -258,5 +259,10 @@ def _source_series(
     if rtstruct is not None:
         with reading(rtstruct):
             reference = read_dicom_header(Path(rtstruct), stop_before_pixels=True)
-            check_same_subject(reference, source, what=f"the RTSTRUCT {Path(rtstruct)}")
+            check_same_subject(
+                reference,
+                source,
+                what=f"the RTSTRUCT {Path(rtstruct)}",
+                rois=[s.value for s in structures],
+            )
     return source

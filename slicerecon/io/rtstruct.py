@@ -389,18 +389,59 @@ def read_rtstruct_structures(
         )
 
 
+def _frames_apart(ds: Any) -> tuple[str, dict[int, str]]:
+    """The frame of reference of a structure set, and its ROIs that name another one
+    (ROINumber → FrameOfReferenceUID).
+
+    The set's frame is the first of its ReferencedFrameOfReferenceSequence when an
+    ROI names it (the frame its images are checked against), else the frame most ROIs
+    name. An ROI in another frame (registered from another study) cannot be placed on
+    the set's grid without the registration, which is not read.
+    """
+    frames: dict[int, str] = {}
+    for item in ds.get("StructureSetROISequence", None) or []:
+        uid = str(item.get("ReferencedFrameOfReferenceUID", "") or "")
+        try:
+            number = int(item.ROINumber)
+        except PARSE_ERRORS:
+            continue
+        if uid:
+            frames[number] = uid
+    if not frames:
+        return "", {}
+    named = list(frames.values())
+    listed = ds.get("ReferencedFrameOfReferenceSequence", None) or []
+    first = str(listed[0].get("FrameOfReferenceUID", "") or "") if len(listed) else ""
+    frame = first if first in named else max(named, key=named.count)
+    return frame, {number: uid for number, uid in frames.items() if uid != frame}
+
+
 def _chosen_polygons(
     ds: Any, p: Path, rois: Sequence[int | str]
 ) -> tuple[list[Structure], list[list[NDArray[np.float64]]]]:
     """The chosen ROIs of a read RTSTRUCT and each one's closed planar polygons (LPS mm).
 
     An ROI without closed planar contours keeps an empty list and is reported
-    with a warning; :class:`EmptyMaskError` when no chosen ROI has any.
+    with a warning; :class:`EmptyMaskError` when no chosen ROI has any. An ROI in
+    another frame of reference than the set's (:func:`_frames_apart`) is left out
+    with a warning, or refused (:class:`InputError`) when chosen by name or number.
     """
     available = _rois(ds, p)
     if not available:
         raise EmptyMaskError(f"{p} holds no ROI (its StructureSetROISequence is empty)")
     chosen = [_choose_roi(available, r, p) for r in rois] if rois else available
+    frame, apart = _frames_apart(ds)
+    for number, name in chosen:
+        if number in apart:
+            said = (
+                f"{p}: ROI {number} ({name}) lies in frame of reference {apart[number]}, the "
+                f"structure set in {frame}: its coordinates are of another space (a "
+                "registration, which is not read)"
+            )
+            if rois:
+                raise InputError(f"{said}; choose ROIs of the set's frame")
+            logger.warning("%s; it is left out", said)
+    chosen = [(number, name) for number, name in chosen if number not in apart]
     colours = _roi_colours(ds)
     structures = [Structure(number, name, colours.get(number)) for number, name in chosen]
     polygons: list[list[NDArray[np.float64]]] = []

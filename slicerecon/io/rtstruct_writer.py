@@ -316,7 +316,9 @@ def write_rtstruct(
     series = load_source_series(source_images, allow_irregular=allow_irregular)
     ref = None if reference is None else _read_reference(reference)
     if ref is not None:
-        check_same_subject(ref, series, what=_reference_name(reference))
+        check_same_subject(
+            ref, series, what=_reference_name(reference), rois=[s.value for s in chosen]
+        )
     on_grid = layers_on_series(values, aff, series)
 
     ref_rois, ref_colours, ref_observations = (

@@ -32,7 +32,7 @@ import logging
 import os
 import re
 import unicodedata
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -256,8 +256,11 @@ def load_source_series(
     return SourceSeries(layout.affine, layout.shape, images, planes, positions, name)
 
 
-def reference_frames(ds: Any) -> tuple[set[str], set[str]]:
+def reference_frames(ds: Any, numbers: Collection[int] | None = None) -> tuple[set[str], set[str]]:
     """The FrameOfReferenceUIDs an RTSTRUCT (or any derived object) names.
+
+    ``numbers``: only the frames of these ROIs (by ROINumber) count as its ROIs'
+    (the ROIs that were read; one in another frame is left out by the reader).
 
     Returns
     -------
@@ -270,6 +273,7 @@ def reference_frames(ds: Any) -> tuple[set[str], set[str]]:
     rois = {
         str(item.get("ReferencedFrameOfReferenceUID", "") or "")
         for item in ds.get("StructureSetROISequence", None) or []
+        if numbers is None or _roi_number(item) in numbers
     }
     listed = rois | {str(ds.get("FrameOfReferenceUID", "") or "")}
     for item in ds.get("ReferencedFrameOfReferenceSequence", None) or []:
@@ -279,7 +283,16 @@ def reference_frames(ds: Any) -> tuple[set[str], set[str]]:
     return rois, listed
 
 
-def check_same_subject(reference: Any, series: SourceSeries, *, what: str) -> None:
+def _roi_number(item: Any) -> int | None:
+    try:
+        return int(item.ROINumber)
+    except PARSE_ERRORS:
+        return None
+
+
+def check_same_subject(
+    reference: Any, series: SourceSeries, *, what: str, rois: Collection[int] | None = None
+) -> None:
     """Refuse a derived object that belongs to another patient or frame than its images.
 
     A SEG or RTSTRUCT written from ``reference`` (the input RTSTRUCT) refers to
@@ -295,6 +308,8 @@ def check_same_subject(reference: Any, series: SourceSeries, *, what: str) -> No
         The images the output will refer to.
     what : str
         The input, for the message.
+    rois : collection of int, optional
+        The ROINumbers that were read (default: every ROI of ``reference``).
 
     Raises
     ------
@@ -305,7 +320,7 @@ def check_same_subject(reference: Any, series: SourceSeries, *, what: str) -> No
     """
     try:
         theirs = str(reference.get("PatientID", "") or "").strip()
-        rois, listed = reference_frames(reference)
+        frames_of_rois, listed = reference_frames(reference, rois)
     except PARSE_ERRORS as exc:
         raise FormatError(
             f"{what}: cannot read its patient and frame of reference ({exc})"
@@ -320,7 +335,7 @@ def check_same_subject(reference: Any, series: SourceSeries, *, what: str) -> No
             "the wrong patient"
         )
     frame = series.frame_of_reference_uid
-    frames = rois - {frame} if rois else (set() if frame in listed else listed)
+    frames = frames_of_rois - {frame} if frames_of_rois else (set() if frame in listed else listed)
     if frames:
         raise InputError(
             f"{what} lies in frame of reference {', '.join(sorted(frames))}, the images it "
