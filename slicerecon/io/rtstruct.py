@@ -416,6 +416,44 @@ def _frames_apart(ds: Any) -> tuple[str, dict[int, str]]:
     return frame, {number: uid for number, uid in frames.items() if uid != frame}
 
 
+def _say_orphans(ds: Any, listed: set[int], p: Path) -> None:
+    """One warning per ROIContourSequence item whose ReferencedROINumber names no ROI of
+    the StructureSetROISequence: its contours belong to no structure and are not read."""
+    for n, item in enumerate(ds.get("ROIContourSequence", None) or [], start=1):
+        try:
+            number = int(item.ReferencedROINumber)
+        except (AttributeError, *PARSE_ERRORS):
+            number = None
+        if number not in listed:
+            logger.warning(
+                "%s: ROIContourSequence item %d refers to ROI %s, which the "
+                "StructureSetROISequence does not list: its contours are not read",
+                p,
+                n,
+                "(none)" if number is None else number,
+            )
+
+
+def _label_values(numbers: list[int], p: Path, names: dict[int, str]) -> dict[int, int]:
+    """Each ROINumber's label value: itself, or for an ROINumber of 0 or below (valid
+    DICOM; 0 is a label map's background) the next value above every ROINumber, said
+    in one warning line."""
+    values = {number: number for number in numbers}
+    top = max([0, *numbers])
+    for number in sorted(n for n in numbers if n <= 0):
+        top += 1
+        values[number] = top
+        logger.warning(
+            "%s: ROI %d (%s) has label value %d in the outputs (label values are positive, 0 "
+            "is the background)",
+            p,
+            number,
+            names[number] or "no name",
+            top,
+        )
+    return values
+
+
 def _chosen_polygons(
     ds: Any, p: Path, rois: Sequence[int | str]
 ) -> tuple[list[Structure], list[list[NDArray[np.float64]]]]:
@@ -442,8 +480,11 @@ def _chosen_polygons(
                 raise InputError(f"{said}; choose ROIs of the set's frame")
             logger.warning("%s; it is left out", said)
     chosen = [(number, name) for number, name in chosen if number not in apart]
+    if not rois:
+        _say_orphans(ds, {number for number, _ in available}, p)
     colours = _roi_colours(ds)
-    structures = [Structure(number, name, colours.get(number)) for number, name in chosen]
+    values = _label_values([number for number, _ in available], p, dict(available))
+    structures = [Structure(values[number], name, colours.get(number)) for number, name in chosen]
     polygons: list[list[NDArray[np.float64]]] = []
     for number, name in chosen:
         try:

@@ -155,8 +155,12 @@ def test_label_selects_one_value_and_missing_label_is_named(tmp_path):
 
 def test_irregular_spacing_is_refused_with_a_pointer_to_allow_irregular(tmp_path):
     factory.write_series(tmp_path, _blob(), _oblique_affine(), irregular_positions=[0, 2, 4, 7, 9])
-    with pytest.raises(GeometryError, match="allow-irregular"):
+    with pytest.raises(GeometryError, match="allow-irregular") as raised:
         read_dicom_series(tmp_path)
+    # the folder, and the two files around the widest gap (a slice missing between them)
+    assert str(raised.value).startswith(f"{tmp_path}: slice spacing is irregular")
+    names = sorted(p.name for p in tmp_path.glob("*.dcm"))
+    assert f"the widest between {names[2]} and {names[3]}" in str(raised.value)
     with pytest.raises(GeometryError, match="irregular"):
         dicom_series_geometry(tmp_path)
 

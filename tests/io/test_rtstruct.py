@@ -298,3 +298,25 @@ def test_contours_that_enclose_no_area_are_named_once_by_roi_and_item(tmp_path, 
     said = [r.getMessage() for r in caplog.records if "no area" in r.getMessage()]
     assert len(said) == 1 and "ROI 1 (Org) contours 1, 6 enclose no area" in said[0]
     assert len(annotation.planes_of(1)) == 4
+
+
+def test_roi_number_zero_and_contours_of_no_roi_are_said(tmp_path, caplog):
+    """ROINumber 0 (valid DICOM) was refused after the whole reconstruction, by the
+    writer: "structures need distinct non-zero values (got [1, 0])". Contours whose
+    ReferencedROINumber names no ROI were dropped without a word."""
+    affine = np.eye(4)
+    rings = [_contour_item(_ring(8.0, [0, 0], affine, k)) for k in range(0, 12, 3)]
+    other = [_contour_item(_ring(4.0, [30, 0], affine, k)) for k in range(0, 12, 3)]
+    path = write_rtstruct(tmp_path / "rt.dcm", {(1, "Organ"): rings, (0, "GTV"): other})
+    ds = pydicom.dcmread(path)
+    ds.ROIContourSequence[1].ReferencedROINumber = 99  # the GTV's contours: of no ROI
+    ds.save_as(tmp_path / "orphan.dcm")
+    with caplog.at_level("WARNING"):
+        annotation, _ = read_rtstruct_annotation(path)
+    assert sorted(s.value for s in annotation.structures) == [1, 2]
+    assert "ROI 0 (GTV) has label value 2 in the outputs" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        annotation, missing = read_rtstruct_annotation(tmp_path / "orphan.dcm")
+    assert "ROIContourSequence item 2 refers to ROI 99" in caplog.text
+    assert [s.name for s in missing] == ["GTV"]

@@ -404,11 +404,13 @@ def _layout(slices: list[_Slice], *, allow_irregular: bool) -> _Layout:
             sources = np.arange(n, dtype=np.int64)
             own = np.ones(n, dtype=bool)
         elif not allow_irregular:
+            wide = int(np.argmax(gaps))
             raise GeometryError(
-                f"slice spacing is irregular: gaps between slices range from {gaps.min():.4g} "
-                f"to {gaps.max():.4g} mm (tolerance {tol:.3g} mm). Pass --allow-irregular "
-                "(allow_irregular=True) to place the slices on a regular grid whose step is "
-                "the smallest gap"
+                f"{ordered[wide].path.parent}: slice spacing is irregular: gaps between slices "
+                f"range from {gaps.min():.4g} to {gaps.max():.4g} mm (tolerance {tol:.3g} mm; "
+                f"the widest between {names[wide]} and {names[wide + 1]}: a slice missing?). Pass "
+                "--allow-irregular (allow_irregular=True) to place the slices on a regular grid "
+                "whose step is the smallest gap"
             )
         else:
             step_t, sources, own = _irregular_grid(t, float(gaps.min()))
