@@ -226,6 +226,27 @@ def test_an_rtstruct_beside_its_series_in_a_subfolder_is_read_on_that_series(tmp
     assert (tmp_path / "run" / "rtstruct.dcm").is_file()
 
 
+def test_a_batch_says_how_the_label_map_holds_nested_rois(tmp_path):
+    """run prints "overlaps: ... labels.nii.gz holds one structure per voxel"; a batch said
+    it nowhere, and an outer ROI's label map below its mesh was left unexplained."""
+    rings = {
+        (1, "Organ"): [
+            factory.contour_item(factory.circle(9.0, (20.0, 20.0), 2.0 * k)) for k in range(3, 10)
+        ],
+        (2, "Lesion"): [
+            factory.contour_item(factory.circle(3.0, (20.0, 20.0), 2.0 * k)) for k in range(5, 8)
+        ],
+    }
+    factory.write_rtstruct(tmp_path / "in" / "rs.dcm", rings)
+    result = run_batch(
+        tmp_path / "in", tmp_path / "out", ReconstructConfig(n_points=5000), workers=0, report=False
+    )
+    (case,) = result.cases
+    assert case.status == "ok"
+    said = [w for w in case.warnings if w.startswith("overlaps: ")]
+    assert len(said) == 1 and "one structure per voxel" in said[0]
+
+
 def _two_series_and_an_rtstruct(root: Path, subfolders: bool, *, names_series: bool = True):
     """A study of a 1 mm and a 3 mm CT series (one frame of reference) and an RTSTRUCT
     drawn on the 1 mm one: in one folder, or as thin/, thick/ and RTSTRUCT/."""
