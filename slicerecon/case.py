@@ -47,7 +47,7 @@ from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
 from .errors import InputError, OptionError
 from .evaluation import mean_metrics
-from .inputs import axis_upsample
+from .inputs import GT_NEEDS_DENSE, axis_upsample
 from .io.projections import read_projection_files
 from .labels import LabelMap, Structure, StructureMasks, check_label_values, labels_dtype
 from .metrics import evaluate
@@ -339,6 +339,13 @@ def reconstruct_case(
             f"several structures of a label map are resolved on their signed distances: "
             f"use --method sdf (got {options.method!r}), or choose one structure with "
             "--label, or --union"
+        )
+    if sparse and config.projections == "gt":
+        raise OptionError(GT_NEEDS_DENSE)
+    if not one_axis and sparse and config.projections not in ("auto", "sections"):
+        raise OptionError(
+            "silhouette files (--projections) apply to planes along one axis; planes along "
+            "several axes are their own views: leave --projections out"
         )
     if not one_axis and not views:
         raise OptionError(

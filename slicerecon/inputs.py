@@ -27,6 +27,7 @@ from .sections import AXIS_NAMES, CrossSections, Projections, Volume, axis_index
 
 __all__ = [
     "DEFAULT_SLICES",
+    "GT_NEEDS_DENSE",
     "MAX_AXIS_UPSAMPLE",
     "PROJECTION_SOURCES",
     "axis_upsample",
@@ -74,6 +75,10 @@ def refuse_plane_options(slices: int | None, every: int | None, why: str) -> Non
     """
     if slices is not None or every is not None:
         raise OptionError(f"--slices/--every apply to dense masks; {why}")
+
+
+GT_NEEDS_DENSE = "--projections gt needs a dense mask as input; use --projections sections"
+"""The refusal of ``--projections gt`` for sparse input (no dense mask to project)."""
 
 
 def prepare_inputs(
@@ -190,9 +195,7 @@ def prepare_inputs(
         source = "gt" if truth is not None else "sections"
     if source == "gt":
         if truth is None:
-            raise OptionError(
-                "--projections gt needs a dense mask as input; use --projections sections"
-            )
+            raise OptionError(GT_NEEDS_DENSE)
         proj = projections_from_volume(truth)
     else:
         proj = projections_from_sections(sections)

@@ -1469,3 +1469,20 @@ def test_a_segment_on_every_2nd_slice_in_its_own_layer_says_nothing_of_the_other
         2 * np.count_nonzero(found & kidney) / (np.count_nonzero(found) + np.count_nonzero(kidney))
     )
     assert dice > 0.9
+
+
+@pytest.mark.parametrize("planes", [{2: [5, 9, 13, 17, 21, 25]}, {2: [5, 13, 21], 0: [16]}])
+def test_projections_gt_on_an_annotation_is_refused_as_such(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], planes: dict
+) -> None:
+    """On planes along several axes, --projections gt was refused with a message about the
+    planner and method ("use --planner auto or none and --method sdf (got --planner none,
+    --method sdf)"): settings already in use, and no word of --projections."""
+    labels = _keep(_ellipsoid(), planes).astype(np.uint8)
+    nib.save(nib.Nifti1Image(labels, AFFINE), tmp_path / "drawn.nii.gz")
+    out = ["-o", str(tmp_path / "out")]
+    assert main(["run", str(tmp_path / "drawn.nii.gz"), "--projections", "gt", *out]) == 2
+    said = capsys.readouterr().err.strip().splitlines()
+    assert said[-1] == (
+        "error: --projections gt needs a dense mask as input; use --projections sections"
+    )
