@@ -296,6 +296,8 @@ def _write_case_files(
     plan["ground_truth"] = None if ground_truth is None else str(ground_truth)
     # the configuration as it ran: ``auto`` resolved to the planner the input chose
     plan["config"] = {**config.to_dict(), "planner": config.resolved_planner(sparse=not case.dense)}
+    if not case.dense:  # the planes were drawn: options that choose a dense mask's were not used
+        plan["config"].update(dict.fromkeys(("slices", "every", "axis")))
     plan["timings_s"] = {k: round(v, 4) for k, v in times.items()}
     write_json(outdir / PLAN_FILE, plan)
     files = [*written, outdir / STRUCTURES_FILE, outdir / PREVIEW_FILE, outdir / PLAN_FILE]

@@ -247,6 +247,21 @@ def test_a_batch_says_how_the_label_map_holds_nested_rois(tmp_path):
     assert len(said) == 1 and "one structure per voxel" in said[0]
 
 
+def test_plan_json_of_an_annotation_records_no_slices_it_did_not_use(tmp_path):
+    """A batch with --slices 8 recorded "slices": 8 in the plan of a sparse label map,
+    whose drawn planes were used as they are."""
+    ball = make_shape("sphere", radius=8.0)
+    drawn = np.zeros(ball.mask.shape, np.uint8)
+    drawn[:, :, 4:-4:3] = ball.mask[:, :, 4:-4:3]
+    (tmp_path / "in").mkdir()
+    nib.save(nib.Nifti1Image(drawn, ball.affine), tmp_path / "in" / "drawn.nii.gz")
+    config = ReconstructConfig(slices=8, n_points=5000)
+    result = run_batch(tmp_path / "in", tmp_path / "out", config, workers=0, report=False)
+    assert [c.status for c in result.cases] == ["ok"]
+    plan = json.loads((tmp_path / "out" / "drawn" / "plan.json").read_text())
+    assert plan["config"]["slices"] is None and plan["config"]["every"] is None
+
+
 def _two_series_and_an_rtstruct(root: Path, subfolders: bool, *, names_series: bool = True):
     """A study of a 1 mm and a 3 mm CT series (one frame of reference) and an RTSTRUCT
     drawn on the 1 mm one: in one folder, or as thin/, thick/ and RTSTRUCT/."""
