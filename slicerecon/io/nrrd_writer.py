@@ -188,8 +188,10 @@ def write_seg_nrrd(
     little = data.astype(data.dtype.newbyteorder("<"), copy=False)
     with atomic_path(target) as tmp, open(tmp, "wb") as fh:
         fh.write(("\n".join(lines) + "\n\n").encode("utf-8"))
-        # gzip level 1: label maps compress almost as well as at 9, several times faster
-        with gzip.GzipFile(fileobj=fh, mode="wb", compresslevel=1, mtime=0) as stream:
+        # gzip level 1: label maps compress almost as well as at 9, several times faster;
+        # no name or time in the gzip header (it held the temporary file's name, so two
+        # identical runs wrote different bytes)
+        with gzip.GzipFile(filename="", fileobj=fh, mode="wb", compresslevel=1, mtime=0) as stream:
             for k in range(spatial[2]):  # NRRD's first axis (the layer) varies fastest
                 stream.write(np.ascontiguousarray(little[:, :, :, k].T).tobytes())
     logger.info(

@@ -984,3 +984,16 @@ def test_layered_segmentation_keeps_nested_segments_whole(tmp_path: Path) -> Non
     assert np.array_equal(masks.masks[0], outer) and np.array_equal(masks.masks[1], inner)
     flat = read_nrrd_label_map(path)
     assert np.count_nonzero(flat.labels == 1) == np.count_nonzero(outer & ~inner)
+
+
+def test_a_written_segmentation_is_the_same_bytes_whatever_its_name(tmp_path: Path) -> None:
+    """The gzip header held the temporary file's name: two identical runs wrote
+    different labels.seg.nrrd bytes."""
+    from slicerecon.io.nrrd_writer import write_seg_nrrd
+    from slicerecon.labels import Structure
+
+    labels = np.zeros((6, 5, 4), np.uint8)
+    labels[1:4, 1:3, 1:3] = 2
+    first = write_seg_nrrd(labels, np.eye(4), [Structure(2, "Liver")], tmp_path / "a.seg.nrrd")
+    again = write_seg_nrrd(labels, np.eye(4), [Structure(2, "Liver")], tmp_path / "b.seg.nrrd")
+    assert first.read_bytes() == again.read_bytes()
