@@ -227,7 +227,20 @@ def _polygon_record(
     return record
 
 
-def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
+def _say_refused_by_run(series: dict[str, Any], folder: Path, allow_irregular: bool) -> None:
+    """One warning when ``info`` describes a series with irregular slice spacing as
+    ``--allow-irregular`` reads it, and ``run`` (without it) refuses the series."""
+    if series.get("regular_spacing") is False and not allow_irregular:
+        logger.warning(
+            "%s: slicerecon run refuses this series (irregular slice spacing) unless "
+            "--allow-irregular; it is described here as that option reads it",
+            folder,
+        )
+
+
+def _describe_rtstruct(
+    path: Path, image_dir: Path | None, allow_irregular: bool = False
+) -> dict[str, Any]:
 
     details: dict[str, Any] = {}
     rois = []
@@ -242,6 +255,7 @@ def _describe_rtstruct(path: Path, image_dir: Path | None) -> dict[str, Any]:
             "path": str(image_dir),
             **dicom_info(image_dir, allow_irregular=True),
         }
+        _say_refused_by_run(details["image_series"], image_dir, allow_irregular)
     return details
 
 
@@ -355,6 +369,7 @@ def describe_input(
         elif kind.kind == "dicom-series":
             # described on the grid --allow-irregular would give: info never refuses
             details["dicom"] = dicom_info(kind.path, allow_irregular=True)
+            _say_refused_by_run(details["dicom"], kind.path, allow_irregular)
             values, affine = read_dicom_series_values(
                 kind.path, allow_irregular=True, memory_budget_gb=memory_budget_gb
             )
@@ -378,7 +393,7 @@ def describe_input(
                 segments.append({**segment, **record})
             details["segments"] = segments
         elif kind.kind == "rtstruct":
-            details.update(_describe_rtstruct(kind.path, kind.image_dir))
+            details.update(_describe_rtstruct(kind.path, kind.image_dir, allow_irregular))
         elif kind.kind == "contours":
             details.update(_describe_contours(kind.path))
         elif kind.kind == "mesh":

@@ -318,3 +318,17 @@ def test_info_and_dispatcher(tmp_path):
 
     volume = load_input(tmp_path / "a")
     np.testing.assert_array_equal(volume.mask, mask)
+
+
+def test_info_says_run_refuses_an_irregular_series(tmp_path, capsys):
+    """info described a series with a slice missing on the grid --allow-irregular gives,
+    with a warning saying slices were "placed on a regular grid", and exit 0; run
+    refuses the same series. info now says so."""
+    from slicerecon.cli import main
+
+    factory.write_series(tmp_path, _blob(), _oblique_affine(), irregular_positions=[0, 2, 4, 7, 9])
+    assert main(["info", str(tmp_path)]) == 0
+    said = capsys.readouterr().err
+    assert "slicerecon run refuses this series (irregular slice spacing)" in said
+    assert main(["info", str(tmp_path), "--allow-irregular"]) == 0
+    assert "run refuses this series" not in capsys.readouterr().err
