@@ -351,7 +351,8 @@ def case_from_label_map(
     whole = label_map.union()
     if whole.is_empty:
         raise EmptyMaskError(f"{kind.path} holds no foreground")
-    reading, every_slice = _read_structures(label_map, whole.crop(pad=3), config, kind.path)
+    whole_box = whole.crop(pad=3)
+    reading, every_slice = _read_structures(label_map, whole_box, config, kind.path)
     if config.union:
         if every_slice:
             raise OptionError(
@@ -368,7 +369,7 @@ def case_from_label_map(
     crop = union.crop(pad=3)
     check_grid(crop.shape, what="the reconstruction grid", memory_budget_gb=config.max_memory_gb)
     if config.union or config.selectors:
-        reading = reading.within(_index_of(whole.crop(pad=3).affine, crop.affine), crop.shape)
+        reading = reading.within(_index_of(whole_box.affine, crop.affine), crop.shape)
         every_slice &= frozenset(s.value for s in label_map.structures)
     if not reading.dense:
         _check_sparse_options(reading, config, crop.spacing)
