@@ -17,14 +17,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .annotated_planes import (
+    NESTED_SHARE,
     check_drawings_meet,
     covering_grid,
     merge_repeated_planes,
     warn_coinciding,
+    warn_parallel_apart,
 )
 from .annotation import AnnotatedPlane, Annotation, PlanePose
 from .case_input import CaseInput
-from .errors import OptionError
+from .errors import InputError, OptionError
+from .io import DICOM_KINDS, frame_of_reference
 from .io.labelmap import LABEL_MAP_KINDS
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.outputs import dicom_image_series
@@ -84,6 +87,7 @@ def combine_cases(
                 "of one study; reconstruct a dense mask on its own, or, if it is drawn on "
                 "every slice it crosses, state the axis drawn on (--annotation z)"
             )
+    _check_frames(cases)
     # the reference first, the others by file name: the same result in any order
     given = list(cases)
     cases = sorted(given, key=_reference_rank)
@@ -188,16 +192,22 @@ def combine_cases(
     # on another lattice than the reference's, keeps that input's grid
     if exclusive:
         _say_coarser(grids, drawers, cases, structures)
-    grids = {
-        value: grid
-        for value, grid in grids.items()
-        if not exclusive
-        and len(drawers[value]) == 1
-        and not _same_lattice(grid[0], first.annotation.affine)
-    }
+    own_grids = grids
+
+    def kept(exclusive: bool) -> dict[int, tuple[NDArray[np.float64], tuple[int, int, int]]]:
+        return {
+            value: grid
+            for value, grid in own_grids.items()
+            if not exclusive
+            and len(drawers[value]) == 1
+            and not _same_lattice(grid[0], first.annotation.affine)
+        }
+
+    grids = kept(exclusive)
     origins = [str(c.input_path) for c in cases for _ in c.annotation.planes]
     labels = {s.value: s.label for s in structures}
     check_drawings_meet(planes, origins, labels)
+    warn_parallel_apart(planes, origins, labels)
     drawer = [n for n, c in enumerate(cases) for _ in c.annotation.planes]
     warn_coinciding(planes, drawer, [str(c.input_path) for c in cases], labels)
     affine = first.annotation.affine
@@ -218,6 +228,17 @@ def combine_cases(
         gap_ends=frozenset(v for v in gap_ends if len(drawers[v]) == 1),
     )
     annotation = merge_repeated_planes(annotation, origins, first.crop_lo + lo)
+    nested = _drawn_inside(annotation) if exclusive else []
+    if nested:
+        # label maps are partitions one by one; together they may hold a lesion drawn inside
+        # its organ (two SEGs): it was cut out of the organ without a word
+        logger.warning(
+            "%s drawn inside %s on a plane both inputs draw: the inputs together are "
+            "structures that may overlap, each reconstructed whole",
+            ", ".join(labels[inner] for inner, _ in nested[:4]),
+            ", ".join(dict.fromkeys(labels[outer] for _, outer in nested[:4])),
+        )
+        annotation = replace(annotation, exclusive=False, grids=kept(False))
     names = ", ".join(str(c.input_path) for c in given)
     annotation = replace(
         annotation,
@@ -242,6 +263,44 @@ def combine_cases(
         output_shape=output_shape,
         crop_lo=first.crop_lo + lo - start,
     )
+
+
+def _check_frames(cases: Sequence[CaseInput]) -> None:
+    """Refuse DICOM inputs of different frames of reference (their coordinates are of
+    different spaces: combined, a sagittal SEG of another study was placed in this one's).
+
+    Raises
+    ------
+    InputError
+        Two DICOM inputs name different FrameOfReferenceUIDs.
+    """
+    frames = {
+        case.input_path: frame_of_reference(Path(case.kind.path), rois=True)
+        for case in cases
+        if case.kind.kind in DICOM_KINDS
+    }
+    named = {path: uid for path, uid in frames.items() if uid}
+    if len(set(named.values())) > 1:
+        listed = "; ".join(f"{path}: {uid}" for path, uid in named.items())
+        raise InputError(
+            f"the inputs lie in different frames of reference ({listed}): their coordinates "
+            "do not match; combine inputs of one study and frame (register them first)"
+        )
+
+
+def _drawn_inside(annotation: Annotation) -> list[tuple[int, int]]:
+    """Structures (inner, outer) of which, on a plane, one's drawing lies at least
+    :data:`~slicerecon.annotated_planes.NESTED_SHARE` inside the other's: what one
+    partition cannot hold, and several inputs together may draw."""
+    found: dict[tuple[int, int], None] = {}
+    for plane in annotation.planes:
+        drawn = {v: m for v, m in plane.masks.items() if m.any()}
+        for inner, mask in drawn.items():
+            count = int(np.count_nonzero(mask))
+            for outer, other in drawn.items():
+                if outer != inner and np.count_nonzero(mask & other) >= NESTED_SHARE * count:
+                    found[(inner, outer)] = None
+    return list(found)
 
 
 def _say_coarser(

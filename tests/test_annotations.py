@@ -1486,3 +1486,84 @@ def test_projections_gt_on_an_annotation_is_refused_as_such(
     assert said[-1] == (
         "error: --projections gt needs a dense mask as input; use --projections sections"
     )
+
+
+def _organ_and_lesion_files(tmp_path: Path, lesion_planes: list[int]) -> tuple[np.ndarray, ...]:
+    """``organ.nii.gz``: the ellipsoid on every 4th axial slice; ``lesion.nii.gz``: a ball
+    inside it on ``lesion_planes`` (a second annotator's file). (organ, lesion) truths."""
+    organ = _ellipsoid()
+    x, y, z = np.meshgrid(
+        *[np.arange(n) * s for n, s in zip(organ.shape, SPACING, strict=True)], indexing="ij"
+    )
+    lesion = (x - 26) ** 2 + (y - 22) ** 2 + (z - 30) ** 2 < 6**2
+    organ_drawn = _keep(organ, {2: list(range(3, 28, 4))}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(organ_drawn, AFFINE), tmp_path / "organ.nii.gz")
+    lesion_drawn = _keep(lesion, {2: lesion_planes}).astype(np.uint8) * 2
+    nib.save(nib.Nifti1Image(lesion_drawn, AFFINE), tmp_path / "lesion.nii.gz")
+    return organ, lesion
+
+
+def test_a_lesion_file_drawn_inside_an_organ_file_on_its_planes_keeps_the_organ_whole(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two label maps (each a partition) together drew a lesion inside its organ on the
+    organ's own slice: resolved as one partition, the organ lost voxels around the
+    lesion without a word. Now they are structures that may overlap, said in one line."""
+    organ, lesion = _organ_and_lesion_files(tmp_path, [13, 15, 17])
+    files = [str(tmp_path / "organ.nii.gz"), str(tmp_path / "lesion.nii.gz")]
+    assert main(["run", files[0], "-o", str(tmp_path / "alone"), "-q"]) == 0
+    assert main(["run", *files, "-o", str(tmp_path / "both")]) == 0
+    said = capsys.readouterr()
+    assert "drawn inside 1 on a plane both inputs draw" in said.err
+    assert "overlaps:" in said.out
+    whole = _volume(tmp_path / "alone" / "mesh.stl")
+    assert _volume(tmp_path / "both" / "meshes" / "1.stl") == pytest.approx(whole, rel=0.01)
+    record = json.loads((tmp_path / "both" / "structures.json").read_text())
+    assert record["overlap"]["exclusive"] is False
+
+
+def test_two_files_misregistered_on_interleaved_planes_are_said(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two files of one organ on interleaved axial slices, one shifted 20 mm: a wide,
+    lumpy organ and no word (parallel planes never meet). Registered, nothing is said."""
+    organ = _ellipsoid()
+    first = _keep(organ, {2: list(range(3, 28, 6))}).astype(np.uint8)
+    second = _keep(organ, {2: list(range(6, 28, 6))}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(first, AFFINE), tmp_path / "a.nii.gz")
+    nib.save(nib.Nifti1Image(second, AFFINE), tmp_path / "b.nii.gz")
+    shifted = AFFINE.copy()
+    shifted[0, 3] = 20.0
+    nib.save(nib.Nifti1Image(second, shifted), tmp_path / "shifted.nii.gz")
+    for name, apart in (("b", False), ("shifted", True)):
+        files = [str(tmp_path / "a.nii.gz"), str(tmp_path / f"{name}.nii.gz")]
+        assert main(["run", *files, "-o", str(tmp_path / name)]) == 0
+        said = capsys.readouterr().err
+        assert ("lie 20 mm apart in their plane" in said) is apart, said
+
+
+def test_dicom_inputs_of_different_frames_of_reference_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two SEGs of different FrameOfReferenceUIDs (another study) were combined, and
+    seg.dcm referred to the first study's images."""
+    import dicom_factory as factory  # tests/io, on pytest's pythonpath
+    from pydicom.uid import generate_uid
+
+    organ = _ellipsoid()
+    paths = []
+    for name, planes in (("axial", {2: list(range(3, 28, 4))}), ("sagittal", {0: [20, 28]})):
+        paths.append(
+            factory.write_seg(
+                tmp_path / f"{name}.dcm",
+                {1: _keep(organ, planes)},
+                AFFINE,
+                labels={1: "Organ"},
+                frame_of_reference_uid=generate_uid(),
+            )
+        )
+    out = tmp_path / "out"
+    assert main(["run", *map(str, paths), "-o", str(out)]) == 2
+    said = [x for x in capsys.readouterr().err.splitlines() if not x.startswith("progress:")]
+    assert len(said) == 1 and "lie in different frames of reference" in said[0]
+    assert not out.exists()

@@ -37,6 +37,7 @@ __all__ = [
     "MESH_SUFFIXES",
     "NIFTI_SUFFIXES",
     "detect_kind",
+    "frame_of_reference",
     "kind_of_name",
     "load_ground_truth",
     "load_input",
@@ -202,30 +203,37 @@ def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
     return named
 
 
+def frame_of_reference(path: Path, *, rois: bool = False) -> str:
+    """The FrameOfReferenceUID a DICOM object or series names ("" when it names none or
+    cannot be read): an image series' (a folder: its first image), a SEG's, an
+    RTSTRUCT's in its references, or (``rois``) its first ROI's."""
+    if path.is_dir():
+        first = next(_images_in(path), None)
+        if first is None:
+            return ""
+        path = first
+    ds = _peek(path)
+    if ds is None:
+        return ""
+    uid = str(ds.get("FrameOfReferenceUID", "") or "")
+    # an RTSTRUCT names it in its references (optional), and in each ROI (``rois``)
+    for sequence, keyword in (
+        ("ReferencedFrameOfReferenceSequence", "FrameOfReferenceUID"),
+        ("StructureSetROISequence", "ReferencedFrameOfReferenceUID"),
+    )[: 2 if rois else 1]:
+        if not uid and sequence in ds:
+            items = ds[sequence].value
+            uid = str(items[0].get(keyword, "") or "") if len(items) else ""
+    return uid
+
+
 def same_frame(drawing: Path, series: Path, *, known: bool = False, rois: bool = False) -> bool:
     """Whether an RTSTRUCT or SEG and the first image of a series folder name one
     FrameOfReferenceUID (True when either does not say: nothing tells them apart,
     unless ``known``: then both must name it). ``rois``: an RTSTRUCT without its
     references names it by its ROIs' ReferencedFrameOfReferenceUID (to tell folders
     side by side apart, not to refuse a series)."""
-
-    def frame(path: Path) -> str:
-        ds = _peek(path)
-        if ds is None:
-            return ""
-        uid = str(ds.get("FrameOfReferenceUID", "") or "")
-        # an RTSTRUCT names it in its references (optional), and in each ROI (``rois``)
-        for sequence, keyword in (
-            ("ReferencedFrameOfReferenceSequence", "FrameOfReferenceUID"),
-            ("StructureSetROISequence", "ReferencedFrameOfReferenceUID"),
-        )[: 2 if rois else 1]:
-            if not uid and sequence in ds:
-                items = ds[sequence].value
-                uid = str(items[0].get(keyword, "") or "") if len(items) else ""
-        return uid
-
-    first = next(_images_in(series), None)
-    own, theirs = frame(drawing), "" if first is None else frame(first)
+    own, theirs = frame_of_reference(drawing, rois=rois), frame_of_reference(series, rois=rois)
     if known:
         return bool(own) and own == theirs
     return not own or not theirs or own == theirs
