@@ -28,6 +28,7 @@ from .annotation import AnnotatedPlane, Annotation, PlanePose
 from .case_input import CaseInput
 from .errors import InputError, OptionError
 from .io import DICOM_KINDS, frame_of_reference
+from .io.contours import contour_file_frame
 from .io.labelmap import LABEL_MAP_KINDS
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.outputs import dicom_image_series
@@ -171,6 +172,8 @@ def combine_cases(
         # world mm of the first input's frame: LPS (DICOM, Slicer) and RAS (NIfTI) differ
         # by the sign of x and y
         flip = case.annotation.coordinates != first.annotation.coordinates
+        if flip:
+            _say_frame_taken(case, first)
         own_affine = LPS_TO_RAS @ case.annotation.affine if flip else case.annotation.affine
         for value in remap.values():
             grids[value] = (own_affine, case.annotation.grid_shape)
@@ -263,6 +266,20 @@ def combine_cases(
         output_shape=output_shape,
         crop_lo=first.crop_lo + lo - start,
     )
+
+
+def _say_frame_taken(case: CaseInput, first: CaseInput) -> None:
+    """One warning when a contour file states no frame and is turned into another input's
+    (an LPS contour file beside an LPS .seg.nrrd came out mirrored, without a word)."""
+    for one, other in ((case, first), (first, case)):
+        if one.kind.kind == "contours" and contour_file_frame(one.kind.path) is None:
+            logger.warning(
+                '%s states no "coordinates": its points are read as RAS, and %s is in %s; '
+                'if they are DICOM patient coordinates, add "coordinates": "LPS" to it',
+                one.input_path,
+                other.input_path,
+                other.annotation.coordinates,
+            )
 
 
 def _check_frames(cases: Sequence[CaseInput]) -> None:

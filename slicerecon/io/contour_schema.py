@@ -64,6 +64,8 @@ CONTOUR_VERSION = 1
 """The JSON format version this module writes (one structure on parallel planes)."""
 CONTOUR_VERSIONS = (1, 2)
 """The JSON format versions this module reads."""
+FRAMES = ("RAS", "LPS")
+"""Values of a JSON contour file's ``"coordinates"``: the world frame of its points."""
 CSV_COLUMNS = ("plane", "polygon", "x", "y", "z")
 """Columns a CSV contour file must have (in any order)."""
 
@@ -81,6 +83,7 @@ class Parsed:
     version: int = 1
     structures: list[Structure] = field(default_factory=list)
     owners: list[int] = field(default_factory=list)  # each polygon's structure value
+    coordinates: str | None = None  # "RAS" or "LPS" when the file states it
 
     def structure_polygons(self) -> list[list[NDArray[np.float64]]]:
         """Each structure's polygons, in the order of :attr:`structures` (possibly none)."""
@@ -254,6 +257,10 @@ class ContourFile(_JsonObject):
     """The string ``"mm"``."""
     label: Annotated[str | None, _not_null("a string")] = None
     """A name for the structure (informative)."""
+    coordinates: Annotated[
+        Any, _not_null('"RAS" or "LPS"'), Field(json_schema_extra={"enum": list(FRAMES)})
+    ] = None
+    """The points' world frame: ``"RAS"`` (NIfTI's; the default) or ``"LPS"`` (DICOM's)."""
     normal: Annotated[Normal | None, _not_null("[nx, ny, nz]")] = None
     """The plane normal, any non-zero length."""
     grid: Annotated[ContourGrid | None, _not_null("an object")] = None
@@ -278,6 +285,13 @@ class ContourFile(_JsonObject):
                 f"version {value} is not supported; this slicerecon reads versions "
                 f"{', '.join(str(v) for v in CONTOUR_VERSIONS)}"
             )
+        return value
+
+    @field_validator("coordinates", mode="after")
+    @classmethod
+    def _coordinates(cls, value: Any) -> Any:
+        if value not in FRAMES:
+            raise _refuse(f'must be "RAS" or "LPS" (got {value!r})')
         return value
 
     @field_validator("units", mode="after")
@@ -349,7 +363,9 @@ def parse_json(text: str, path: Path) -> Parsed:
         raise _schema_error(exc.errors()[0], path) from None
 
     # the rules that join several fields: positions against polygons, empty planes
-    parsed = Parsed(n_planes=len(model.planes), version=model.version)
+    parsed = Parsed(
+        n_planes=len(model.planes), version=model.version, coordinates=model.coordinates
+    )
     if model.version == 1:
         newer = next(
             (

@@ -70,6 +70,7 @@ from .contour_schema import (
     CONTOUR_VERSION,
     CONTOUR_VERSIONS,
     CSV_COLUMNS,
+    FRAMES,
     ContourFile,
     ContourGrid,
     ContourPlane,
@@ -97,6 +98,7 @@ __all__ = [
     "ContourFile",
     "ContourGrid",
     "ContourPlane",
+    "contour_file_frame",
     "contour_file_grid",
     "contour_structures",
     "read_contour_annotation",
@@ -269,6 +271,19 @@ def read_contour_annotation(
         return _read_contour_annotation(Path(path), pixel_spacing, memory_budget_gb)
 
 
+def contour_file_frame(path: str | os.PathLike[str]) -> str | None:
+    """The world frame a contour file states for its points (``"coordinates"``: ``"RAS"``
+    or ``"LPS"``), or None when it states none (then they are read as RAS).
+
+    Raises
+    ------
+    InputError, FormatError
+        As :func:`read_contours`, for a file that cannot be read.
+    """
+    with reading(path):
+        return _read_parsed(Path(path)).coordinates
+
+
 def contour_file_grid(
     path: str | os.PathLike[str],
 ) -> tuple[NDArray[np.float64], tuple[int, int, int]] | None:
@@ -291,6 +306,7 @@ def _read_contour_annotation(
     for polygon, name in zip(parsed.polygons, parsed.names, strict=True):
         check_coordinates(polygon, what=f"{p}: {name}")
     reference = parsed.grid if pixel_spacing is None else None
+    frame = parsed.coordinates or "RAS"
     simple = len(parsed.structures) == 1 and orientation_count(parsed.polygons) <= 1
     if simple or parsed.version == 1:  # version 1: one structure on parallel planes
         try:
@@ -302,7 +318,7 @@ def _read_contour_annotation(
                 f"{exc} (planes of several orientations: write the file as version 2)"
             ) from exc
         return annotation_from_sections(
-            parsed.structures, [sections], shared=True, coordinates="RAS", exclusive=True
+            parsed.structures, [sections], shared=True, coordinates=frame, exclusive=True
         )
     try:
         return annotation_from_polygons(
@@ -310,7 +326,7 @@ def _read_contour_annotation(
             parsed.structure_polygons(),
             reference=reference,
             pixel_spacing=pixel_spacing,
-            coordinates="RAS",
+            coordinates=frame,
             exclusive=False,
             memory_budget_gb=memory_budget_gb,
         )
@@ -449,7 +465,11 @@ def _check_sections(sections: CrossSections) -> None:
 
 
 def write_contours_json(
-    sections: CrossSections, path: str | os.PathLike[str], *, label: str | None = None
+    sections: CrossSections,
+    path: str | os.PathLike[str],
+    *,
+    label: str | None = None,
+    coordinates: str | None = None,
 ) -> Path:
     """Write the boundary polygons of cross-sections as a JSON contour file.
 
@@ -465,15 +485,25 @@ def write_contours_json(
         Output file; written atomically (temporary file, then rename).
     label : str, optional
         Stored as ``"label"`` (e.g. the structure's name).
+    coordinates : {"RAS", "LPS"}, optional
+        Stored as ``"coordinates"``: the world frame of ``sections`` (``"LPS"`` for
+        sections of DICOM data; without it the file is read as RAS).
 
     Returns
     -------
     Path
         ``path``.
+
+    Raises
+    ------
+    OptionError
+        ``label`` is not a string, or ``coordinates`` neither "RAS" nor "LPS".
     """
     _check_sections(sections)
     if label is not None and not isinstance(label, str):
         raise OptionError(f"label must be a string (got {type(label).__name__})")
+    if coordinates is not None and coordinates not in FRAMES:
+        raise OptionError(f'coordinates must be "RAS" or "LPS" (got {coordinates!r})')
     dump = json.dumps
     lines = [
         "{",
@@ -483,6 +513,8 @@ def write_contours_json(
     ]
     if label is not None:
         lines.append(f'  "label": {dump(label)},')
+    if coordinates is not None:
+        lines.append(f'  "coordinates": {dump(coordinates)},')
     lines.append(f'  "normal": {dump(sections.normal.tolist())},')
     lines.append(
         f'  "grid": {{"affine": {dump(sections.affine.tolist())}, '

@@ -188,6 +188,11 @@ def test_non_parallel_planes_raise_geometry_error(tmp_path):
         (_json_doc([]) | {"version": 3}, "version: version 3 is not supported"),
         (_json_doc([]) | {"units": "cm"}, 'units: must be "mm"'),
         (_json_doc([]) | {"colour": "red"}, "unknown key 'colour'"),
+        (_json_doc([]) | {"coordinates": "XYZ"}, 'coordinates: must be "RAS" or "LPS"'),
+        (
+            _json_doc([]) | {"coordinates": None},
+            r'coordinates: expected "RAS" or "LPS" \(got null\)',
+        ),
         (_json_doc({"polygons": []}), "planes: expected a list of planes"),
         (_json_doc([{"polygons": [TRIANGLE]}, {"poly": []}]), r"planes\[1\]: unknown key 'poly'"),
         (_json_doc([{"position": 1.0}]), r"planes\[0\]: missing key 'polygons'"),
