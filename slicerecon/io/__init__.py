@@ -160,7 +160,11 @@ def _images_in(folder: Path) -> Iterator[Path]:
     (a README, a .DS_Store), DICOMDIRs and non-image objects are passed over."""
     from .dicom.sniff import dicom_role
 
-    for f in sorted(folder.iterdir()):
+    try:
+        files = sorted(folder.iterdir())
+    except FileNotFoundError:  # removed while its siblings were looked through
+        return
+    for f in files:
         if f.is_file() and not f.name.startswith(".") and dicom_role(f) == "image":
             yield f
 
