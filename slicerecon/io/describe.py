@@ -97,30 +97,32 @@ def describe_label_map(
         reading = detect_planes(data[union] != 0)
         first = np.array([s.start for s in union])
     out: list[dict[str, Any]] = []
+    # one structure at a time on the box of all: a whole 512 x 512 x 200 volume per
+    # structure and plane made info take 15 minutes on 20 sparse structures
+    inside = data[union] if present.size else data
     for value, count in zip(present.tolist(), counts.tolist(), strict=True):
-        mask = data == value
+        mask = inside == value
         box = ndimage.find_objects(mask.astype(np.uint8))[0]
         assert box is not None
-        lo = np.array([s.start for s in box])
-        hi = np.array([s.stop for s in box])
-        other = tuple(a for a in range(3) if a != axis)
+        lo = np.array([s.start for s in box]) + first
+        hi = np.array([s.stop for s in box]) + first
+        # the slices holding it along each axis, on the box of all
+        held = [mask.any(axis=tuple(a for a in range(3) if a != along)) for along in range(3)]
         planes: dict[str, Any]
         if reading is None or reading.dense:
-            held = np.flatnonzero(mask[box].any(axis=other)) + lo[axis]
+            slices = np.flatnonzero(held[axis]) + first[axis]
             planes = {
                 "axis": AXIS_NAMES[axis],
-                "count": int(held.size),
-                "first": int(held[0]),
-                "last": int(held[-1]),
+                "count": int(slices.size),
+                "first": int(slices[0]),
+                "last": int(slices[-1]),
             }
         else:  # a sparse annotation: the planes it is drawn on, along each axis
             planes = {"drawn": {}}
             for along, indices in sorted(reading.planes.items(), key=lambda item: -item[0]):
-                drawn = [
-                    k for k in indices if np.take(mask, int(k) + first[along], axis=along).any()
-                ]
+                drawn = int(np.count_nonzero(held[along][indices]))
                 if drawn:
-                    planes["drawn"][AXIS_NAMES[along]] = len(drawn)
+                    planes["drawn"][AXIS_NAMES[along]] = drawn
         out.append(
             {
                 "value": int(value),
