@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -395,12 +396,23 @@ class Annotation:
         """The grid axis a plane is perpendicular to, or None (an oblique plane)."""
         return self._axis_of(pose)
 
-    def _axis_of(self, pose: PlanePose) -> int | None:
+    @cached_property
+    def _slice_normals(self) -> NDArray[np.float64]:
+        """The unit normals of the grid's slices, one row per axis, shape (3, 3)."""
+        rows = []
         for axis in range(3):
             a, b = in_plane_axes(axis)
-            grid_normal = np.cross(self.affine[:3, a], self.affine[:3, b])
-            grid_normal /= np.linalg.norm(grid_normal)
-            if float(np.linalg.norm(np.cross(grid_normal, pose.normal))) < ANGLE_TOLERANCE:
+            normal = np.cross(self.affine[:3, a], self.affine[:3, b])
+            rows.append(normal / np.linalg.norm(normal))
+        return np.array(rows)
+
+    def _axis_of(self, pose: PlanePose) -> int | None:
+        # sine of the angle between the normals (asked thousands of times per case: the
+        # cross products took 3 s of 23 for 20 structures)
+        cosines = np.abs(self._slice_normals @ pose.normal)
+        sines = np.sqrt(np.clip(1.0 - cosines**2, 0.0, None))
+        for axis in range(3):
+            if sines[axis] < ANGLE_TOLERANCE:
                 return axis
         return None
 
