@@ -1599,3 +1599,21 @@ def test_a_contour_file_in_lps_beside_an_lps_segmentation_states_its_frame(
     one_file = reconstruct_structures((drawn, AFFINE)).labels > 0
     placed = np.asanyarray(nib.load(tmp_path / "a" / "labels.nii.gz").dataobj) > 0
     assert placed.shape == one_file.shape and _iou(placed, one_file) > 0.95
+
+
+def test_other_views_drawn_beyond_the_main_views_ends_are_said(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Axial planes that stop short of the structure's ends, with a sagittal view that
+    reaches them: beyond the axial planes only the sagittal planes show the structure,
+    and it came out as thin fins on them, without a word. Axial planes reaching the
+    ends say nothing."""
+    _axial_and_sagittal_files(tmp_path)
+    short = _keep(_ellipsoid(), {2: [9, 13, 17, 21]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(short, AFFINE), tmp_path / "short.nii.gz")
+    sagittal = str(tmp_path / "sagittal.json")
+    for axial, said in (("axial", False), ("short", True)):
+        files = [str(tmp_path / f"{axial}.nii.gz"), sagittal]
+        assert main(["run", *files, "-o", str(tmp_path / axial)]) == 0
+        err = capsys.readouterr().err
+        assert ("is drawn on other views up to" in err) is said, err

@@ -239,6 +239,10 @@ def views_field(
         else None
         for n, view in enumerate(oblique)
     ]
+    if complete(main) and len(counts) > 1:
+        _say_drawn_beyond(
+            annotation, views, oblique, main, reach, oblique_reach, float(spacing.min()), value
+        )
     pad = np.full(3, CROP_PAD, dtype=np.int64)
     for axis, extent in reach.items():
         if extent is not None:
@@ -312,6 +316,82 @@ def views_field(
     to_index[along, 3] = lo[along] - 0.5 + (0.5 - 1) / upsample
     affine = annotation.affine @ to_index
     return SdfField(padded, affine, (int(lo[0]), int(lo[1]), int(lo[2])), upsample, along)
+
+
+def _say_drawn_beyond(
+    annotation: Annotation,
+    views: dict[int, list[tuple[float, NDArray]]],
+    oblique: list[_Oblique],
+    main: int,
+    reach: dict[int, float | None],
+    oblique_reach: list[float | None],
+    voxel: float,
+    value: int,
+) -> None:
+    """One warning when the other views draw a structure more than half the main view's
+    gap (at least a voxel, ``voxel`` mm) beyond its reach along its normal: there only
+    the other views' corrections near their own planes say it is present, and it comes
+    out as slabs on those planes (a liver drawn on 4 axial contours that stop 8 mm short
+    of its top, with sagittal ones reaching the top, grew thin fins there: Dice 0.92
+    against 0.97 from either file alone)."""
+    affine = annotation.affine
+    if main >= 0:
+        a, b = in_plane_axes(main)
+        normal = np.cross(affine[:3, a], affine[:3, b])
+        normal /= np.linalg.norm(normal)
+        reach_mm = (reach[main] or 0.0) * abs(float(affine[:3, main] @ normal))
+    else:
+        normal = oblique[-1 - main].normal
+        reach_mm = oblique_reach[-1 - main] or 0.0
+
+    def extent(corners: NDArray[np.float64]) -> tuple[float, float]:
+        along = corners @ normal
+        return float(along.min()), float(along.max())
+
+    spans: dict[int, list[tuple[float, float]]] = {}
+    for axis, planes in views.items():
+        a, b = in_plane_axes(axis)
+        for index, mask in planes:
+            if mask.any():
+                rows = np.flatnonzero(mask.any(axis=1))
+                cols = np.flatnonzero(mask.any(axis=0))
+                corners = np.zeros((4, 3))
+                corners[:, axis] = index
+                corners[:, a] = np.repeat([rows[0] - 0.5, rows[-1] + 0.5], 2)
+                corners[:, b] = np.tile([cols[0] - 0.5, cols[-1] + 0.5], 2)
+                world = corners @ affine[:3, :3].T + affine[:3, 3]
+                spans.setdefault(axis, []).append(extent(world))
+    for n, view in enumerate(oblique):
+        for _, pose, mask in view.planes:
+            if mask.any():
+                pixels = np.argwhere(mask)
+                rows, cols = pixels[:, 0], pixels[:, 1]
+                corners = np.array(
+                    [[r, c] for r in (rows.min(), rows.max()) for c in (cols.min(), cols.max())],
+                    dtype=np.float64,
+                )
+                spans.setdefault(-1 - n, []).append(extent(pose.to_world(corners)))
+    if main not in spans:
+        return
+    first = min(lo for lo, _ in spans[main]) - reach_mm
+    last = max(hi for _, hi in spans[main]) + reach_mm
+    others = [span for key, listed in spans.items() if key != main for span in listed]
+    below = max([first - lo for lo, _ in others], default=0.0)
+    above = max([hi - last for _, hi in others], default=0.0)
+    # the structure's true end lies somewhere in the gap past the last plane: said when
+    # the other views show it more than half a gap of the main view (or a voxel) beyond
+    positions = sorted({round(lo, 3) for lo, _ in spans[main]})
+    gap = float(np.median(np.diff(positions))) if len(positions) > 1 else 0.0
+    if max(below, above) > max(voxel, gap / 2) + 1e-6:
+        logger.warning(
+            "structure %s is drawn on other views up to %.1f mm beyond its %s plane of the "
+            "main view (%d planes): there only those views' planes show it, and it comes out "
+            "as slabs on them; draw its end on a plane of the main view",
+            value,
+            max(below, above),
+            "last" if above >= below else "first",
+            len(spans[main]),
+        )
 
 
 def _end_reach(positions: list[float], voxel: float, own_gap: bool) -> float:
