@@ -96,7 +96,7 @@ def load_case(
         a sparse input.
     """
     if not isinstance(input_path, str | os.PathLike):
-        paths = list(input_path)
+        paths = _once(list(input_path))
         if len(paths) == 1:
             return load_case(paths[0], config, ground_truth=ground_truth, image_dir=image_dir)
         drawn = [detect_kind(path).kind in CONTOUR_KINDS for path in paths]
@@ -137,6 +137,19 @@ def load_case(
         case = _with_ground_truth(case, ground_truth, config)
     logger.info("%s: %s", kind.path, case.annotation.source)
     return case
+
+
+def _once(paths: list[Any]) -> list[Any]:
+    """The inputs, each file once: one given twice (or its folder beside it) is read once,
+    said in one warning line (its planes were merged with themselves, without a word)."""
+    seen: dict[Path, Any] = {}
+    for path in paths:
+        key = Path(detect_kind(path).path).resolve()
+        if key in seen:
+            logger.warning("%s and %s are one input (%s): it is read once", seen[key], path, key)
+            continue
+        seen[key] = path
+    return list(seen.values())
 
 
 def _say_stated(

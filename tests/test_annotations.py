@@ -1617,3 +1617,15 @@ def test_other_views_drawn_beyond_the_main_views_ends_are_said(
         assert main(["run", *files, "-o", str(tmp_path / axial)]) == 0
         err = capsys.readouterr().err
         assert ("is drawn on other views up to" in err) is said, err
+
+
+def test_an_input_given_twice_is_read_once_and_said(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same file twice ran as two inputs, merged with itself, without a word."""
+    _axial_and_sagittal_files(tmp_path)
+    axial = str(tmp_path / "axial.nii.gz")
+    assert main(["run", axial, axial, "-o", str(tmp_path / "twice")]) == 0
+    said = capsys.readouterr()
+    assert "are one input" in said.err and "it is read once" in said.err
+    assert "read as: sparse annotation" in said.out  # one input, not "2 inputs"
