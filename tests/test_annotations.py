@@ -1564,7 +1564,7 @@ def test_dicom_inputs_of_different_frames_of_reference_are_refused(
         )
     out = tmp_path / "out"
     assert main(["run", *map(str, paths), "-o", str(out)]) == 2
-    said = [x for x in capsys.readouterr().err.splitlines() if not x.startswith("progress:")]
+    said = [x for x in capsys.readouterr().err.splitlines() if x.startswith("error:")]
     assert len(said) == 1 and "lie in different frames of reference" in said[0]
     assert not out.exists()
 
