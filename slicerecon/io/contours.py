@@ -273,15 +273,9 @@ def read_contour_annotation(
 
 def contour_file_frame(path: str | os.PathLike[str]) -> str | None:
     """The world frame a contour file states for its points (``"coordinates"``: ``"RAS"``
-    or ``"LPS"``), or None when it states none (then they are read as RAS).
-
-    Raises
-    ------
-    InputError, FormatError
-        As :func:`read_contours`, for a file that cannot be read.
-    """
-    with reading(path):
-        return _read_parsed(Path(path)).coordinates
+    or ``"LPS"``), or None when it states none (then they are read as RAS). Raises as
+    :func:`contour_file_grid`."""
+    return _header(path).coordinates
 
 
 def contour_file_grid(
@@ -295,8 +289,12 @@ def contour_file_grid(
     InputError, FormatError
         As :func:`read_contours`, for a file that cannot be read.
     """
+    return _header(path).grid
+
+
+def _header(path: str | os.PathLike[str]) -> Parsed:
     with reading(path):
-        return _read_parsed(Path(path)).grid
+        return _read_parsed(Path(path))
 
 
 def _read_contour_annotation(
