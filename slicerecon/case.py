@@ -48,6 +48,7 @@ from .case_outputs import check_outdir, write_case
 from .errors import InputError, OptionError
 from .evaluation import mean_metrics
 from .inputs import GT_NEEDS_DENSE, axis_upsample
+from .io.limits import PIPELINE_BYTES_PER_VOXEL, check_bytes
 from .io.projections import read_projection_files
 from .labels import LabelMap, Structure, StructureMasks, check_label_values, labels_dtype
 from .metrics import evaluate
@@ -58,9 +59,9 @@ from .rasterize import mesh_to_mask
 from .reconstruct import ReconstructConfig, reconstruct
 from .sampling import projections_from_sections, projections_from_volume
 from .sections import Box, CrossSections, Projections, Volume
-from .surface.joint import cut_nested, keep_drawn_sections, resolve
+from .surface.joint import cut_nested, fields_bytes, keep_drawn_sections, resolve
 from .surface.smooth import taubin_smooth
-from .surface.views import views_surface
+from .surface.views import views_surface, views_upsample
 
 __all__ = [
     "NOT_RECONSTRUCTED",
@@ -355,6 +356,14 @@ def reconstruct_case(
         )
     per_structure = options.with_changes(smooth=False) if joint else options
     upsample = axis_upsample(shared) if not views else 1
+    if joint:  # every structure's field is held, beside the grid, until they are resolved
+        sampling = views_upsample(annotation) if views else upsample
+        held = fields_bytes(annotation, sampling, CROP_PAD)
+        check_bytes(
+            held + PIPELINE_BYTES_PER_VOXEL * int(np.prod(annotation.grid_shape)),
+            what=f"resolving {len(drawn)} structures together (their fields and the grid)",
+            memory_budget_gb=config.max_memory_gb,
+        )
     timings: dict[str, float] = {}
     results: list[StructureResult] = []
     fields: list[Any] = []

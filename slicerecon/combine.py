@@ -22,7 +22,6 @@ from .annotated_planes import (
     covering_grid,
     merge_repeated_planes,
     warn_coinciding,
-    warn_parallel_apart,
 )
 from .annotation import AnnotatedPlane, Annotation, PlanePose
 from .case_input import CaseInput
@@ -33,6 +32,7 @@ from .io.labelmap import LABEL_MAP_KINDS
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.outputs import dicom_image_series
 from .labels import LPS_TO_RAS, Structure
+from .parallel_inputs import warn_parallel_apart
 from .selection import name_key
 
 __all__ = ["combine_cases"]
