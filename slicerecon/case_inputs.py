@@ -12,6 +12,7 @@ read is stated in one line (:attr:`slicerecon.annotation.Annotation.source`).
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 from collections.abc import Callable, Sequence
@@ -45,6 +46,7 @@ from .plane_detection import (
     MIN_GAPS_WARNED,
     PlaneReading,
     empty_runs_inside,
+    mixed_reading,
     parse_annotation,
     structures_reading,
 )
@@ -476,10 +478,12 @@ def _read_structures(
     def mask_of(value: int) -> NDArray[np.bool_]:
         return label_map.mask(value).mask[box]
 
+    # read one by one at most once, for the stated reading and the rule's
+    mixed = functools.cache(lambda: mixed_reading(values, mask_of))
     stated = parse_annotation(config.annotation)
-    reading, every_slice = structures_reading(values, mask_of, crop.mask, stated)
+    reading, every_slice = structures_reading(values, mask_of, crop.mask, stated, mixed=mixed)
     if reading.stated:
-        rule, _ = structures_reading(values, mask_of, crop.mask)
+        rule, _ = structures_reading(values, mask_of, crop.mask, mixed=mixed)
         _say_stated(reading, rule, crop.affine, config.annotation, source)
     return reading, every_slice
 

@@ -355,6 +355,8 @@ def structures_reading(
     mask_of: Callable[[int], NDArray[np.bool_]],
     union: NDArray[np.bool_],
     annotation: str | tuple[int, ...] = "auto",
+    *,
+    mixed: Callable[[], tuple[PlaneReading, frozenset[int]] | None] | None = None,
 ) -> tuple[PlaneReading, frozenset[int]]:
     """How a label map of several structures is read: their union by
     :func:`detect_planes` (or as ``annotation`` states), and structures drawn on every
@@ -375,6 +377,9 @@ def structures_reading(
     annotation : str or tuple of int
         ``"auto"`` (the rule), ``"dense"`` or the annotated axes
         (:func:`parse_annotation`).
+    mixed : callable, optional
+        Gives :func:`mixed_reading` of ``values`` (a caller reading both as stated and
+        by the rule reads the structures one by one once); default: it is called.
 
     Returns
     -------
@@ -390,14 +395,14 @@ def structures_reading(
             return reading, frozenset()
     elif reading.dense and not has_gaps(union):
         return reading, frozenset()
-    mixed = mixed_reading(values, mask_of)
-    if mixed is None:
+    one_by_one = mixed() if mixed is not None else mixed_reading(values, mask_of)
+    if one_by_one is None:
         return reading, frozenset()
     if reading.stated:
-        if mixed[0].axes != reading.axes:
+        if one_by_one[0].axes != reading.axes:
             return reading, frozenset()
-        return replace(mixed[0], stated=True), mixed[1]
-    return mixed
+        return replace(one_by_one[0], stated=True), one_by_one[1]
+    return one_by_one
 
 
 def mixed_reading(
