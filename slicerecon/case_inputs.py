@@ -98,10 +98,11 @@ def load_case(
         a sparse input.
     """
     if not isinstance(input_path, str | os.PathLike):
-        paths = _once(list(input_path))
+        kinds = _once(list(input_path))
+        paths = list(kinds)
         if len(paths) == 1:
             return load_case(paths[0], config, ground_truth=ground_truth, image_dir=image_dir)
-        drawn = [detect_kind(path).kind in CONTOUR_KINDS for path in paths]
+        drawn = [kind.kind in CONTOUR_KINDS for kind in kinds.values()]
         if all(drawn):
             _refuse_annotation(config, " ".join(map(str, paths)))
         # --annotation states how the label maps among them are read
@@ -141,17 +142,19 @@ def load_case(
     return case
 
 
-def _once(paths: list[Any]) -> list[Any]:
-    """The inputs, each file once: one given twice (or its folder beside it) is read once,
-    said in one warning line (its planes were merged with themselves, without a word)."""
-    seen: dict[Path, Any] = {}
+def _once(paths: list[Any]) -> dict[Any, InputKind]:
+    """The inputs, each file once, with their kinds: one given twice (or its folder beside
+    it) is read once, said in one warning line (its planes were merged with themselves,
+    without a word)."""
+    seen: dict[Path, tuple[Any, InputKind]] = {}
     for path in paths:
-        key = Path(detect_kind(path).path).resolve()
+        kind = detect_kind(path)
+        key = Path(kind.path).resolve()
         if key in seen:
-            logger.warning("%s and %s are one input (%s): it is read once", seen[key], path, key)
+            logger.warning("%s and %s are one input (%s): it is read once", seen[key][0], path, key)
             continue
-        seen[key] = path
-    return list(seen.values())
+        seen[key] = (path, kind)
+    return dict(seen.values())
 
 
 def _say_stated(
