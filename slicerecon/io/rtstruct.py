@@ -38,6 +38,7 @@ from ..errors import (
 from ..labels import Structure
 from ..sections import CrossSections
 from ..selection import choose_structure, parse_selector
+from .dicom.derived import roi_frames
 from .dicom.series import dicom_series_geometry, referenced_series
 from .dicom.sniff import PARSE_ERRORS, object_kind, read_dicom_header
 from .limits import DEFAULT_MEMORY_BUDGET_GB, reading
@@ -398,15 +399,7 @@ def _frames_apart(ds: Any) -> tuple[str, dict[int, str]]:
     name. An ROI in another frame (registered from another study) cannot be placed on
     the set's grid without the registration, which is not read.
     """
-    frames: dict[int, str] = {}
-    for item in ds.get("StructureSetROISequence", None) or []:
-        uid = str(item.get("ReferencedFrameOfReferenceUID", "") or "")
-        try:
-            number = int(item.ROINumber)
-        except PARSE_ERRORS:
-            continue
-        if uid:
-            frames[number] = uid
+    frames = roi_frames(ds)
     if not frames:
         return "", {}
     named = list(frames.values())

@@ -58,6 +58,7 @@ __all__ = [
     "layers_on_series",
     "load_source_series",
     "reference_frames",
+    "roi_frames",
     "structure_mask",
 ]
 
@@ -281,6 +282,18 @@ def reference_frames(ds: Any, numbers: Collection[int] | None = None) -> tuple[s
     rois.discard("")
     listed.discard("")
     return rois, listed
+
+
+def roi_frames(ds: Any) -> dict[int, str]:
+    """Each ROI's FrameOfReferenceUID in an RTSTRUCT: ``{ROINumber: ReferencedFrameOfReferenceUID}``
+    for the StructureSetROISequence items with a valid ROINumber that name a frame."""
+    frames: dict[int, str] = {}
+    for item in ds.get("StructureSetROISequence", None) or []:
+        number = _roi_number(item)
+        uid = str(item.get("ReferencedFrameOfReferenceUID", "") or "")
+        if number is not None and uid:
+            frames[number] = uid
+    return frames
 
 
 def _roi_number(item: Any) -> int | None:
