@@ -347,16 +347,12 @@ def covering_grid(
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
     """The index range ``[lo, hi)`` of the lattice of ``affine`` that holds ``shape`` and every
     plane's drawn pixels with ``pad`` voxels around them."""
-    inverse = np.linalg.inv(affine)
     lo = np.zeros(3, dtype=np.int64)
     hi = np.asarray(shape, dtype=np.int64).copy()
-    for plane in planes:
-        box = _drawn_corners(plane)
-        if box is None:
-            continue
-        index = box @ inverse[:3, :3].T + inverse[:3, 3]
-        lo = np.minimum(lo, np.floor(index.min(axis=0)).astype(np.int64) - pad)
-        hi = np.maximum(hi, np.ceil(index.max(axis=0)).astype(np.int64) + 1 + pad)
+    corners = [c for c in map(_drawn_corners, planes) if c is not None]
+    if corners:
+        drawn_lo, drawn_hi = _index_range(corners, affine, pad)
+        lo, hi = np.minimum(lo, drawn_lo), np.maximum(hi, drawn_hi)
     return lo, hi
 
 
@@ -370,7 +366,15 @@ def drawn_box(
     ]
     if not corners:
         return None
-    inverse = np.linalg.inv(annotation.affine)
+    return _index_range(corners, annotation.affine, pad)
+
+
+def _index_range(
+    corners: Sequence[NDArray[np.float64]], affine: NDArray[np.float64], pad: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The index range ``[lo, hi)`` on the lattice of ``affine`` holding world points
+    (each an array of shape (N, 3), mm), with ``pad`` voxels around them."""
+    inverse = np.linalg.inv(affine)
     index = np.vstack(corners) @ inverse[:3, :3].T + inverse[:3, 3]
     lo = np.floor(index.min(axis=0)).astype(np.int64) - pad
     return lo, np.ceil(index.max(axis=0)).astype(np.int64) + 1 + pad
