@@ -94,15 +94,6 @@ def combine_cases(
     cases = sorted(given, key=_reference_rank)
     cases = [cases[0], *sorted(cases[1:], key=lambda c: str(c.input_path))]
     first = cases[0]
-    if not _same_lattice(first.output_affine, first.annotation.affine):
-        # written more finely than its grid (contours on a grid of their own): the inputs
-        # together are written on the reference's own lattice
-        first = replace(
-            first,
-            output_affine=first.annotation.affine,
-            output_shape=first.annotation.grid_shape,
-            crop_lo=np.zeros(3, dtype=np.int64),
-        )
     structures: list[Structure] = list(first.annotation.structures)
     origin = {s.value: first.input_path for s in structures}
     # each input's planes speak for that input's structures only
@@ -249,11 +240,15 @@ def combine_cases(
         f"{annotation.describe()}",
     )
     missing = tuple(s for c in cases for s in c.missing)
-    # the written grid grows only where a drawing lies beyond it, not by the padding
-    drawn_lo, drawn_hi = covering_grid(planes, affine, first.annotation.grid_shape, pad=0)
+    # the written grid (the reference's, which may sample its annotation grid more finely:
+    # contours without an image) grows only where a drawing lies beyond it, not by the
+    # padding
+    drawn_lo, drawn_hi = covering_grid(planes, first.output_affine, first.output_shape, pad=0)
     output_affine, output_shape, start = _output_holding(
-        first, first.crop_lo + drawn_lo, first.crop_lo + drawn_hi, memory_budget_gb
+        first, drawn_lo, drawn_hi, memory_budget_gb
     )
+    # where the annotation grid's first voxel lies on the written grid
+    crop_lo = np.rint(np.linalg.solve(output_affine[:3, :3], moved[:3, 3] - output_affine[:3, 3]))
     return replace(
         first,
         annotation=annotation,
@@ -264,7 +259,7 @@ def combine_cases(
         },
         output_affine=output_affine,
         output_shape=output_shape,
-        crop_lo=first.crop_lo + lo - start,
+        crop_lo=crop_lo.astype(np.int64),
     )
 
 

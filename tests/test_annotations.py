@@ -1657,3 +1657,39 @@ def test_the_memory_budget_counts_every_structure_resolved_together() -> None:
     with pytest.raises(MemoryBudgetError, match="resolving 4 structures together"):
         reconstruct_structures(label_map, ReconstructConfig(max_memory_gb=budget))
     reconstruct_structures(label_map, ReconstructConfig(max_memory_gb=(grid + held) / 2**30 + 0.01))
+
+
+def test_contour_files_without_an_image_combine_on_the_sampling_of_either_alone(
+    tmp_path: Path,
+) -> None:
+    """Axial and sagittal contour files, no image: the label map of both together was
+    written on the axial file's own lattice, one slice per plane 8 mm apart (Dice 0.90
+    where either alone gave 0.99 on its finer sampling). It is now written on the
+    reference file's sampling, grown to hold the other's drawings."""
+    semi = np.array([20.0, 14.0, 30.0])
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    axial = []
+    for z in np.arange(-24.0, 25.0, 8.0):
+        r = np.sqrt(1 - (z / semi[2]) ** 2)
+        ring = np.stack([semi[0] * r * np.cos(t), semi[1] * r * np.sin(t), np.full_like(t, z)], 1)
+        axial.append({"normal": [0, 0, 1], "polygons": [ring.tolist()]})
+    sagittal = []
+    for x in (-8.0, 8.0):
+        r = np.sqrt(1 - (x / semi[0]) ** 2)
+        ring = np.stack([np.full_like(t, x), semi[1] * r * np.cos(t), semi[2] * r * np.sin(t)], 1)
+        sagittal.append({"normal": [1, 0, 0], "polygons": [ring.tolist()]})
+    for name, planes in (("axial", axial), ("sagittal", sagittal)):
+        doc = {"format": "slicerecon-contours", "version": 2, "units": "mm", "planes": planes}
+        (tmp_path / f"{name}.json").write_text(json.dumps(doc))
+    files = [str(tmp_path / "axial.json"), str(tmp_path / "sagittal.json")]
+    assert main(["run", files[0], "-o", str(tmp_path / "alone"), "-q"]) == 0
+    assert main(["run", *files, "-o", str(tmp_path / "both"), "-q"]) == 0
+    alone = nib.load(tmp_path / "alone" / "labels.nii.gz")
+    both = nib.load(tmp_path / "both" / "labels.nii.gz")
+    spacing = np.linalg.norm(both.affine[:3, :3], axis=0)
+    assert spacing[2] < 8.0 / 4  # slices between the planes, as the axial file alone
+    np.testing.assert_allclose(spacing, np.linalg.norm(alone.affine[:3, :3], axis=0))
+    mask = np.asanyarray(both.dataobj) > 0
+    world = np.indices(mask.shape).reshape(3, -1).T @ both.affine[:3, :3].T + both.affine[:3, 3]
+    truth = (((world / semi) ** 2).sum(axis=1) <= 1).reshape(mask.shape)
+    assert 2 * np.count_nonzero(mask & truth) / (mask.sum() + truth.sum()) > 0.97
