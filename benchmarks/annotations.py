@@ -10,6 +10,9 @@ some planes of the true mask, in one of these layouts:
 ``axial12+2+2``  the 12 axial planes plus 2 sagittal and 2 coronal ones (at 1/3 and 2/3
                  of the structure's extent along x and y)
 ``axial6+2+2``   6 axial planes plus the same 2 sagittal and 2 coronal ones
+``inner8+2+2``   8 axial planes over the middle 60 % of the structure's axial extent (its
+                 ends left undrawn on that view) plus the same 2 sagittal and 2 coronal
+                 ones, which reach the ends
 
 or, as contours (the polygons an RTSTRUCT holds, traced on each plane of the
 true mask, in world mm; written as a version 2 contour file on the mask's grid):
@@ -67,6 +70,7 @@ LAYOUTS = (
     "every2",
     "axial12+2+2",
     "axial6+2+2",
+    "inner8+2+2",
     "rt-axial8",
     "rt-axial8+3+3",
     "rt-radial8",
@@ -74,6 +78,8 @@ LAYOUTS = (
 )
 CONTOUR_LAYOUTS = ("rt-axial8", "rt-axial8+3+3", "rt-radial8", "rt-axial8+tilted3")
 """Layouts drawn as contours (polygons in world mm, as an RTSTRUCT holds them)."""
+INNER_CUT = 0.2
+"""``inner8+2+2``: the share of the axial extent left undrawn at each end on the axial view."""
 TIE = 0.001
 """|IoU difference| at most this is a tie."""
 
@@ -88,7 +94,12 @@ def layout_planes(mask: np.ndarray, layout: str) -> dict[int, np.ndarray]:
     z = np.flatnonzero(mask.any(axis=(0, 1)))
     if layout == "every2":
         return {2: np.arange(z[0], z[-1] + 1, 2)}
-    axial = _evenly(z, 12 if layout.startswith("axial12") else 6)
+    if layout.startswith("inner"):
+        cut = int(round(INNER_CUT * (z[-1] - z[0])))
+        z = np.arange(z[0] + cut, z[-1] - cut + 1)
+    axial = _evenly(
+        z, 12 if layout.startswith("axial12") else 8 if layout.startswith("inner") else 6
+    )
     planes = {2: axial}
     if layout.endswith("+2+2"):
         for axis, other in ((0, (1, 2)), (1, (0, 2))):

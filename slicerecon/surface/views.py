@@ -41,13 +41,12 @@ the view's planes, and beats blending the views' own interpolations.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..annotation import Annotation, PlanePose, smallest_gap, window
+from ..annotation import Annotation, window
 from ..errors import EmptyMaskError, GeometryError
 from ..io.limits import check_grid
 from ..sections import Volume, in_plane_axes
@@ -55,18 +54,13 @@ from .across_planes import fill_between
 from .drift import join_drifting_regions
 from .marching import march_field
 from .sdf import SdfField, plane_signed_distance
+from .view_planes import END_REACH, ObliqueView, drawn_beyond, end_reach, views_of
 
 __all__ = ["VIEW_WEIGHT_EXPONENT", "ViewsSurface", "views_field", "views_surface"]
 
-logger = logging.getLogger(__name__)
 
 VIEW_WEIGHT_EXPONENT = 6.0
 """``p`` of the views' inverse-distance weights (chosen on the development shapes)."""
-END_REACH = 0.5
-"""How far a structure goes on beyond a complete view's outer plane, in voxels of the
-reference grid: a drawn slice stands for its own voxels (a label map's slice; a contour
-on its image slice). Contours read without an image end half their own spacing beyond
-(:attr:`~slicerecon.annotation.Annotation.gap_ends`)."""
 BEYOND_PENALTY = 2.0
 """Factor on the distance of a sample beyond the outer planes of a view that is
 extruded there (no complete view to correct; chosen on the development shapes)."""
@@ -96,50 +90,6 @@ class ViewsSurface:
     mesh: object
     occupancy: Volume | None
     field: SdfField
-
-
-@dataclass
-class _Oblique:
-    """The planes of one orientation that is not perpendicular to a grid axis."""
-
-    normal: NDArray[np.float64]
-    planes: list[tuple[float, PlanePose, NDArray[np.bool_]]]  # (offset mm, pose, mask)
-
-
-def _views(
-    annotation: Annotation, value: int
-) -> tuple[dict[int, list[tuple[float, NDArray]]], list[_Oblique]]:
-    """The planes of structure ``value``: by grid axis ``{axis: [(index, mask), ...]}`` for
-    slices of the reference grid (each mask on the grid's in-plane voxels), and by
-    orientation for any other plane."""
-    inverse = np.linalg.inv(annotation.affine)
-    aligned: dict[int, list[tuple[float, NDArray]]] = {}
-    oblique: list[_Oblique] = []
-    limit = np.sin(np.radians(0.5))
-    for plane in annotation.planes_of(value):
-        pose = plane.pose
-        found = annotation.axis_of(pose)
-        shift = None if found is None else annotation.grid_shift(pose, found)
-        if found is not None and shift is not None:
-            # the plane's pixels on the grid's voxels (another input's crop of the grid
-            # may start elsewhere): its mask moved by whole pixels
-            origin = inverse[:3, :3] @ pose.affine[:3, 3] + inverse[:3, 3]
-            a, b = in_plane_axes(found)
-            size = np.array([annotation.grid_shape[a], annotation.grid_shape[b]])
-            grid_mask = window(plane.mask(value), -shift, size - shift)
-            aligned.setdefault(found, []).append((float(origin[found]), grid_mask))
-            continue
-        normal = pose.normal
-        for view in oblique:
-            if np.linalg.norm(np.cross(view.normal, normal)) < limit:
-                sign = 1.0 if view.normal @ normal > 0 else -1.0
-                view.planes.append((sign * pose.offset_mm, pose, plane.mask(value)))
-                break
-        else:
-            oblique.append(_Oblique(normal, [(pose.offset_mm, pose, plane.mask(value))]))
-    for view in oblique:
-        view.planes.sort(key=lambda item: item[0])
-    return {axis: sorted(p, key=lambda item: item[0]) for axis, p in aligned.items()}, oblique
 
 
 def views_field(
@@ -182,7 +132,7 @@ def views_field(
     MemoryBudgetError
         The field's samples would exceed the default memory budget.
     """
-    views, oblique = _views(annotation, value)
+    views, oblique = views_of(annotation, value)
     inverse = np.linalg.inv(annotation.affine)
     lo = np.full(3, np.iinfo(np.int64).max, dtype=np.int64)
     hi = np.full(3, np.iinfo(np.int64).min, dtype=np.int64)
@@ -229,25 +179,34 @@ def views_field(
 
     spacing = np.linalg.norm(annotation.affine[:3, :3], axis=0)
     own_gap = value in annotation.gap_ends
-    reach = {
-        axis: _end_reach([i for i, _ in planes], END_REACH, own_gap) if complete(axis) else None
+    # how far a complete view's structure goes on beyond its first and last planes
+    reach: dict[int, tuple[float, float] | None] = {
+        axis: end_reach([i for i, _ in planes], END_REACH, own_gap) if complete(axis) else None
         for axis, planes in views.items()
     }
-    oblique_reach = [
-        _end_reach([o for o, _, _ in view.planes], END_REACH * float(spacing.min()), own_gap)
+    oblique_reach: list[tuple[float, float] | None] = [
+        end_reach([o for o, _, _ in view.planes], END_REACH * float(spacing.min()), own_gap)
         if complete(-1 - n)
         else None
         for n, view in enumerate(oblique)
     ]
+    # sides where the main view's end is carried on to where other views show the structure
+    ends_carried = (False, False)
     if complete(main) and len(counts) > 1:
-        _say_drawn_beyond(
-            annotation, views, oblique, main, reach, oblique_reach, float(spacing.min()), value
-        )
+        own = reach[main] if main >= 0 else oblique_reach[-1 - main]
+        beyond = drawn_beyond(annotation, views, oblique, main, own, float(spacing.min()), value)
+        if own is not None and beyond is not None:
+            extended = (own[0] + beyond[0], own[1] + beyond[1])
+            ends_carried = (beyond[0] > 0, beyond[1] > 0)
+            if main >= 0:
+                reach[main] = extended
+            else:
+                oblique_reach[-1 - main] = extended
     pad = np.full(3, CROP_PAD, dtype=np.int64)
     for axis, extent in reach.items():
         if extent is not None:
-            pad[axis] += int(np.ceil(extent))
-    extra_mm = max([r for r in oblique_reach if r is not None], default=0.0)
+            pad[axis] += int(np.ceil(max(extent)))
+    extra_mm = max([max(r) for r in oblique_reach if r is not None], default=0.0)
     pad += np.ceil(extra_mm / spacing).astype(np.int64)
     # not clipped to the grid: a structure may reach beyond a grid that holds only
     # its drawn slices (a SEG of one frame); what lies outside is not written
@@ -281,6 +240,7 @@ def views_field(
                 positions,
                 base,
                 upsample,
+                ends_carried if key == main else (False, False),
             )
         else:
             own, distance = _oblique_view(
@@ -294,6 +254,7 @@ def views_field(
                 oblique_reach[-1 - key],
                 base,
                 upsample,
+                ends_carried if key == main else (False, False),
             )
         if key == main and complete(main):
             base = own
@@ -318,90 +279,6 @@ def views_field(
     return SdfField(padded, affine, (int(lo[0]), int(lo[1]), int(lo[2])), upsample, along)
 
 
-def _say_drawn_beyond(
-    annotation: Annotation,
-    views: dict[int, list[tuple[float, NDArray]]],
-    oblique: list[_Oblique],
-    main: int,
-    reach: dict[int, float | None],
-    oblique_reach: list[float | None],
-    voxel: float,
-    value: int,
-) -> None:
-    """One warning when the other views draw a structure more than half the main view's
-    gap (at least a voxel, ``voxel`` mm) beyond its reach along its normal: there only
-    the other views' corrections near their own planes say it is present, and it comes
-    out as slabs on those planes (a liver drawn on 4 axial contours that stop 8 mm short
-    of its top, with sagittal ones reaching the top, grew thin fins there: Dice 0.92
-    against 0.97 from either file alone)."""
-    affine = annotation.affine
-    if main >= 0:
-        a, b = in_plane_axes(main)
-        normal = np.cross(affine[:3, a], affine[:3, b])
-        normal /= np.linalg.norm(normal)
-        reach_mm = (reach[main] or 0.0) * abs(float(affine[:3, main] @ normal))
-    else:
-        normal = oblique[-1 - main].normal
-        reach_mm = oblique_reach[-1 - main] or 0.0
-
-    def extent(corners: NDArray[np.float64]) -> tuple[float, float]:
-        along = corners @ normal
-        return float(along.min()), float(along.max())
-
-    spans: dict[int, list[tuple[float, float]]] = {}
-    for axis, planes in views.items():
-        a, b = in_plane_axes(axis)
-        for index, mask in planes:
-            if mask.any():
-                rows = np.flatnonzero(mask.any(axis=1))
-                cols = np.flatnonzero(mask.any(axis=0))
-                corners = np.zeros((4, 3))
-                corners[:, axis] = index
-                corners[:, a] = np.repeat([rows[0] - 0.5, rows[-1] + 0.5], 2)
-                corners[:, b] = np.tile([cols[0] - 0.5, cols[-1] + 0.5], 2)
-                world = corners @ affine[:3, :3].T + affine[:3, 3]
-                spans.setdefault(axis, []).append(extent(world))
-    for n, view in enumerate(oblique):
-        for _, pose, mask in view.planes:
-            if mask.any():
-                pixels = np.argwhere(mask)
-                rows, cols = pixels[:, 0], pixels[:, 1]
-                corners = np.array(
-                    [[r, c] for r in (rows.min(), rows.max()) for c in (cols.min(), cols.max())],
-                    dtype=np.float64,
-                )
-                spans.setdefault(-1 - n, []).append(extent(pose.to_world(corners)))
-    if main not in spans:
-        return
-    first = min(lo for lo, _ in spans[main]) - reach_mm
-    last = max(hi for _, hi in spans[main]) + reach_mm
-    others = [span for key, listed in spans.items() if key != main for span in listed]
-    below = max([first - lo for lo, _ in others], default=0.0)
-    above = max([hi - last for _, hi in others], default=0.0)
-    # the structure's true end lies somewhere in the gap past the last plane: said when
-    # the other views show it more than half a gap of the main view (or a voxel) beyond
-    positions = sorted({round(lo, 3) for lo, _ in spans[main]})
-    gap = float(np.median(np.diff(positions))) if len(positions) > 1 else 0.0
-    if max(below, above) > max(voxel, gap / 2) + 1e-6:
-        logger.warning(
-            "structure %s is drawn on other views up to %.1f mm beyond its %s plane of the "
-            "main view (%d planes): there only those views' planes show it, and it comes out "
-            "as slabs on them; draw its end on a plane of the main view",
-            value,
-            max(below, above),
-            "last" if above >= below else "first",
-            len(spans[main]),
-        )
-
-
-def _end_reach(positions: list[float], voxel: float, own_gap: bool) -> float:
-    """How far a complete view's structure goes on beyond its outer planes (the units of
-    ``positions``): half a voxel (``voxel``), or with ``own_gap`` half the smallest gap
-    between its planes (contours read without an image; :attr:`Annotation.gap_ends`)."""
-    gap = smallest_gap(positions) if own_gap else None
-    return gap / 2 if gap is not None else voxel
-
-
 def _view(
     planes: list[tuple[float, NDArray]],
     axis: int,
@@ -411,18 +288,21 @@ def _view(
     far: np.float32,
     interpolation: str,
     join_drift: bool,
-    reach: float | None,
+    reach: tuple[float, float] | None,
     along: int,
     positions: NDArray[np.float64],
     base: NDArray[np.float32] | None = None,
     upsample: int = 1,
+    ends_carried: tuple[bool, bool] = (False, False),
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """One view's field and each sample's distance (mm) to its nearest plane.
 
     Both on the crop in grid axis order, sampled at ``positions`` (voxel index
     units) along axis ``along`` and at the voxels along the others. ``reach``:
-    how far (index units) a complete view's structure goes on beyond its outer
-    planes; None: an incomplete view, extruded beyond them. Without ``base`` the
+    how far (index units) a complete view's structure goes on beyond its first
+    and last planes; None: an incomplete view, extruded beyond them. ``ends_carried``:
+    the sides where that end was carried on to other views' drawings, and the
+    view weighs less beyond its outer plane (:data:`BEYOND_PENALTY`). Without ``base`` the
     field is the view's interpolation across its planes; with ``base`` (the
     complete view's field, on the same samples) it is ``base`` corrected by the
     nearest plane's residual (:func:`_corrected`).
@@ -436,7 +316,9 @@ def _view(
     }
     samples = positions if axis == along else np.arange(lo[axis], hi[axis], dtype=np.float64)
     penalised = reach is None and base is None
-    nearest = _nearest_mm(samples, indices, float(spacing[axis]), penalised=penalised)
+    nearest = _nearest_mm(
+        samples, indices, float(spacing[axis]), penalised=penalised, sides=ends_carried
+    )
     distance = np.broadcast_to(
         np.expand_dims(nearest, tuple(d for d in range(3) if d != axis)),
         tuple(len(positions) if d == along else int(hi[d] - lo[d]) for d in range(3)),
@@ -462,9 +344,9 @@ def _view(
             # at and beyond the outer plane the structure ends ``reach`` beyond it:
             # max(d, distance past the end), which keeps the plane's own section
             beyond = samples <= indices[n] + 1e-9 if side == 0 else samples >= indices[n] - 1e-9
-            gap = (np.abs(samples[beyond] - indices[n]) - reach).astype(np.float32) * np.float32(
-                spacing[axis]
-            )
+            gap = (np.abs(samples[beyond] - indices[n]) - reach[side]).astype(
+                np.float32
+            ) * np.float32(spacing[axis])
             field[beyond] = np.maximum(base_n[None], gap[:, None, None])
         else:
             beyond = samples < indices[n] if side == 0 else samples > indices[n]
@@ -477,15 +359,21 @@ def _view(
 
 
 def _nearest_mm(
-    samples: NDArray[np.float64], indices: NDArray[np.float64], step: float, *, penalised: bool
+    samples: NDArray[np.float64],
+    indices: NDArray[np.float64],
+    step: float,
+    *,
+    penalised: bool,
+    sides: tuple[bool, bool] = (False, False),
 ) -> NDArray[np.float32]:
-    """Each sample's distance (mm) to a view's nearest plane; ``penalised`` (an incomplete
-    view extruded, not correcting a complete one): :data:`BEYOND_PENALTY` times beyond its
-    outer planes."""
+    """Each sample's distance (mm) to a view's nearest plane, :data:`BEYOND_PENALTY` times
+    beyond its outer planes where the view is extruded (``penalised``: an incomplete
+    view, not correcting a complete one) or its end carried on (``sides``: before its
+    first plane, after its last)."""
     nearest = np.min(np.abs(samples[:, None] - indices[None, :]), axis=1) * step
-    if penalised:  # an extruded view weighs less beyond its outer planes
-        outside = (samples < indices.min()) | (samples > indices.max())
-        nearest[outside] *= BEYOND_PENALTY
+    # an extruded or carried-on view weighs less beyond its outer planes
+    nearest[(samples < indices.min()) & (penalised or sides[0])] *= BEYOND_PENALTY
+    nearest[(samples > indices.max()) & (penalised or sides[1])] *= BEYOND_PENALTY
     return nearest.astype(np.float32)
 
 
@@ -548,25 +436,27 @@ def _main_grid_axis(annotation: Annotation) -> int:
 
 
 def _oblique_view(
-    view: _Oblique,
+    view: ObliqueView,
     affine: NDArray[np.float64],
     lo: NDArray[np.int64],
     size: list[int],
     along: int,
     positions: NDArray[np.float64],
     far: np.float32,
-    reach_mm: float | None,
+    reach_mm: tuple[float, float] | None,
     base: NDArray[np.float32] | None = None,
     upsample: int = 1,
+    ends_carried: tuple[bool, bool] = (False, False),
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """One oblique view's field and distances (mm) on the crop's samples, slab by slab.
 
     A sample between two planes of the view takes their in-plane signed
     distances at its projections onto them (bilinear), blended linearly along
-    the normal; beyond the outer planes the view ends ``reach_mm`` past them
-    (a complete view) or is extruded (None). With ``base`` (the complete view's
-    field on the same samples) a sample takes ``base`` plus the residual of the
-    view's nearest plane at its projection (:func:`_corrected`, the drawn
+    the normal; beyond its first and last planes the view ends ``reach_mm`` past
+    them (a complete view; ``ends_carried`` as in :func:`_view`) or is extruded
+    (None). With ``base`` (the complete view's field on the same samples) a
+    sample takes ``base`` plus the residual of the view's nearest plane at its
+    projection (:func:`_corrected`, the drawn
     distance less ``base`` on the plane; none beyond the plane's pixels).
     """
     from scipy import ndimage
@@ -610,7 +500,7 @@ def _oblique_view(
                 if reach_mm is None:
                     values[sel] = outer
                 else:
-                    past = (np.abs(u[sel] - offsets[n]) - reach_mm).astype(np.float32)
+                    past = (np.abs(u[sel] - offsets[n]) - reach_mm[int(j > 0)]).astype(np.float32)
                     values[sel] = np.maximum(outer, past)
                 continue
             t = ((u[sel] - offsets[j - 1]) / (offsets[j] - offsets[j - 1])).astype(np.float32)
@@ -650,7 +540,9 @@ def _oblique_view(
             values = interpolated(world, u)
         else:
             values = carried(world, u, base[tuple(block)].ravel(), residuals)
-        nearest = _nearest_mm(u, offsets, 1.0, penalised=reach_mm is None and base is None)
+        nearest = _nearest_mm(
+            u, offsets, 1.0, penalised=reach_mm is None and base is None, sides=ends_carried
+        )
         field[tuple(block)] = values.reshape(mesh_a.shape)
         distance[tuple(block)] = nearest.reshape(mesh_a.shape)
     return np.minimum(field, far), distance
@@ -685,7 +577,7 @@ def _residual(
 
 
 def _oblique_residuals(
-    view: _Oblique,
+    view: ObliqueView,
     images: list[NDArray[np.float32] | None],
     base: NDArray[np.float32],
     affine: NDArray[np.float64],
