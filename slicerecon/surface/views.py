@@ -26,7 +26,12 @@ got wrong:
   every signed-distance surface here);
 * between the complete view's planes it dominates, near a sagittal plane the
   sagittal correction does, and where the complete view ends, a sagittal plane
-  that shows the structure going on moves the end.
+  that shows the structure going on moves the end;
+* where other views draw the structure well beyond the complete view's first or
+  last plane (:func:`~slicerecon.surface.view_planes.drawn_beyond`), that end is
+  carried on to their drawings, weighing :data:`BEYOND_PENALTY` times less
+  there, so that their corrections shape it between their planes (it ended half
+  a voxel past its plane, and only their planes showed the rest: thin slabs).
 
 With no complete view (a radial set of single planes through one axis) each
 view is its own interpolation, extruded beyond its outer planes, where it weighs
@@ -63,7 +68,8 @@ VIEW_WEIGHT_EXPONENT = 6.0
 """``p`` of the views' inverse-distance weights (chosen on the development shapes)."""
 BEYOND_PENALTY = 2.0
 """Factor on the distance of a sample beyond the outer planes of a view that is
-extruded there (no complete view to correct; chosen on the development shapes)."""
+extruded there (no complete view to correct; chosen on the development shapes), or of
+the complete view where its end is carried on to other views' drawings."""
 RESIDUAL_BAND = 6.0
 """How far (pixels of the plane) a plane's residual reaches around where the plane and the
 complete view disagree on inside and outside (chosen on the development shapes)."""
