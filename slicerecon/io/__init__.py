@@ -377,6 +377,11 @@ def detect_kind(path: str | os.PathLike[str]) -> InputKind:
         )
     if p.name.lower().endswith(".nhdr"):
         raise FormatError(f"{p}: {DETACHED_NRRD}")
+    if p.name.lower().endswith((".dcm", ".dicom", ".ima")):
+        raise FormatError(
+            f"{p} is named like a DICOM file but is not one that can be read (no DICOM "
+            "header, or a damaged one): export it again from the planning system or viewer"
+        )
     raise FormatError(
         f"cannot tell the format of {p}: expected .nii/.nii.gz, a DICOM series directory, "
         "a DICOM SEG or RTSTRUCT file, a contour file (.json/.csv), a VTK image (.vti), "

@@ -88,3 +88,17 @@ def test_what_is_not_dicom(files, tmp_path):
     assert dicom_role(files["torn"]) == "unreadable"  # DICOM by content: a failing case
     assert dicom_modality(files["torn"]) is None
     assert dicom_role(files["notes"]) is None  # anything else is not the batch's business
+
+
+@pytest.mark.filterwarnings("ignore:Expected implicit VR")  # pydicom, on the torn file
+@pytest.mark.parametrize("name", ["garbage", "torn"])
+def test_a_dcm_file_that_cannot_be_read_is_said_to_be_one(files, name, tmp_path, capsys):
+    """A ``.dcm`` file that is not DICOM got "cannot tell the format ... expected
+    .nii/.nii.gz, ..." as if its name were unknown."""
+    from slicerecon.cli import main
+
+    path = tmp_path / f"{name}.dcm"
+    path.write_bytes(files[name].read_bytes())
+    assert main(["run", str(path), "-o", str(tmp_path / "out")]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and "named like a DICOM file but is not one that can be read" in err[0]
