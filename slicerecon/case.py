@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import trimesh
 from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
 
 from .annotated_planes import MAX_VIEW_DISAGREEMENT, nested_apart, views_disagreement
 from .annotation import Annotation
@@ -58,7 +59,7 @@ from .partition.planner import Plan, PlanPart
 from .rasterize import mesh_to_mask
 from .reconstruct import ReconstructConfig, reconstruct
 from .sampling import projections_from_sections, projections_from_volume
-from .sections import Box, CrossSections, Projections, Volume
+from .sections import Box, CrossSections, Projections, Volume, crop_affine
 from .surface.joint import cut_nested, fields_bytes, keep_drawn_sections, resolve
 from .surface.smooth import taubin_smooth
 from .surface.views import views_surface, views_upsample
@@ -112,8 +113,9 @@ class StructureResult:
     planes : int
         Annotated planes that hold it.
     occupancy : Volume or None
-        Its voxels, when known without rasterizing: on the shared grid (its
-        share) for a partition of several structures, else on its own crop.
+        Its voxels, when known without rasterizing, on its own crop of the
+        grid (for a partition of several structures, its share's box on the
+        shared grid; ``occupancy.affine`` places it).
     plan : Plan or None
         The partition its reconstruction used.
     metrics : dict or None
@@ -247,18 +249,16 @@ def crop_to_structure(
     lo = np.maximum(lo - CROP_PAD, 0)
     hi = np.minimum(hi + CROP_PAD, grid)
     keep = np.flatnonzero((own.indices >= lo[axis] - 0.5) & (own.indices <= hi[axis] - 0.5))
-    affine = own.affine.copy()
-    affine[:3, 3] = own.affine[:3, :3] @ lo.astype(np.float64) + own.affine[:3, 3]
     sub = CrossSections(
         own.masks[keep][:, lo[a] : hi[a], lo[b] : hi[b]],
         own.indices[keep] - lo[axis],
         axis,
-        affine,
+        crop_affine(own.affine, lo),
         tuple(int(v) for v in hi - lo),
     )
     if mask is not None:
         crop = mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]]
-        projections = projections_from_volume(Volume(crop, affine))
+        projections = projections_from_volume(Volume(crop, sub.affine))
     else:
         projections = projections_from_sections(sub)
     return sub, projections, lo
@@ -528,9 +528,10 @@ def _resolve(
     smooth: bool,
     source: str | os.PathLike[str],
 ) -> None:
-    """Resolve a partition's structures on their fields: meshes and shares in place. A
-    structure drawn inside another on planes of its own is cut out of it (said in one
-    line: the other's drawn pixels around it change hands)."""
+    """Resolve a partition's structures on their fields: meshes and shares (each on its
+    own box: on the whole grid, 80 structures of a 512 x 512 x 200 map held 2 GiB of
+    masks) in place. A structure drawn inside another on planes of its own is cut out
+    of it (said in one line: the other's drawn pixels around it change hands)."""
     values = [r.structure.value for r in results]
     nested = nested_apart(annotation)
     if nested:
@@ -546,12 +547,13 @@ def _resolve(
     keep_drawn_sections(fields, values, annotation, nested)
     cut_nested(fields, values, nested)
     joint = resolve(fields, annotation.grid_shape)
+    boxes = ndimage.find_objects(joint.labels + 1, max_label=len(results))
     for i, item in enumerate(results):
         if fields[i] is None:
             continue
-        inside = joint.labels == i
+        box = boxes[i]
         mesh = joint.meshes[i]
-        if mesh is None or not inside.any():
+        if mesh is None or box is None:
             item.status, item.mesh, item.occupancy = NOT_RECONSTRUCTED, None, None
             logger.warning(
                 "structure %s: %s (its neighbours are closer everywhere)",
@@ -560,7 +562,8 @@ def _resolve(
             )
             continue
         item.mesh = taubin_smooth(mesh) if smooth else mesh
-        item.occupancy = Volume(inside, annotation.affine)
+        corner = [b.start for b in box]
+        item.occupancy = Volume(joint.labels[box] == i, crop_affine(annotation.affine, corner))
 
 
 def _label_map(

@@ -33,6 +33,7 @@ from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.outputs import dicom_image_series
 from .labels import LPS_TO_RAS, Structure
 from .parallel_inputs import warn_parallel_apart
+from .sections import crop_affine
 from .selection import name_key
 
 __all__ = ["combine_cases"]
@@ -208,8 +209,7 @@ def combine_cases(
     lo, hi = covering_grid(planes, affine, first.annotation.grid_shape)
     size = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), int(hi[2] - lo[2]))
     check_grid(size, what="the grid of the inputs together", memory_budget_gb=memory_budget_gb)
-    moved = affine.copy()
-    moved[:3, 3] = affine[:3, :3] @ lo + affine[:3, 3]
+    moved = crop_affine(affine, lo)
     annotation = Annotation(
         tuple(planes),
         tuple(structures),
@@ -406,6 +406,4 @@ def _output_holding(
     check_grid(
         grown, what="the output grid of the inputs together", memory_budget_gb=memory_budget_gb
     )
-    affine = reference.output_affine.copy()
-    affine[:3, 3] = affine[:3, :3] @ start + affine[:3, 3]
-    return affine, grown, start
+    return crop_affine(reference.output_affine, start), grown, start

@@ -32,6 +32,7 @@ __all__ = [
     "AXIS_NAMES",
     "axis_index",
     "in_plane_axes",
+    "crop_affine",
     "Volume",
     "Box",
     "Contour",
@@ -94,6 +95,14 @@ def check_affine(affine: ArrayLike) -> NDArray[np.float64]:
     if abs(np.linalg.det(aff[:3, :3])) < 1e-12:
         raise GeometryError("affine is singular: a voxel axis has zero length or axes coincide")
     return _readonly(aff, np.float64)
+
+
+def crop_affine(affine: NDArray[np.float64], lo: ArrayLike) -> NDArray[np.float64]:
+    """The affine (4, 4) of a grid whose first voxel is voxel ``lo`` (3 indices, any
+    sign) of the grid of ``affine``: the same voxel axes, the origin moved."""
+    moved = np.array(affine, dtype=np.float64)
+    moved[:3, 3] = moved[:3, :3] @ np.asarray(lo, dtype=np.float64) + moved[:3, 3]
+    return moved
 
 
 def _spacing(affine: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 from slicerecon.case import NO_PLANE, reconstruct_structures
 from slicerecon.cli import main
 from slicerecon.io.labelmap import read_label_map
+from slicerecon.metrics.inputs import place
 from slicerecon.rasterize import mesh_to_mask
 from slicerecon.reconstruct import reconstruct
 from slicerecon.sampling import projections_from_volume
@@ -58,13 +59,25 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / (a | b).sum())
 
 
+def _on_grid(volume, affine: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray:  # noqa: ANN001
+    """A structure's voxels (its own crop) on the lattice of ``affine``."""
+    lo = np.rint(np.linalg.solve(affine[:3, :3], volume.affine[:3, 3] - affine[:3, 3]))
+    return place(volume.mask, -lo.astype(np.int64), shape)
+
+
 def test_every_structure_gets_a_watertight_mesh_and_no_voxel_two(joint) -> None:  # noqa: ANN001
     assert [r.structure.value for r in joint.results] == [1, 2, 5, 7]
     assert all(r.mesh is not None and r.mesh.is_watertight for r in joint.results)
     # one label per voxel by construction: the label map holds the input's values only
     assert set(np.unique(joint.labels)) == {0, 1, 2, 5, 7}
-    owners = sum(r.occupancy.mask.astype(int) for r in joint.results)
+    grid = joint.sections.affine, joint.sections.grid_shape
+    owners = sum(_on_grid(r.occupancy, *grid).astype(int) for r in joint.results)
     assert owners.max() == 1
+    # each share is held on its own box, not on the whole grid (80 structures of a
+    # 512 x 512 x 200 map held 2 GiB of masks)
+    for r in joint.results:
+        lo, hi = r.occupancy.bounding_box_vox()
+        assert r.occupancy.shape == tuple(int(v) for v in hi - lo)
 
 
 def test_touching_structures_share_their_interface(joint) -> None:  # noqa: ANN001
@@ -106,7 +119,8 @@ def test_each_label_at_least_as_good_as_plain_sdf_on_the_same_planes(joint) -> N
             interpolation="linear",
         ).mesh
         plain_iou = _iou(mesh_to_mask(plain, sections.affine, sections.grid_shape), truth.mask)
-        assert _iou(item.occupancy.mask, truth.mask) >= plain_iou - 1e-9, item.structure
+        mine = _on_grid(item.occupancy, sections.affine, sections.grid_shape)
+        assert _iou(mine, truth.mask) >= plain_iou - 1e-9, item.structure
 
 
 def test_run_writes_meshes_labels_and_records(four: Path, tmp_path: Path) -> None:
