@@ -1703,3 +1703,33 @@ def test_contour_files_without_an_image_combine_on_the_sampling_of_either_alone(
     world = np.indices(mask.shape).reshape(3, -1).T @ both.affine[:3, :3].T + both.affine[:3, 3]
     truth = (((world / semi) ** 2).sum(axis=1) <= 1).reshape(mask.shape)
     assert 2 * np.count_nonzero(mask & truth) / (mask.sum() + truth.sum()) > 0.97
+
+
+def test_a_view_on_a_grid_turned_about_its_normal_reaches_as_far_as_its_drawing(
+    tmp_path: Path,
+) -> None:
+    """A sagittal file on a grid whose in-plane axes are turned 45° about its normal,
+    beside axial slices that stop short of the ends: the axial end was carried on to
+    the corners of the sagittal drawing's bounding box, not to the drawing (3 mm
+    beyond it here; +9 % volume on an oblique MRI pair). The result now ends where
+    the drawing does."""
+    truth = _ellipsoid()
+    short = _keep(truth, {2: [9, 13, 17, 21]}).astype(np.uint8)
+    nib.save(nib.Nifti1Image(short, AFFINE), tmp_path / "short.nii.gz")
+    turn = np.radians(45.0)
+    u = np.array([0.0, np.cos(turn), np.sin(turn)])
+    v = np.array([0.0, -np.sin(turn), np.cos(turn)])
+    step, size = 0.5, 160
+    affine = np.eye(4)
+    affine[:3, 0], affine[:3, 1], affine[:3, 2] = [1.0, 0, 0], step * u, step * v
+    affine[:3, 3] = np.array([16.0, 22.0, 30.0]) - step * (size - 1) / 2 * (u + v)
+    r, c = np.meshgrid(np.arange(size), np.arange(size), indexing="ij")
+    world = affine[:3, 3] + r[..., None] * affine[:3, 1] + c[..., None] * affine[:3, 2]
+    inside = (8 / 17) ** 2 + ((world[..., 1] - 22) / 13) ** 2 + ((world[..., 2] - 30) / 22) ** 2
+    sagittal = (inside < 1)[None].astype(np.uint8)
+    nib.save(nib.Nifti1Image(sagittal, affine), tmp_path / "sagittal.nii.gz")
+    drawn_z = world[..., 2][inside < 1]
+    files = [str(tmp_path / "short.nii.gz"), str(tmp_path / "sagittal.nii.gz")]
+    assert main(["run", *files, "-o", str(tmp_path / "out"), "-q"]) == 0
+    z = trimesh.load(tmp_path / "out" / "mesh.stl").vertices[:, 2]
+    assert z.min() > drawn_z.min() - 1.5 and z.max() < drawn_z.max() + 1.5, (z.min(), z.max())

@@ -109,33 +109,21 @@ def drawn_beyond(
     if step < 0:  # along the normal the view's first plane is its last
         ends_mm.reverse()
 
-    def extent(corners: NDArray[np.float64]) -> tuple[float, float]:
-        along = corners @ normal
-        return float(along.min()), float(along.max())
-
     spans: dict[int, list[tuple[float, float]]] = {}
     for axis, planes in views.items():
         a, b = in_plane_axes(axis)
         for index, mask in planes:
             if mask.any():
-                rows = np.flatnonzero(mask.any(axis=1))
-                cols = np.flatnonzero(mask.any(axis=0))
-                corners = np.zeros((4, 3))
-                corners[:, axis] = index
-                corners[:, a] = np.repeat([rows[0] - 0.5, rows[-1] + 0.5], 2)
-                corners[:, b] = np.tile([cols[0] - 0.5, cols[-1] + 0.5], 2)
-                world = corners @ affine[:3, :3].T + affine[:3, 3]
-                spans.setdefault(axis, []).append(extent(world))
+                origin = affine[:3, :3] @ np.eye(3)[axis] * index + affine[:3, 3]
+                steps = (affine[:3, a], affine[:3, b])
+                spans.setdefault(axis, []).append(_extent(mask, origin, steps, normal))
     for n, view in enumerate(oblique):
         for _, pose, mask in view.planes:
             if mask.any():
-                pixels = np.argwhere(mask)
-                rows, cols = pixels[:, 0], pixels[:, 1]
-                corners = np.array(
-                    [[r, c] for r in (rows.min(), rows.max()) for c in (cols.min(), cols.max())],
-                    dtype=np.float64,
+                steps = (pose.affine[:3, 0], pose.affine[:3, 1])
+                spans.setdefault(-1 - n, []).append(
+                    _extent(mask, pose.affine[:3, 3], steps, normal)
                 )
-                spans.setdefault(-1 - n, []).append(extent(pose.to_world(corners)))
     if main not in spans:
         return None
     first = min(lo for lo, _ in spans[main]) - ends_mm[0]
@@ -173,3 +161,25 @@ def end_reach(positions: list[float], voxel: float, own_gap: bool) -> tuple[floa
     gap = smallest_gap(positions) if own_gap else None
     reach = gap / 2 if gap is not None else voxel
     return reach, reach
+
+
+def _extent(
+    mask: NDArray[np.bool_],
+    origin: NDArray[np.float64],
+    steps: tuple[NDArray[np.float64], NDArray[np.float64]],
+    normal: NDArray[np.float64],
+) -> tuple[float, float]:
+    """Where a plane's drawn pixels reach along ``normal`` (mm): pixel ``(r, c)`` centred
+    at ``origin + r * steps[0] + c * steps[1]``. Taken on each row's first and last drawn
+    pixel (the reach is linear along a row), not on the drawing's bounding box: a plane
+    whose pixel axes are turned about its normal reached beyond its drawing by its box's
+    corners (16 mm on a sagittal series rotated 45°)."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    drawn = mask[rows]
+    first = drawn.argmax(axis=1)
+    last = drawn.shape[1] - 1 - drawn[:, ::-1].argmax(axis=1)
+    r = np.concatenate([rows, rows]).astype(np.float64)
+    c = np.concatenate([first, last]).astype(np.float64)
+    along = origin @ normal + r * float(steps[0] @ normal) + c * float(steps[1] @ normal)
+    half = 0.5 * (abs(float(steps[0] @ normal)) + abs(float(steps[1] @ normal)))
+    return float(along.min()) - half, float(along.max()) + half
