@@ -635,9 +635,8 @@ def score_case(
         metrics}, "mean": {...}}`` (:func:`slicerecon.metrics.evaluate`);
         each structure's metrics are also kept on its :class:`StructureResult`.
     """
-    truths: LabelMap | StructureMasks | None = (
-        case.truth if isinstance(case.truth, LabelMap | StructureMasks) else case.labels
-    )
+    truths: Any = case.truth if case.truth is not None else case.labels  # --gt first
+    truths = truths if isinstance(truths, LabelMap | StructureMasks) else None
     scored: dict[str, dict[str, Any]] = {}
     for item in result.reconstructed:
         truth: Any = case.truth

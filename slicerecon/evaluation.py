@@ -18,8 +18,9 @@ from .errors import InputError
 from .io import detect_kind, load_ground_truth
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB
-from .labels import LabelMap
+from .labels import LPS_TO_RAS, LabelMap
 from .metrics import evaluate
+from .sections import Volume
 
 __all__ = ["evaluate_structures", "mean_metrics"]
 
@@ -67,7 +68,9 @@ def evaluate_structures(
     ground_truth : path-like
         A dense label map.
     n_points, seed
-        As for :func:`slicerecon.metrics.evaluate`.
+        As for :func:`slicerecon.metrics.evaluate`. Each prediction is scored in
+        the ground truth's world frame (RAS or LPS; a mesh by the frame it
+        states, :func:`slicerecon.io.world_frame`).
     memory_budget_gb : float, optional
         As for :func:`slicerecon.io.load_input`.
 
@@ -123,8 +126,10 @@ def evaluate_structures(
         if pred_map is not None:
             if any(s.value == structure.value for s in pred_map.structures):
                 pred = pred_map.mask(structure.value)
+                if pred_map.coordinates != truth.coordinates:  # RAS against LPS
+                    pred = Volume(pred.mask, LPS_TO_RAS @ pred.affine)
         elif structure.value in meshes:
-            pred = load_ground_truth(meshes[structure.value])
+            pred = load_ground_truth(meshes[structure.value], frame=truth.coordinates)
         if pred is None:
             missing.append(structure.label)
             continue

@@ -104,6 +104,45 @@ def test_evaluate_prints_metrics_json(
     assert metrics["chamfer_l1_mm"] == pytest.approx(0.0, abs=1e-9)
 
 
+def test_scores_compare_files_of_either_world_frame(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One off-centre ball as a NIfTI (RAS) and as an LPS NRRD: a run's LPS mesh scored
+    against the NIfTI got volume IoU 0.39 (mirrored), and ``run --gt`` of the NRRD with the
+    NIfTI as truth scored mirrored too, exit 0. Every score is now taken in one frame."""
+    import nrrd
+
+    ijk = np.indices((40, 36, 30)).astype(float)
+    ball = ((ijk[0] - 28) ** 2 + (ijk[1] - 20) ** 2 + ((ijk[2] - 15) * 2) ** 2) < 9**2
+    affine = np.diag([1.0, 1.0, 2.0, 1.0])
+    affine[:3, 3] = [10.0, 30.0, -20.0]  # RAS
+    write_nifti(Volume(ball, affine), tmp_path / "ball.nii.gz")
+    lps = np.diag([-1.0, -1.0, 1.0, 1.0]) @ affine
+    header = {
+        "space": "left-posterior-superior",
+        "space directions": lps[:3, :3].T,
+        "space origin": lps[:3, 3],
+    }
+    nrrd.write(str(tmp_path / "ball.nrrd"), ball.astype(np.uint8), header)
+    out = tmp_path / "out"
+    truth = str(tmp_path / "ball.nii.gz")
+    args = ["run", str(tmp_path / "ball.nrrd"), "--slices", "8", "--gt", truth, "-o", str(out)]
+    assert main([*args, "-q"]) == 0
+    scored = json.loads((out / "metrics.json").read_text())
+    assert scored["volume_iou"] > 0.9, scored
+    # a --gt of another shape scores that shape (it was passed over for the input itself)
+    other = np.zeros_like(ball)
+    other[2:8, 2:8, 2:8] = True
+    write_nifti(Volume(other, affine), tmp_path / "other.nii.gz")
+    args[-3] = str(tmp_path / "other.nii.gz")
+    assert main([*args[:-1], str(tmp_path / "other"), "-q"]) == 0
+    assert json.loads((tmp_path / "other" / "metrics.json").read_text())["volume_iou"] < 0.1
+    capsys.readouterr()
+    for prediction in (out / "mesh.stl", out / "labels.seg.nrrd"):
+        assert main(["evaluate", str(prediction), truth, "--n-points", "2000"]) == 0
+        assert json.loads(capsys.readouterr().out)["volume_iou"] > 0.9, prediction
+
+
 # ------------------------------------------------------------------ bad input
 def test_missing_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["run", str(tmp_path / "nope.nii.gz"), "-o", str(tmp_path / "o")]) == 2

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import FormatError, InputError, LabelError, OptionError
+from ..labels import LPS_TO_RAS
 from ..sections import CrossSections, Volume
 from ..selection import parse_selector
 from .limits import DEFAULT_MEMORY_BUDGET_GB, check_budget, check_grid, reading
@@ -43,6 +44,7 @@ __all__ = [
     "load_input",
     "same_frame",
     "series_below",
+    "world_frame",
     "series_of",
 ]
 
@@ -483,6 +485,36 @@ def load_input(
         )
 
 
+def world_frame(path: str | os.PathLike[str]) -> str | None:
+    """The world frame of an input's coordinates, ``"RAS"`` or ``"LPS"``, by its kind:
+    DICOM is LPS, NIfTI and VTI RAS, NRRD its ``space``, a contour file its
+    ``"coordinates"`` (RAS without it), a mesh the frame it states
+    (:func:`slicerecon.io.mesh.mesh_frame`; None when it states none).
+
+    Raises
+    ------
+    InputError
+        What :func:`detect_kind` raises.
+    """
+    with reading(path):
+        kind = detect_kind(path)
+        if kind.kind == "mesh":
+            from .mesh import mesh_frame
+
+            return mesh_frame(kind.path)
+        if kind.kind in DICOM_KINDS:
+            return "LPS"
+        if kind.kind == "nrrd":
+            from .nrrd_header import nrrd_info
+
+            return nrrd_info(kind.path).coordinates
+        if kind.kind == "contours":
+            from .contours import contour_file_frame
+
+            return contour_file_frame(kind.path) or "RAS"
+    return "RAS"
+
+
 def load_ground_truth(
     path: str | os.PathLike[str],
     *,
@@ -490,6 +522,7 @@ def load_ground_truth(
     allow_irregular: bool = False,
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
     union: bool = False,
+    frame: str | None = None,
 ) -> Volume | Any:
     """Read a ground truth (or a prediction) to score against: the one loader for both.
 
@@ -505,6 +538,10 @@ def load_ground_truth(
         A mesh (``.stl`` / ``.ply`` / ``.obj`` / ``.off``) or a dense mask.
     label, allow_irregular, memory_budget_gb, union
         As for :func:`load_input`.
+    frame : {"RAS", "LPS"}, optional
+        The world frame to return it in: from its own (:func:`world_frame`), x
+        and y change sign where the two differ (a mesh that states no frame is
+        taken as it is). Default: its own frame.
 
     Returns
     -------
@@ -514,13 +551,22 @@ def load_ground_truth(
     ------
     InputError
         What :func:`load_input` raises; a contour input (sparse planes).
+    OptionError
+        ``frame`` is neither "RAS" nor "LPS".
     """
+    if frame not in (None, "RAS", "LPS"):
+        raise OptionError(f'frame must be "RAS" or "LPS" (got {frame!r})')
+    own = world_frame(path) if frame is not None else None
+    flip = own is not None and own != frame
     with reading(path):
         if detect_kind(path).kind == "mesh":
             from .mesh import read_mesh
 
             _single_structure(Path(path), parse_selector(label))
-            return read_mesh(path)
+            mesh = read_mesh(path)
+            if flip:
+                mesh.apply_transform(LPS_TO_RAS)
+            return mesh
     data = load_input(
         path,
         label=label,
@@ -533,6 +579,8 @@ def load_ground_truth(
             f"{path} holds contours on some planes; a ground truth must be a dense mask "
             "or a closed mesh"
         )
+    if flip:
+        return Volume(data.mask, LPS_TO_RAS @ data.affine)
     return data
 
 

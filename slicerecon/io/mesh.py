@@ -24,6 +24,7 @@ from .atomic import atomic_path
 __all__ = [
     "MESH_FORMATS",
     "mesh_file_closed",
+    "mesh_frame",
     "read_mesh",
     "write_mesh",
     "voxelize_mesh",
@@ -184,6 +185,29 @@ def _tag_space(path: Path, fmt: str, coordinates: str) -> None:
         else:
             data = b"# " + tag + b"\n" + data
         path.write_bytes(data)
+
+
+def mesh_frame(path: str | os.PathLike[str]) -> str | None:
+    """The world frame a mesh file states, as 3D Slicer records it (:func:`write_mesh`):
+    ``"RAS"`` or ``"LPS"`` from ``SPACE=`` in a binary STL header, a PLY comment or an
+    OBJ comment at its top; None when it states none (OFF, an ASCII STL, a file
+    written elsewhere)."""
+    with Path(path).open("rb") as handle:
+        head = handle.read(4096)
+    fmt = MESH_FORMATS.get(Path(path).suffix.lower())
+    if fmt == "stl":
+        lines = [head[:80]]
+    elif fmt == "ply":
+        lines = head.split(b"end_header")[0].splitlines()
+    elif fmt == "obj":
+        lines = [line for line in head.splitlines()[:8] if line.startswith(b"#")]
+    else:
+        return None
+    for line in lines:
+        for frame in ("RAS", "LPS"):
+            if f"SPACE={frame}".encode() in line:
+                return frame
+    return None
 
 
 def mesh_file_closed(path: str | os.PathLike[str]) -> bool:
