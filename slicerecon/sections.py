@@ -33,6 +33,7 @@ __all__ = [
     "axis_index",
     "in_plane_axes",
     "crop_affine",
+    "world_bounds",
     "Volume",
     "Box",
     "Contour",
@@ -103,6 +104,32 @@ def crop_affine(affine: NDArray[np.float64], lo: ArrayLike) -> NDArray[np.float6
     moved = np.array(affine, dtype=np.float64)
     moved[:3, 3] = moved[:3, :3] @ np.asarray(lo, dtype=np.float64) + moved[:3, 3]
     return moved
+
+
+def world_bounds(
+    mask: NDArray[np.bool_], affine: NDArray[np.float64], first: ArrayLike = (0, 0, 0)
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """World-axis-aligned bounds ``(min, max)``, mm, of the centres of a mask's foreground
+    voxels, ``mask`` being the box of the grid of ``affine`` that starts at voxel
+    ``first``. Exact on an oblique grid too: there the corners of the voxels' index box
+    reach beyond the voxels (19 mm on a liver of a grid turned 20°), so each column's
+    first and last voxel is taken (a world coordinate is linear along a column).
+
+    Raises
+    ------
+    EmptyMaskError
+        The mask holds no foreground.
+    """
+    columns = mask.any(axis=2)
+    if not columns.any():
+        raise EmptyMaskError("the mask is empty: it has no bounds")
+    i, j = np.nonzero(columns)
+    held = mask[i, j]
+    top = held.shape[1] - 1
+    k = np.concatenate([held.argmax(axis=1), top - held[:, ::-1].argmax(axis=1)])
+    ijk = np.column_stack([np.tile(i, 2), np.tile(j, 2), k]) + np.asarray(first, dtype=np.float64)
+    world = ijk @ np.asarray(affine)[:3, :3].T + np.asarray(affine)[:3, 3]
+    return world.min(axis=0), world.max(axis=0)
 
 
 def _spacing(affine: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -220,15 +247,11 @@ class Volume:
         return lo, hi
 
     def bounding_box_mm(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """World-axis-aligned bounds ``(min, max)`` of the foreground voxel centres, mm."""
+        """World-axis-aligned bounds ``(min, max)`` of the foreground voxel centres, mm
+        (:func:`world_bounds`)."""
         lo, hi = self.bounding_box_vox()
-        corners = (
-            np.array([[c[0], c[1], c[2]] for c in np.ndindex(2, 2, 2)], dtype=np.float64)
-            * (hi - 1 - lo)
-            + lo
-        )
-        world = self.index_to_world(corners)
-        return world.min(axis=0), world.max(axis=0)
+        box = self.mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]]
+        return world_bounds(box, self.affine, lo)
 
     def occupied_planes(self, axis: int | str = 2) -> NDArray[np.int64]:
         """Indices of the planes perpendicular to ``axis`` that hold foreground."""

@@ -214,3 +214,18 @@ def test_atomic_writes_get_normal_permissions(tmp_path) -> None:  # type: ignore
         os.umask(umask)
     assert stat.S_IMODE((tmp_path / "a.txt").stat().st_mode) == 0o644
     assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_world_bounds_are_those_of_the_voxels_on_an_oblique_grid() -> None:
+    """On a grid turned 30°, the corners of the voxels' index box reach beyond the
+    voxels: `info` put a liver 19 mm further than its voxels. The bounds are now those
+    of the voxel centres themselves, as ``slicerecon info`` reports them."""
+    turn = np.radians(30.0)
+    affine = np.eye(4)
+    affine[:3, :3] = [[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 2]]
+    ijk = np.indices((30, 30, 10))
+    ball = ((ijk[0] - 15) ** 2 + (ijk[1] - 15) ** 2 + (2 * (ijk[2] - 5)) ** 2) < 64
+    lo, hi = Volume(ball, affine).bounding_box_mm()
+    centres = np.argwhere(ball) @ affine[:3, :3].T + affine[:3, 3]
+    np.testing.assert_allclose(lo, centres.min(axis=0))
+    np.testing.assert_allclose(hi, centres.max(axis=0))

@@ -20,7 +20,7 @@ from scipy import ndimage
 
 from ..errors import EmptyMaskError, LabelError
 from ..labels import check_label_values
-from ..sections import AXIS_NAMES, CrossSections, Volume
+from ..sections import AXIS_NAMES, CrossSections, Volume, world_bounds
 from . import detect_kind, load_input
 from .contours import contour_structures
 from .dicom import dicom_info, read_dicom_seg, read_dicom_series_values
@@ -40,12 +40,9 @@ def _round(values: Any, digits: int = 4) -> list[float]:
     return [round(float(v), digits) for v in np.asarray(values, dtype=np.float64).ravel()]
 
 
-def _box_mm(affine: NDArray[np.float64], lo: NDArray, hi: NDArray) -> dict[str, list[float]]:
-    """World bounds (mm) of the voxel centres in the index box ``[lo, hi)``."""
-    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
-    ijk = lo + corners * (np.asarray(hi) - 1 - np.asarray(lo))
-    world = ijk @ affine[:3, :3].T + affine[:3, 3]
-    return {"min": _round(world.min(axis=0), 3), "max": _round(world.max(axis=0), 3)}
+def _bounds(bounds: tuple[NDArray, NDArray]) -> dict[str, list[float]]:
+    """World bounds (mm) as a record."""
+    return {"min": _round(bounds[0], 3), "max": _round(bounds[1], 3)}
 
 
 def _grid(affine: NDArray[np.float64], shape: tuple[int, ...]) -> dict[str, Any]:
@@ -105,7 +102,6 @@ def describe_label_map(
         box = ndimage.find_objects(mask.astype(np.uint8))[0]
         assert box is not None
         lo = np.array([s.start for s in box]) + first
-        hi = np.array([s.stop for s in box]) + first
         # the slices holding it along each axis, on the box of all
         held = [mask.any(axis=tuple(a for a in range(3) if a != along)) for along in range(3)]
         planes: dict[str, Any]
@@ -130,7 +126,7 @@ def describe_label_map(
                 "voxels": int(count),
                 "volume_mm3": round(count * voxel, 3),
                 "planes": planes,
-                "extent_mm": _box_mm(affine, lo, hi),
+                "extent_mm": _bounds(world_bounds(mask[box], affine, lo)),
             }
         )
     return out
