@@ -282,10 +282,13 @@ def _documented_warning_inputs(root: Path) -> dict[str, tuple[list[str], str]]:
         "no plane crosses it": ([str(root / "thin.nii.gz"), "--slices", "4"], "between"),
         "overlapping segments": ([str(both)], "overlap on"),
         "DICOM output skipped": ([str(alone)], "rtstruct.dcm and seg.dcm not written"),
+        "SEG output skipped": ([str(both)], "seg.dcm not written"),
     }
 
 
-@pytest.mark.parametrize("name", ["one plane", "no plane crosses it", "DICOM output skipped"])
+@pytest.mark.parametrize(
+    "name", ["one plane", "no plane crosses it", "DICOM output skipped", "SEG output skipped"]
+)
 def test_every_documented_warning_reaches_stderr_without_v(
     name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -306,6 +309,7 @@ def test_overlapping_structures_are_said_with_the_summary_not_warned(
     argv, words = _documented_warning_inputs(tmp_path)["overlapping segments"]
     assert main(["run", *argv, "-o", str(tmp_path / "out")]) == 0
     said = capsys.readouterr()
-    assert not [line for line in said.err.splitlines() if line.startswith("warning")]
+    warned = [line for line in said.err.splitlines() if line.startswith("warning")]
+    assert [line for line in warned if "seg.dcm not written" not in line] == []
     (line,) = [x for x in said.out.splitlines() if x.startswith("overlaps: ")]
     assert words in line and "the smallest on top" in line

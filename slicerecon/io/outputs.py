@@ -160,7 +160,8 @@ def write_label_outputs(
         voxel.
     seg : path-like, optional
         The DICOM SEG the structures were read from: ``seg.dcm`` keeps each
-        segment's category and type codes.
+        segment's category and type codes (without ``series``: not written,
+        with a warning, as for an RTSTRUCT).
 
     Returns
     -------
@@ -195,6 +196,13 @@ def write_label_outputs(
                 "%s: rtstruct.dcm and seg.dcm not written: its image series was not found "
                 "beside it (pass the folder that holds both, or the series in one subfolder)",
                 rtstruct,
+            )
+        elif seg is not None:
+            result.skipped["seg"] = "the SEG's image series was not found beside it"
+            logger.warning(
+                "%s: seg.dcm not written: its image series was not found beside it (pass "
+                "the folder that holds both, or the series in one subfolder)",
+                seg,
             )
         return result
     lps = np.asarray(affine, dtype=np.float64)
