@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 import trimesh
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 from scipy import ndimage
 
 from .annotated_planes import MAX_VIEW_DISAGREEMENT, nested_apart, views_disagreement
@@ -47,12 +47,11 @@ from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
 from .errors import InputError, OptionError
-from .evaluation import mean_metrics
+from .evaluation import score_case
 from .inputs import GT_NEEDS_DENSE, axis_upsample
 from .io.limits import PIPELINE_BYTES_PER_VOXEL, check_bytes
 from .io.projections import read_projection_files
 from .labels import LabelMap, Structure, StructureMasks, check_label_values, labels_dtype
-from .metrics import evaluate
 from .metrics.inputs import place
 from .options import ReconstructOptions
 from .partition.planner import Plan, PlanPart
@@ -622,47 +621,6 @@ def _size(item: StructureResult) -> float:
     return float(abs(item.mesh.volume)) if item.mesh is not None else 0.0
 
 
-# ----------------------------------------------------------------------------- score
-def score_case(
-    case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
-) -> dict[str, Any] | None:
-    """Score every reconstructed structure against its own ground truth.
-
-    Returns
-    -------
-    dict or None
-        None without a ground truth. Otherwise ``{"structures": {label:
-        metrics}, "mean": {...}}`` (:func:`slicerecon.metrics.evaluate`);
-        each structure's metrics are also kept on its :class:`StructureResult`.
-    """
-    truths: Any = case.truth if case.truth is not None else case.labels  # --gt first
-    truths = truths if isinstance(truths, LabelMap | StructureMasks) else None
-    scored: dict[str, dict[str, Any]] = {}
-    for item in result.reconstructed:
-        truth: Any = case.truth
-        if truths is not None:
-            if not any(s.value == item.structure.value for s in truths.structures):
-                logger.warning(
-                    "the ground truth holds no structure %s: not scored", item.structure.label
-                )
-                continue
-            truth = truths.mask(item.structure.value)
-        if truth is None:
-            continue
-        item.metrics = evaluate(
-            item.mesh,
-            truth,
-            n_points=config.n_points,
-            seed=config.seed,
-            pred_occupancy=item.occupancy,
-            memory_budget_gb=config.max_memory_gb,
-        ).to_dict()
-        scored[item.structure.label] = item.metrics
-    if not scored:
-        return None
-    return {"structures": scored, "mean": mean_metrics(scored)}
-
-
 # ------------------------------------------------------------------------------- run
 def run_case(
     input_path: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
@@ -725,7 +683,7 @@ def run_case(
 
 
 def reconstruct_structures(
-    source: str | os.PathLike[str] | LabelMap | Volume | tuple[ArrayLike, ArrayLike] | Any,
+    source: str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | LabelMap | Volume | Any,
     config: ReconstructConfig | None = None,
     *,
     score: bool = False,
@@ -735,9 +693,10 @@ def reconstruct_structures(
 
     Parameters
     ----------
-    source : path-like, LabelMap, Volume, nibabel image or (array, affine)
+    source : path-like, list of path-like, LabelMap, Volume, nibabel image or (array, affine)
         Any input ``slicerecon run`` reads (a label map file, a DICOM SEG or
-        RTSTRUCT, a DICOM folder, a contour file; :func:`load_case`), a
+        RTSTRUCT, a DICOM folder, a contour file; :func:`load_case`), several
+        sparse inputs of one study (``run A B``), a
         :class:`~slicerecon.labels.LabelMap`, a
         :class:`~slicerecon.sections.Volume` (one structure), a nibabel image
         (its ``dataobj`` and ``affine``, RAS), or an integer array of shape
@@ -769,8 +728,11 @@ def reconstruct_structures(
         A bad option.
     """
     config = replace(config or ReconstructConfig(), **changes)
-    if isinstance(source, str | os.PathLike):
-        case = load_case(source, config)
+    paths = isinstance(source, list | tuple) and all(
+        isinstance(p, str | os.PathLike) for p in source
+    )
+    if isinstance(source, str | os.PathLike) or (paths and source):
+        case = load_case(source, config)  # one input, or several of one study
     else:
         if isinstance(source, Volume):
             source = (source.mask.astype(np.uint8), source.affine)
@@ -778,6 +740,11 @@ def reconstruct_structures(
             source = (np.asarray(source.dataobj), np.asarray(source.affine))
         if isinstance(source, LabelMap):
             label_map = source
+            check_label_values(
+                label_map.labels,
+                source="the label map",
+                chosen=config.union or bool(config.selectors),
+            )
         else:
             if not isinstance(source, tuple | list) or len(source) != 2:
                 raise InputError(

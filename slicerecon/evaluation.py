@@ -3,14 +3,16 @@
 :func:`mean_metrics` is how a case of several structures is summarised (the
 mean of each metric; a structure's own for one); :func:`evaluate_structures`
 scores the structures of a prediction on disk (a label map, or a run's
-``meshes/``) against a label-map ground truth (``slicerecon evaluate``).
+``meshes/``) against a label-map ground truth (``slicerecon evaluate``);
+:func:`score_case` scores a case just reconstructed (``slicerecon run``).
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,11 +20,18 @@ from .errors import InputError
 from .io import detect_kind, load_ground_truth
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB
-from .labels import LPS_TO_RAS, LabelMap
+from .labels import LPS_TO_RAS, LabelMap, StructureMasks
 from .metrics import evaluate
 from .sections import Volume
 
-__all__ = ["evaluate_structures", "mean_metrics"]
+if TYPE_CHECKING:
+    from .case import CaseReconstruction
+    from .case_input import CaseInput
+    from .reconstruct import ReconstructConfig
+
+__all__ = ["evaluate_structures", "mean_metrics", "score_case"]
+
+logger = logging.getLogger(__name__)
 
 
 def mean_metrics(per_structure: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -147,3 +156,46 @@ def _mesh_value(path: Path) -> int | None:
     """The label value a ``meshes/`` file is named for (``<value>_<name>.<fmt>``)."""
     head = path.name.split(".")[0].split("_")[0]
     return int(head) if head.isdigit() else None
+
+
+def score_case(
+    case: CaseInput, result: CaseReconstruction, config: ReconstructConfig
+) -> dict[str, Any] | None:
+    """Score every reconstructed structure of a case against its own ground truth: a
+    separate one (``--gt``, in the input's world frame) first, else the dense input's own
+    labels; a sparse input without ``--gt`` has none.
+
+    Returns
+    -------
+    dict or None
+        None without a ground truth. Otherwise ``{"structures": {label:
+        metrics}, "mean": {...}}`` (:func:`slicerecon.metrics.evaluate`);
+        each structure's metrics are also kept on its
+        :class:`~slicerecon.case.StructureResult`.
+    """
+    truths: Any = case.truth if case.truth is not None else case.labels  # --gt first
+    truths = truths if isinstance(truths, LabelMap | StructureMasks) else None
+    scored: dict[str, dict[str, Any]] = {}
+    for item in result.reconstructed:
+        truth: Any = case.truth
+        if truths is not None:
+            if not any(s.value == item.structure.value for s in truths.structures):
+                logger.warning(
+                    "the ground truth holds no structure %s: not scored", item.structure.label
+                )
+                continue
+            truth = truths.mask(item.structure.value)
+        if truth is None:
+            continue
+        item.metrics = evaluate(
+            item.mesh,
+            truth,
+            n_points=config.n_points,
+            seed=config.seed,
+            pred_occupancy=item.occupancy,
+            memory_budget_gb=config.max_memory_gb,
+        ).to_dict()
+        scored[item.structure.label] = item.metrics
+    if not scored:
+        return None
+    return {"structures": scored, "mean": mean_metrics(scored)}

@@ -188,6 +188,9 @@ class LabelMap:
     ) -> LabelMap:
         """A label map of an integer array: one structure per non-zero value.
 
+        The values are copied (a later change to ``labels`` does not reach the
+        label map, as for :class:`~slicerecon.sections.Volume`) and read-only.
+
         Parameters
         ----------
         labels : ndarray of shape (I, J, K)
@@ -221,6 +224,9 @@ class LabelMap:
                 f"this array holds {data.max().item():.10g}: renumber its structures"
             )
         values = as_labels(data.astype(np.uint8) if data.dtype.kind == "b" else data)
+        if np.shares_memory(values, data):  # the caller's array stays the caller's
+            values = values.copy()
+        values.flags.writeable = False
         return cls(values, affine, _structures_of(values, names, colours), coordinates)
 
     @property

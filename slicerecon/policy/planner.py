@@ -40,7 +40,7 @@ Reconstruct = Callable[[Box], NDArray[np.bool_]]
 
 
 @lru_cache(maxsize=8)
-def _cached(path: str, device: str) -> tuple[Actor, int]:
+def _cached(path: str, device: str, stamp: tuple[int, int]) -> tuple[Actor, int]:
     actor, meta = load_actor(path, device=device)
     return actor, int(meta.get("max_steps", 8))
 
@@ -50,14 +50,19 @@ def load_policy(
 ) -> tuple[Actor, int]:
     """The actor of a weights file (default: the shipped ``il_rl``) and its training ``max_steps``.
 
-    Loaded actors are cached per (path, device).
+    Loaded actors are cached per (path, device) while the file is unchanged (its
+    modification time and size: weights trained again into one folder are read again).
     """
     path = shipped_weights("il_rl") if weights is None else Path(weights)
     if device not in ("cpu", "cuda"):
         raise OptionError(f"device must be cpu or cuda (got {device!r})")
     if device == "cuda" and not torch.cuda.is_available():
         raise OptionError("device cuda was asked for but CUDA is not available; use cpu")
-    return _cached(str(Path(path).resolve()), device)
+    resolved = Path(path).resolve()
+    stamp = (0, -1)  # a missing file: load_actor says so
+    if resolved.is_file():
+        stamp = (resolved.stat().st_mtime_ns, resolved.stat().st_size)
+    return _cached(str(resolved), device, stamp)
 
 
 def _shift_cut(cut: Cut | None, offset: tuple[int, int, int]) -> Cut | None:

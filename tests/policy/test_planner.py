@@ -60,3 +60,23 @@ def test_geometry_does_not_import_torch() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
     assert "policy" in PLANNERS and np is not None
+
+
+def test_weights_written_again_to_one_path_are_read_again(tmp_path) -> None:  # noqa: ANN001
+    """Actors were cached by path for the whole process: weights trained again into the
+    same folder (from a notebook) planned with the old actor, without a word."""
+    import os
+    import shutil
+
+    from slicerecon.policy.planner import load_policy
+
+    path = tmp_path / "actor.safetensors"
+    shutil.copy(shipped_weights("il"), path)
+    first, _ = load_policy(path)
+    shutil.copy(shipped_weights("ddpg"), path)
+    stamp = path.stat().st_mtime_ns + 10**9  # a later write, even on a coarse clock
+    os.utime(path, ns=(stamp, stamp))
+    second, _ = load_policy(path)
+    weights = [dict(a.state_dict()) for a in (first, second)]
+    assert any(not (weights[0][k] == weights[1][k]).all() for k in weights[0])
+    assert load_policy(path)[0] is second  # unchanged: read once
