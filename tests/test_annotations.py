@@ -1733,3 +1733,25 @@ def test_a_view_on_a_grid_turned_about_its_normal_reaches_as_far_as_its_drawing(
     assert main(["run", *files, "-o", str(tmp_path / "out"), "-q"]) == 0
     z = trimesh.load(tmp_path / "out" / "mesh.stl").vertices[:, 2]
     assert z.min() > drawn_z.min() - 1.5 and z.max() < drawn_z.max() + 1.5, (z.min(), z.max())
+
+
+def test_an_empty_end_plane_of_a_contour_file_leaves_the_other_end_where_it_was(
+    tmp_path: Path,
+) -> None:
+    """Squares every 5 mm from z = 0 to 20 end 2.5 mm beyond both end planes (half their
+    gap). An empty plane 1 mm past the top one (the top marked as ended) moved the
+    *bottom* end to 0.5 mm: the 1 mm gap to the empty plane was taken as the
+    structure's own. Now it only ends the top."""
+    doc = {"format": "slicerecon-contours", "version": 1, "units": "mm", "normal": [0, 0, 1]}
+    square = [[-20.0, -20.0], [20.0, -20.0], [20.0, 20.0], [-20.0, 20.0]]
+    planes = [
+        {"position": z, "polygons": [[[x, y, z] for x, y in square]]} for z in range(0, 21, 5)
+    ]
+    lows = []
+    for extra in ([], [{"position": 21.0, "polygons": []}]):
+        (tmp_path / "squares.json").write_text(json.dumps(dict(doc, planes=planes + extra)))
+        result = reconstruct_structures(tmp_path / "squares.json").reconstructed[0]
+        lows.append(result.mesh.bounds[0, 2])
+        high = result.mesh.bounds[1, 2]
+    assert lows[1] == pytest.approx(lows[0], abs=0.05) and lows[0] == pytest.approx(-2.5, abs=0.3)
+    assert 20.0 < high < 21.0  # the top ends before the empty plane

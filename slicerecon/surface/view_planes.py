@@ -155,9 +155,11 @@ def drawn_beyond(
 
 def end_reach(positions: list[float], voxel: float, own_gap: bool) -> tuple[float, float]:
     """How far a complete view's structure goes on beyond its first and last planes (the
-    units of ``positions``): half a voxel (``voxel``), or with ``own_gap`` half the
-    smallest gap between its planes (contours read without an image;
-    :attr:`Annotation.gap_ends`)."""
+    units of ``positions``: those of the planes it is drawn on): half a voxel
+    (``voxel``), or with ``own_gap`` half the smallest gap between its drawn planes
+    (contours read without an image; :attr:`Annotation.gap_ends`). A plane that says
+    it is absent (an empty contour plane) ends it by itself: counted, one 1 mm past
+    the last contour moved the other end from 2.5 to 0.5 mm past its plane."""
     gap = smallest_gap(positions) if own_gap else None
     reach = gap / 2 if gap is not None else voxel
     return reach, reach

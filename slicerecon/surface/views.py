@@ -187,11 +187,13 @@ def views_field(
     own_gap = value in annotation.gap_ends
     # how far a complete view's structure goes on beyond its first and last planes
     reach: dict[int, tuple[float, float] | None] = {
-        axis: end_reach([i for i, _ in planes], END_REACH, own_gap) if complete(axis) else None
+        axis: end_reach([i for i, m in planes if m.any()], END_REACH, own_gap)
+        if complete(axis)
+        else None
         for axis, planes in views.items()
     }
     oblique_reach: list[tuple[float, float] | None] = [
-        end_reach([o for o, _, _ in view.planes], END_REACH * float(spacing.min()), own_gap)
+        end_reach([o for o, _, m in view.planes if m.any()], END_REACH * spacing.min(), own_gap)
         if complete(-1 - n)
         else None
         for n, view in enumerate(oblique)
