@@ -14,6 +14,7 @@ every structure.
 from __future__ import annotations
 
 import logging
+from typing import TYPE_CHECKING
 
 from .errors import (
     DependencyError,
@@ -26,6 +27,20 @@ from .errors import (
     OptionError,
     SlicereconError,
 )
+
+if TYPE_CHECKING:  # what type checkers and editors see; imported lazily at run time
+    from .case import reconstruct_structures
+    from .labels import LabelMap
+    from .reconstruct import ReconstructConfig
+    from .sections import (
+        AXIS_NAMES,
+        Box,
+        Contour,
+        CrossSections,
+        Projection,
+        Projections,
+        Volume,
+    )
 
 __version__ = "0.1.0"
 
@@ -48,6 +63,11 @@ def __getattr__(name: str) -> object:
 
         return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module 'slicerecon' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """Every public name, the lazy ones included (tab completion)."""
+    return sorted({*globals(), *_LAZY})
 
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -35,7 +35,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import trimesh
@@ -753,7 +753,7 @@ def reconstruct_structures(
                     f"(got {type(source).__name__}"
                     + (f" of {len(source)} items)" if isinstance(source, tuple | list) else ")")
                 )
-            array, affine = source
+            array, affine = cast(tuple[Any, Any], source)
             check_label_values(
                 np.asarray(array), source="the array", chosen=config.union or bool(config.selectors)
             )

@@ -185,7 +185,7 @@ def score_case(
                 )
                 continue
             truth = truths.mask(item.structure.value)
-        if truth is None:
+        if truth is None or item.mesh is None:
             continue
         item.metrics = evaluate(
             item.mesh,

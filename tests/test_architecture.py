@@ -228,3 +228,19 @@ def test_no_module_over_800_lines() -> None:
         if (n := len(p.read_text().splitlines())) > 800
     }
     assert not long, long
+
+
+def test_the_package_lists_every_public_name_for_completion_and_type_checkers() -> None:
+    """The data model and entry point are imported on first use; ``dir(slicerecon)``
+    left them out (no tab completion) and type checkers saw ``object`` ("object" not
+    callable on ``reconstruct_structures``)."""
+
+    assert set(slicerecon.__all__) <= set(dir(slicerecon))
+    tree = ast.parse(Path(slicerecon.__file__).read_text())
+    checked = next(
+        node
+        for node in tree.body
+        if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING"
+    )
+    seen = {alias.asname or alias.name for n in checked.body for alias in n.names}
+    assert seen == set(slicerecon._LAZY)

@@ -201,10 +201,10 @@ def views_field(
     # sides where the main view's end is carried on to where other views show the structure
     ends_carried = (False, False)
     if complete(main) and len(counts) > 1:
-        own = reach[main] if main >= 0 else oblique_reach[-1 - main]
-        beyond = drawn_beyond(annotation, views, oblique, main, own, float(spacing.min()), value)
-        if own is not None and beyond is not None:
-            extended = (own[0] + beyond[0], own[1] + beyond[1])
+        ends = reach[main] if main >= 0 else oblique_reach[-1 - main]
+        beyond = drawn_beyond(annotation, views, oblique, main, ends, float(spacing.min()), value)
+        if ends is not None and beyond is not None:
+            extended = (ends[0] + beyond[0], ends[1] + beyond[1])
             ends_carried = (beyond[0] > 0, beyond[1] > 0)
             if main >= 0:
                 reach[main] = extended
