@@ -52,6 +52,7 @@ from .inputs import GT_NEEDS_DENSE, axis_upsample
 from .io.limits import PIPELINE_BYTES_PER_VOXEL, check_bytes
 from .io.projections import read_projection_files
 from .labels import LabelMap, Structure, StructureMasks, check_label_values, labels_dtype
+from .messages import collected_warnings
 from .metrics.inputs import place
 from .options import ReconstructOptions
 from .partition.planner import Plan, PlanPart
@@ -183,6 +184,9 @@ class CaseReconstruction:
         of structures that do not overlap; a value lies in one layer), what
         ``labels.seg.nrrd``, ``seg.dcm`` and ``rtstruct.dcm`` are written from.
         None when no voxel is claimed twice.
+    warnings : list of str
+        What :func:`reconstruct_structures` warned of, one line each, as ``run``
+        prints them (also logged on the ``slicerecon`` logger).
     """
 
     results: list[StructureResult]
@@ -196,6 +200,7 @@ class CaseReconstruction:
     overlap_voxels: int = 0
     timings: dict[str, float] = field(default_factory=dict)
     layers: NDArray[np.integer] | None = None
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def reconstructed(self) -> list[StructureResult]:
@@ -728,38 +733,38 @@ def reconstruct_structures(
         A bad option.
     """
     config = replace(config or ReconstructConfig(), **changes)
+    # a library user sees the warnings without setting up logging
+    with collected_warnings() as said:
+        case = _case_of(source, config)
+        result = reconstruct_case(case, config)
+        if score:
+            score_case(case, result, config)
+    result.warnings = list(said)
+    return result
+
+
+def _case_of(source: Any, config: ReconstructConfig) -> CaseInput:
+    """The case of what :func:`reconstruct_structures` is given."""
     paths = isinstance(source, list | tuple) and all(
         isinstance(p, str | os.PathLike) for p in source
     )
     if isinstance(source, str | os.PathLike) or (paths and source):
-        case = load_case(source, config)  # one input, or several of one study
-    else:
-        if isinstance(source, Volume):
-            source = (source.mask.astype(np.uint8), source.affine)
-        elif hasattr(source, "dataobj") and hasattr(source, "affine"):  # a nibabel image
-            source = (np.asarray(source.dataobj), np.asarray(source.affine))
-        if isinstance(source, LabelMap):
-            label_map = source
-            check_label_values(
-                label_map.labels,
-                source="the label map",
-                chosen=config.union or bool(config.selectors),
-            )
-        else:
-            if not isinstance(source, tuple | list) or len(source) != 2:
-                raise InputError(
-                    "reconstruct_structures takes a path, a LabelMap, a Volume, a nibabel "
-                    "image, or (array, affine) "
-                    f"(got {type(source).__name__}"
-                    + (f" of {len(source)} items)" if isinstance(source, tuple | list) else ")")
-                )
-            array, affine = cast(tuple[Any, Any], source)
-            check_label_values(
-                np.asarray(array), source="the array", chosen=config.union or bool(config.selectors)
-            )
-            label_map = LabelMap.from_array(array, affine)
-        case = case_from_label_map(label_map, config)
-    result = reconstruct_case(case, config)
-    if score:
-        score_case(case, result, config)
-    return result
+        return load_case(source, config)  # one input, or several of one study
+    chosen = config.union or bool(config.selectors)
+    if isinstance(source, Volume):
+        source = (source.mask.astype(np.uint8), source.affine)
+    elif hasattr(source, "dataobj") and hasattr(source, "affine"):  # a nibabel image
+        source = (np.asarray(source.dataobj), np.asarray(source.affine))
+    if isinstance(source, LabelMap):
+        check_label_values(source.labels, source="the label map", chosen=chosen)
+        return case_from_label_map(source, config)
+    if not isinstance(source, tuple | list) or len(source) != 2:
+        raise InputError(
+            "reconstruct_structures takes a path, several paths, a LabelMap, a Volume, a "
+            f"nibabel image, or (array, affine) (got {type(source).__name__}"
+            + (f" of {len(source)} items)" if isinstance(source, tuple | list) else ")")
+        )
+    array, affine = cast(tuple[Any, Any], source)
+    check_label_values(np.asarray(array), source="the array", chosen=chosen)
+    label_map = LabelMap.from_array(array, affine)
+    return case_from_label_map(label_map, config)

@@ -210,3 +210,15 @@ def test_several_inputs_of_one_study_reconstruct_from_python_as_run(tmp_path: Pa
     assert main(["run", *map(str, paths), "-o", str(tmp_path / "out"), "-q"]) == 0
     written = np.asanyarray(nib.load(tmp_path / "out" / "labels.nii.gz").dataobj)
     np.testing.assert_array_equal(result.labels, written)
+
+
+def test_warnings_reach_a_library_user_on_the_result(tmp_path: Path) -> None:
+    """Warnings went to the ``slicerecon`` logger only: in a notebook without logging
+    set up, "drawn on one plane only" and the like never appeared. The result now
+    carries them, one line each, as ``run`` prints them."""
+    thin = _ball(10)
+    thin[2:5, 2:5, 14:16] = 2  # two slices between the kept planes
+    nib.save(nib.Nifti1Image(thin, np.eye(4)), tmp_path / "thin.nii.gz")
+    result = reconstruct_structures(tmp_path / "thin.nii.gz", slices=4)
+    assert any("structure 2" in line and "between" in line for line in result.warnings)
+    assert reconstruct_structures((_ball(10), np.eye(4)), slices=8).warnings == []
