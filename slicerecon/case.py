@@ -121,8 +121,10 @@ class StructureResult:
     metrics : dict or None
         Its metrics against its ground truth (:func:`score_case`).
     sections, projections : CrossSections, Projections or None
-        What it was reconstructed from (its own crop of the shared grid; None
-        for planes along several axes).
+        What it was reconstructed from, on its own crop of the shared grid.
+        Drawn in several views, it was reconstructed from every plane
+        (:mod:`slicerecon.surface.views`) and ``sections`` holds the planes
+        of the main view only.
     volume_mm3 : float
         Volume of its voxels in the written label map's grid, mm³ (before any
         overlap is resolved in that one file).
