@@ -216,7 +216,9 @@ def _load_label_map(
         )
     selectors = config.selectors
     if kind.kind not in LABEL_MAP_KINDS:  # a mesh, voxelised
-        volume = load_input(kind.path, label=config.label, memory_budget_gb=config.max_memory_gb)
+        volume = load_input(
+            kind.path, label=_one_label(config), memory_budget_gb=config.max_memory_gb
+        )
         assert isinstance(volume, Volume)
         return case_from_label_map(_as_label_map(volume), config, kind=kind)
     if kind.kind == "dicom-seg" and selectors and not config.union:
@@ -715,6 +717,15 @@ def _upsampled(annotation: Annotation, axis: int) -> list[int]:
     return shape
 
 
+def _one_label(config: ReconstructConfig) -> int | str | None:
+    """The structure ``--label`` names for an input of one (several as one text, which the
+    reader refuses naming them)."""
+    chosen = config.selectors
+    if len(chosen) == 1:
+        return chosen[0]
+    return ",".join(map(str, chosen)) or None
+
+
 def _with_ground_truth(
     case: CaseInput, ground_truth: str | os.PathLike[str], config: ReconstructConfig
 ) -> CaseInput:
@@ -723,7 +734,7 @@ def _with_ground_truth(
     if len(structures) == 1:
         truth = load_ground_truth(
             ground_truth,
-            label=config.label,
+            label=_one_label(config),
             union=config.union,
             allow_irregular=config.allow_irregular,
             memory_budget_gb=config.max_memory_gb,

@@ -118,10 +118,11 @@ class ReconstructConfig(ReconstructOptions):
     mesh_format: str = "stl"
     """Output mesh format: stl, ply or obj."""
     label: int | str | Sequence[int | str] | None = None
-    """The structures to keep, by number or name, comma-separated (or a list):
-    label values, SEG segment numbers or labels, RTSTRUCT ROI numbers or names
-    (default: every structure)."""
-    roi: str | None = None
+    """The structures to keep, by number or name, comma-separated (or a list, kept
+    as a tuple: a name holding a comma, ``["Kidney, right"]``): label values, SEG
+    segment numbers or labels, RTSTRUCT ROI numbers or names (default: every
+    structure)."""
+    roi: int | str | Sequence[int | str] | None = None
     """RTSTRUCT ROI name or number (another name for ``label``)."""
     union: bool = False
     """Treat every non-zero voxel (every structure) as one structure."""
@@ -148,12 +149,7 @@ class ReconstructConfig(ReconstructOptions):
     @property
     def selectors(self) -> list[int | str]:
         """The structures ``label`` (or ``roi``) names: comma-separated numbers or names."""
-        text = self.label if self.label is not None else self.roi
-        if text is None:
-            return []
-        if isinstance(text, int):
-            return [text]
-        return [v for part in str(text).split(",") if (v := parse_selector(part)) is not None]
+        return _selectors(self.label if self.label is not None else self.roi)
 
     @property
     def projection_files(self) -> list[str]:
@@ -173,7 +169,7 @@ class ReconstructConfig(ReconstructOptions):
         for name in ("label", "roi"):  # a list of values or names, as Python callers give it
             chosen = getattr(self, name)
             if isinstance(chosen, (list, tuple)):
-                object.__setattr__(self, name, ",".join(str(v) for v in chosen) or None)
+                object.__setattr__(self, name, tuple(chosen) or None)
         for name in ("slices", "every"):
             count = getattr(self, name)
             if count is not None and (isinstance(count, bool) or not isinstance(count, Integral)):
@@ -183,9 +179,7 @@ class ReconstructConfig(ReconstructOptions):
         if self.union and (self.label is not None or self.roi is not None):
             raise OptionError("give --label or --union, not both")
         if self.label is not None and self.roi is not None:
-            if [parse_selector(v) for v in str(self.label).split(",")] != [
-                parse_selector(v) for v in str(self.roi).split(",")
-            ]:
+            if _selectors(self.label) != _selectors(self.roi):
                 raise OptionError(f"--label {self.label} and --roi {self.roi} disagree; give one")
         if self.slices is not None and self.every is not None:
             raise OptionError("give --slices or --every, not both")
@@ -249,6 +243,20 @@ class Reconstruction:
     field: Any = None
     """With ``keep_field=True`` and ``method="sdf"``: the signed-distance field the
     mesh was extracted from (:class:`slicerecon.surface.sdf.SdfField`)."""
+
+
+def _selectors(chosen: int | str | Sequence[int | str] | None) -> list[int | str]:
+    """The structures a ``label`` names: a number, comma-separated numbers or names, or a
+    sequence of them (each item one structure, commas and all)."""
+    if chosen is None:
+        return []
+    if isinstance(chosen, int):
+        return [chosen]
+    if isinstance(chosen, str):
+        parts: Sequence[int | str] = chosen.split(",")
+    else:
+        parts = chosen
+    return [v for part in parts if (v := parse_selector(part)) is not None]
 
 
 @contextmanager

@@ -150,7 +150,7 @@ def test_a_malformed_source_is_one_input_error() -> None:
     labels = np.zeros((8, 8, 8), np.uint8)
     for source in (labels, (labels, np.eye(4), 1)):
         with pytest.raises(
-            InputError, match=r"a path, a LabelMap, a Volume, a nibabel image, or \(array, affine\)"
+            InputError, match=r"several paths, a LabelMap, a Volume, a nibabel image, or \(array"
         ):
             reconstruct_structures(source)  # type: ignore[arg-type]
 
@@ -222,3 +222,14 @@ def test_warnings_reach_a_library_user_on_the_result(tmp_path: Path) -> None:
     result = reconstruct_structures(tmp_path / "thin.nii.gz", slices=4)
     assert any("structure 2" in line and "between" in line for line in result.warnings)
     assert reconstruct_structures((_ball(10), np.eye(4)), slices=8).warnings == []
+
+
+def test_a_structure_named_with_a_comma_is_chosen_by_a_list() -> None:
+    """``label=["Kidney, right"]`` was joined with commas and split again: "label
+    'Kidney' is not in ..."."""
+    labels = _ball(12)
+    labels[:, :, :16] *= 2
+    kidneys = LabelMap.from_array(labels, np.eye(4), names={1: "Kidney, right", 2: "Kidney, left"})
+    result = reconstruct_structures(kidneys, slices=6, label=["Kidney, right"])
+    assert [r.structure.name for r in result.results] == ["Kidney, right"]
+    assert ReconstructConfig(label="1,2").selectors == [1, 2]  # text is still split
