@@ -34,7 +34,7 @@ import logging
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, cast
 
 import numpy as np
@@ -734,7 +734,7 @@ def reconstruct_structures(
     OptionError
         A bad option.
     """
-    config = replace(config or ReconstructConfig(), **changes)
+    config = _config_of(config, changes)
     # a library user sees the warnings without setting up logging
     with collected_warnings() as said:
         case = _case_of(source, config)
@@ -745,6 +745,23 @@ def reconstruct_structures(
     return result
 
 
+def _config_of(config: Any, changes: dict[str, Any]) -> ReconstructConfig:
+    """The configuration :func:`reconstruct_structures` is given, or an OptionError."""
+    if isinstance(config, ReconstructOptions) and not isinstance(config, ReconstructConfig):
+        config = ReconstructConfig(**config.to_dict())  # the options bundle alone
+    if config is not None and not isinstance(config, ReconstructConfig):
+        raise OptionError(
+            f"config must be a ReconstructConfig (got {type(config).__name__}); give "
+            "options as keywords: reconstruct_structures(source, slices=12)"
+        )
+    known = {f.name for f in fields(ReconstructConfig)}
+    unknown = sorted(set(changes) - known)
+    if unknown:
+        listed = ", ".join(sorted(known))
+        raise OptionError(f"not an option: {', '.join(unknown)} (options: {listed})")
+    return replace(config or ReconstructConfig(), **changes)
+
+
 def _case_of(source: Any, config: ReconstructConfig) -> CaseInput:
     """The case of what :func:`reconstruct_structures` is given."""
     paths = isinstance(source, list | tuple) and all(
@@ -753,10 +770,17 @@ def _case_of(source: Any, config: ReconstructConfig) -> CaseInput:
     if isinstance(source, str | os.PathLike) or (paths and source):
         return load_case(source, config)  # one input, or several of one study
     chosen = config.union or bool(config.selectors)
+    if config.pixel_spacing is not None:  # refused for a label map file too
+        raise OptionError(
+            "pixel_spacing applies to contours without a grid; a label map keeps its voxels"
+        )
     if isinstance(source, Volume):
         source = (source.mask.astype(np.uint8), source.affine)
     elif hasattr(source, "dataobj") and hasattr(source, "affine"):  # a nibabel image
-        source = (np.asarray(source.dataobj), np.asarray(source.affine))
+        data = np.asarray(source.dataobj)
+        while data.ndim > 3 and data.shape[-1] == 1:  # (X, Y, Z, 1), as a file is read
+            data = data[..., 0]
+        source = (data, np.asarray(source.affine))
     if isinstance(source, LabelMap):
         check_label_values(source.labels, source="the label map", chosen=chosen)
         return case_from_label_map(source, config)

@@ -115,6 +115,11 @@ class ReconstructOptions:
                 f"--interpolation must be one of {', '.join(INTERPOLATIONS)} "
                 f"(got {self.interpolation!r})"
             )
+        for name in ("carve", "cover", "join_drift", "smooth"):  # "no" is a true string
+            value = getattr(self, name)
+            if not isinstance(value, bool) and type(value).__name__ != "bool_":  # numpy's
+                raise OptionError(f"{name} must be True or False (got {value!r})")
+            object.__setattr__(self, name, bool(value))
         if isinstance(self.max_parts, bool) or not isinstance(self.max_parts, int):
             raise OptionError(f"max_parts must be an integer (got {self.max_parts!r})")
         if self.max_parts < 1:

@@ -209,8 +209,15 @@ class ReconstructConfig(ReconstructOptions):
             raise OptionError(
                 f"--pixel-spacing must be a positive number of mm (got {self.pixel_spacing})"
             )
+        for name in ("n_points", "seed"):  # checked here, not after the reconstruction
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, Integral):
+                raise OptionError(f"{name} must be a whole number (got {value!r})")
         if self.n_points < 1:
             raise OptionError(f"n_points must be >= 1 (got {self.n_points})")
+        for name in ("union", "allow_irregular"):
+            if not isinstance(getattr(self, name), bool):
+                raise OptionError(f"{name} must be True or False (got {getattr(self, name)!r})")
 
 
 @dataclass

@@ -233,3 +233,31 @@ def test_a_structure_named_with_a_comma_is_chosen_by_a_list() -> None:
     result = reconstruct_structures(kidneys, slices=6, label=["Kidney, right"])
     assert [r.structure.name for r in result.results] == ["Kidney, right"]
     assert ReconstructConfig(label="1,2").selectors == [1, 2]  # text is still split
+
+
+@pytest.mark.parametrize(
+    ("changes", "words"),
+    [
+        ({"slice": 12}, "not an option: slice"),
+        ({"carve": "no"}, "carve must be True or False"),
+        ({"seed": "a"}, "seed must be a whole number"),
+        ({"config": {"slices": 4}}, "config must be a ReconstructConfig"),
+        ({"pixel_spacing": 0.5}, "a label map keeps its voxels"),
+    ],
+)
+def test_bad_options_from_python_are_one_option_error_before_any_work(
+    changes: dict, words: str
+) -> None:
+    """A misspelt keyword was a TypeError, ``carve="no"`` meant carve, a bad seed failed
+    after the reconstruction when scoring, a dict config an AttributeError, and a pixel
+    spacing was ignored for an array but refused for the same data as a file."""
+    with pytest.raises(OptionError, match=words):
+        reconstruct_structures((_ball(10), np.eye(4)), **changes)
+
+
+def test_the_options_bundle_and_a_4d_nibabel_image_are_taken_as_a_file_is() -> None:
+    from slicerecon.options import ReconstructOptions
+
+    image = nib.Nifti1Image(_ball(10)[..., None], np.eye(4))  # (X, Y, Z, 1)
+    result = reconstruct_structures(image, ReconstructOptions(interpolation="linear"), slices=8)
+    assert result.reconstructed[0].mesh.is_watertight
