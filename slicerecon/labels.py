@@ -175,6 +175,14 @@ class LabelMap:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "affine", check_affine(self.affine))
+        if self.coordinates not in ("RAS", "LPS"):
+            raise LabelError(f'coordinates must be "RAS" or "LPS" (got {self.coordinates!r})')
+        labels = np.asarray(self.labels)
+        if labels.ndim != 3 or labels.dtype.kind not in "iu":
+            raise LabelError(
+                "a LabelMap holds a 3-D integer array (got "
+                f"{labels.dtype} of shape {labels.shape}): make one with LabelMap.from_array"
+            )
 
     @classmethod
     def from_array(

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import trimesh
 
-from .errors import InputError, OptionError
+from .errors import GeometryError, InputError, OptionError
 from .inputs import (
     DEFAULT_SLICES,
     MAX_AXIS_UPSAMPLE,
@@ -39,7 +39,7 @@ from .partition.lookahead import PlanningSurface
 from .partition.planner import Plan, PlanPart, plan_partition, planner_names
 from .plane_detection import parse_annotation
 from .sampling import pool_any, pool_sections, visual_hull
-from .sections import Box, CrossSections, Projections, Volume, axis_index
+from .sections import AXIS_NAMES, Box, CrossSections, Projections, Volume, axis_index
 from .selection import parse_selector
 from .surface.methods import method_names
 from .surface.smooth import taubin_smooth
@@ -252,6 +252,11 @@ class Reconstruction:
     mesh was extracted from (:class:`slicerecon.surface.sdf.SdfField`)."""
 
 
+def _scale(affine: np.ndarray) -> float:
+    """The size of a grid's coordinates (mm): what an affine's tolerance is relative to."""
+    return max(1.0, float(np.abs(affine).max()))
+
+
 def _selectors(chosen: int | str | Sequence[int | str] | None) -> list[int | str]:
     """The structures a ``label`` names: a number, comma-separated numbers or names, or a
     sequence of them (each item one structure, commas and all)."""
@@ -375,6 +380,8 @@ def reconstruct(
         No section holds foreground.
     InputError
         ``sections`` or ``projections`` of another type (given in the wrong order).
+    GeometryError
+        ``projections`` on another grid than ``sections`` (another affine).
     """
     from .surface.part import reconstruct_surface
 
@@ -384,6 +391,13 @@ def reconstruct(
             f"(got {type(sections).__name__}, {type(projections).__name__}): make them with "
             "slicerecon.reconstruct.prepare_inputs"
         )
+    for view in projections:  # same shape but another grid was taken without a word
+        if not np.allclose(view.affine, sections.affine, atol=1e-6 * _scale(sections.affine)):
+            raise GeometryError(
+                f"the projection along {AXIS_NAMES[view.axis]} lies on another grid than the "
+                "sections (their affines differ): make both on one grid "
+                "(slicerecon.reconstruct.prepare_inputs)"
+            )
     options = (options or ReconstructOptions()).with_changes(**changes)
     entry = options.method_entry
     if not entry.per_part:

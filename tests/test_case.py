@@ -261,3 +261,12 @@ def test_the_options_bundle_and_a_4d_nibabel_image_are_taken_as_a_file_is() -> N
     image = nib.Nifti1Image(_ball(10)[..., None], np.eye(4))  # (X, Y, Z, 1)
     result = reconstruct_structures(image, ReconstructOptions(interpolation="linear"), slices=8)
     assert result.reconstructed[0].mesh.is_watertight
+
+
+def test_a_label_map_made_directly_refuses_what_from_array_refuses() -> None:
+    """``LabelMap(...)`` took labels of 0.5 (reconstructed as label 1) and any
+    ``coordinates`` text."""
+    with pytest.raises(LabelError, match="integer"):
+        LabelMap(_ball(6) * 0.5, np.eye(4), ())
+    with pytest.raises(LabelError, match="RAS"):
+        LabelMap(_ball(6), np.eye(4), (), "XYZ")

@@ -200,3 +200,18 @@ def test_python_callers_mistakes_get_one_error_that_says_what_to_pass() -> None:
     # a list of structures, as Python callers give it, is the comma-separated selection
     assert ReconstructConfig(label=[3, "Liver"]).selectors == [3, "Liver"]
     assert ReconstructConfig(roi=("GTV",)).selectors == ["GTV"]
+
+
+def test_projections_of_another_grid_are_refused() -> None:
+    """Projections of the right shape on another grid (another affine) were taken as the
+    sections' own, without a word."""
+    from slicerecon.errors import GeometryError
+    from slicerecon.sampling import projections_from_volume
+
+    volume = make_shape("sphere", radius=10.0)
+    sections, _, _ = prepare_inputs(volume, slices=8)
+    moved = volume.affine.copy()
+    moved[:3, 3] += 5.0
+    elsewhere = projections_from_volume(Volume(volume.mask, moved))
+    with pytest.raises(GeometryError, match="another grid"):
+        reconstruct(sections, elsewhere)
