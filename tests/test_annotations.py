@@ -1711,8 +1711,9 @@ def test_a_view_on_a_grid_turned_about_its_normal_reaches_as_far_as_its_drawing(
     """A sagittal file on a grid whose in-plane axes are turned 45° about its normal,
     beside axial slices that stop short of the ends: the axial end was carried on to
     the corners of the sagittal drawing's bounding box, not to the drawing (3 mm
-    beyond it here; +9 % volume on an oblique MRI pair). The result now ends where
-    the drawing does."""
+    beyond it here; +9 % volume on an oblique MRI pair), and, carried on to the
+    drawing itself, left detached blobs. Such a plane does not carry the end: the
+    result stays within the drawing, in one piece."""
     truth = _ellipsoid()
     short = _keep(truth, {2: [9, 13, 17, 21]}).astype(np.uint8)
     nib.save(nib.Nifti1Image(short, AFFINE), tmp_path / "short.nii.gz")
@@ -1733,6 +1734,10 @@ def test_a_view_on_a_grid_turned_about_its_normal_reaches_as_far_as_its_drawing(
     assert main(["run", *files, "-o", str(tmp_path / "out"), "-q"]) == 0
     z = trimesh.load(tmp_path / "out" / "mesh.stl").vertices[:, 2]
     assert z.min() > drawn_z.min() - 1.5 and z.max() < drawn_z.max() + 1.5, (z.min(), z.max())
+    from scipy import ndimage
+
+    labels = np.asanyarray(nib.load(tmp_path / "out" / "labels.nii.gz").dataobj) > 0
+    assert ndimage.label(labels)[1] == 1
 
 
 def test_an_empty_end_plane_of_a_contour_file_leaves_the_other_end_where_it_was(

@@ -86,7 +86,11 @@ def drawn_beyond(
     """How far other views draw a structure beyond the main view's ``reach`` past its
     first and last planes (the main view's units: grid indices, or mm for an oblique
     view), on the sides where that is more than half the main view's gap (at least a
-    voxel, ``voxel`` mm); None, and nothing said, where it is not.
+    voxel, ``voxel`` mm); None where it is not. Only planes whose pixel rows or
+    columns run along the main view's normal count (slices of the grid, a sagittal
+    series of its own): planes tilted to it, or on pixels turned about their normal,
+    carried the end into blobs and slabs beyond every drawing. Drawn beyond on those
+    alone, it is said, and None.
 
     Beyond the main view's ends only the other views' planes show the structure:
     corrected near those planes alone, it came out as slabs on them (a liver drawn
@@ -117,6 +121,7 @@ def drawn_beyond(
                 origin = affine[:3, :3] @ np.eye(3)[axis] * index + affine[:3, 3]
                 steps = (affine[:3, a], affine[:3, b])
                 spans.setdefault(axis, []).append(_extent(mask, origin, steps, normal))
+    upright: set[int] = set(views)  # views whose pixel rows or columns run along the normal
     for n, view in enumerate(oblique):
         for _, pose, mask in view.planes:
             if mask.any():
@@ -124,10 +129,14 @@ def drawn_beyond(
                 spans.setdefault(-1 - n, []).append(
                     _extent(mask, pose.affine[:3, 3], steps, normal)
                 )
+                along = [abs(float(s @ normal)) / float(np.linalg.norm(s)) for s in steps]
+                if max(along) > 1 - 1e-6:
+                    upright.add(-1 - n)
     if main not in spans:
         return None
     first = min(lo for lo, _ in spans[main]) - ends_mm[0]
     last = max(hi for _, hi in spans[main]) + ends_mm[1]
+    aligned = [span for key in upright - {main} for span in spans.get(key, [])]
     others = [span for key, listed in spans.items() if key != main for span in listed]
     below = max([first - lo for lo, _ in others], default=0.0)
     above = max([hi - last for _, hi in others], default=0.0)
@@ -138,16 +147,29 @@ def drawn_beyond(
     limit = max(voxel, gap / 2) + 1e-6
     if max(below, above) <= limit:
         return None
-    logger.warning(
-        "structure %s is drawn on other views up to %.1f mm beyond its %s plane of the "
-        "main view (%d planes): there its end section is carried on to where they show "
-        "it, shaped only near their planes; draw its end on a plane of the main view",
-        value,
-        max(below, above),
-        "last" if above >= below else "first",
-        len(spans[main]),
-    )
-    excess = [below if below > limit else 0.0, above if above > limit else 0.0]
+    below_aligned = max([first - lo for lo, _ in aligned], default=0.0)
+    above_aligned = max([hi - last for _, hi in aligned], default=0.0)
+    excess = [e if e > limit else 0.0 for e in (below_aligned, above_aligned)]
+    sides = [name for name, e in (("first", below), ("last", above)) if e > limit]
+    where = f"{' and '.join(sides)} plane{'s' * (len(sides) > 1)} of its main view"
+    if max(excess) > 0:
+        logger.warning(
+            "structure %s is drawn on other views up to %.1f mm beyond the %s: its end "
+            "section is carried on to their drawings there, shaped only near their planes",
+            value,
+            max(below, above),
+            where,
+        )
+    else:
+        logger.warning(
+            "structure %s is drawn on planes of other orientations up to %.1f mm beyond the "
+            "%s: there only those planes show it, and it comes out as slabs on them; draw "
+            "its end on a plane of the main view",
+            value,
+            max(below, above),
+            where,
+        )
+        return None
     if step < 0:
         excess.reverse()
     return excess[0] / abs(step), excess[1] / abs(step)
