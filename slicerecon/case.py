@@ -508,10 +508,14 @@ def _from_views(
 
 def _main_sections(annotation: Annotation, value: int | None) -> CrossSections | None:
     """The planes (of structure ``value``, or all) that are slices of the annotation's main
-    grid axis, or None when no plane is a slice of the grid (a radial set)."""
+    grid axis (the one most of its drawings lie on: drawn on sagittal and coronal slices
+    only beside others' axial ones, it was refused), or None when no plane is a slice of
+    the grid (a radial set)."""
     planes = annotation.planes if value is None else annotation.planes_of(value)
     counts = [0, 0, 0]
     for plane in planes:
+        if value is not None and not plane.mask(value).any():
+            continue
         axis = annotation.axis_of(plane.pose)
         if axis is not None and annotation.grid_shift(plane.pose, axis) is not None:
             counts[axis] += 1

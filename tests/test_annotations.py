@@ -1760,3 +1760,27 @@ def test_an_empty_end_plane_of_a_contour_file_leaves_the_other_end_where_it_was(
         high = result.mesh.bounds[1, 2]
     assert lows[1] == pytest.approx(lows[0], abs=0.05) and lows[0] == pytest.approx(-2.5, abs=0.3)
     assert 20.0 < high < 21.0  # the top ends before the empty plane
+
+
+def test_a_structure_drawn_only_on_other_views_beside_axial_organs_is_reconstructed(
+    tmp_path: Path,
+) -> None:
+    """Organ 1 drawn on axial slices, organ 2 (above their range) on one sagittal and one
+    coronal slice only, in one label map: refused with "the cross-sections hold no
+    foreground on any plane" (each ran alone with --label)."""
+    x, y, z = np.meshgrid(
+        np.arange(72) - 35.5, np.arange(40) - 19.5, (np.arange(60) - 29.5) * 1.5, indexing="ij"
+    )
+    truth = np.zeros(x.shape, np.uint8)
+    truth[(x / 14) ** 2 + (y / 12) ** 2 + (z / 12) ** 2 <= 1] = 1
+    truth[((x - 20) / 8) ** 2 + (y / 8) ** 2 + ((z - 24) / 8) ** 2 <= 1] = 2
+    drawn = np.zeros_like(truth)
+    drawn[:, :, 22:38:3] = np.where(truth[:, :, 22:38:3] == 1, 1, 0)
+    drawn[55] = np.where(truth[55] == 2, 2, drawn[55])
+    drawn[:, 19] = np.where(truth[:, 19] == 2, 2, drawn[:, 19])
+    affine = np.diag([1.0, 1.0, 1.5, 1.0])
+    nib.save(nib.Nifti1Image(drawn, affine), tmp_path / "two.nii.gz")
+    assert main(["run", str(tmp_path / "two.nii.gz"), "-o", str(tmp_path / "out"), "-q"]) == 0
+    labels = np.asanyarray(nib.load(tmp_path / "out" / "labels.nii.gz").dataobj)
+    for value in (1, 2):
+        assert _iou(labels == value, truth == value) > 0.6, value
