@@ -33,6 +33,7 @@ __all__ = [
     "axis_index",
     "in_plane_axes",
     "crop_affine",
+    "line_ends",
     "world_bounds",
     "Volume",
     "Box",
@@ -120,16 +121,24 @@ def world_bounds(
     EmptyMaskError
         The mask holds no foreground.
     """
-    columns = mask.any(axis=2)
-    if not columns.any():
+    ends = line_ends(mask)
+    if not ends.size:
         raise EmptyMaskError("the mask is empty: it has no bounds")
-    i, j = np.nonzero(columns)
-    held = mask[i, j]
-    top = held.shape[1] - 1
-    k = np.concatenate([held.argmax(axis=1), top - held[:, ::-1].argmax(axis=1)])
-    ijk = np.column_stack([np.tile(i, 2), np.tile(j, 2), k]) + np.asarray(first, dtype=np.float64)
+    ijk = ends + np.asarray(first, dtype=np.float64)
     world = ijk @ np.asarray(affine)[:3, :3].T + np.asarray(affine)[:3, 3]
     return world.min(axis=0), world.max(axis=0)
+
+
+def line_ends(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """The indices, shape (2 N, mask.ndim), of the first and last foreground element of
+    each of the N lines along the mask's last axis that hold any: where a function
+    linear in the indices is least and greatest over the foreground (the bounds of
+    :func:`world_bounds`, a plane's reach along a normal)."""
+    lines = np.nonzero(mask.any(axis=-1))
+    held = mask[lines]
+    top = held.shape[-1] - 1
+    last = np.concatenate([held.argmax(axis=-1), top - held[:, ::-1].argmax(axis=-1)])
+    return np.column_stack([*(np.tile(index, 2) for index in lines), last])
 
 
 def _spacing(affine: NDArray[np.float64]) -> NDArray[np.float64]:

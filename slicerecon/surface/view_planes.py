@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..annotation import Annotation, PlanePose, smallest_gap, window
-from ..sections import in_plane_axes
+from ..sections import in_plane_axes, line_ends
 
 __all__ = ["END_REACH", "ObliqueView", "drawn_beyond", "end_reach", "views_of"]
 
@@ -198,12 +198,7 @@ def _extent(
     pixel (the reach is linear along a row), not on the drawing's bounding box: a plane
     whose pixel axes are turned about its normal reached beyond its drawing by its box's
     corners (16 mm on a sagittal series rotated 45°)."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    drawn = mask[rows]
-    first = drawn.argmax(axis=1)
-    last = drawn.shape[1] - 1 - drawn[:, ::-1].argmax(axis=1)
-    r = np.concatenate([rows, rows]).astype(np.float64)
-    c = np.concatenate([first, last]).astype(np.float64)
-    along = origin @ normal + r * float(steps[0] @ normal) + c * float(steps[1] @ normal)
+    rc = line_ends(mask)
+    along = origin @ normal + rc @ np.array([steps[0] @ normal, steps[1] @ normal])
     half = 0.5 * (abs(float(steps[0] @ normal)) + abs(float(steps[1] @ normal)))
     return float(along.min()) - half, float(along.max()) + half
