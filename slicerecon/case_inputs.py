@@ -41,7 +41,7 @@ from .io.labelmap import LABEL_MAP_KINDS, read_label_map, read_seg_masks
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB, check_grid
 from .io.nrrd import nrrd_info, read_nrrd_masks
 from .io.rtstruct import read_rtstruct_annotation
-from .labels import LPS_TO_RAS, LabelMap, Structure, StructureMasks, labels_dtype
+from .labels import LabelMap, Structure, StructureMasks, labels_dtype
 from .plane_detection import (
     MIN_GAPS_WARNED,
     PlaneReading,
@@ -752,13 +752,7 @@ def _with_ground_truth(
         memory_budget_gb=config.max_memory_gb,
     )
     assert truth_map is not None
-    if truth_map.coordinates != case.annotation.coordinates:
-        truth_map = replace(
-            truth_map,
-            affine=LPS_TO_RAS @ truth_map.affine,
-            coordinates=case.annotation.coordinates,
-        )
-    return replace(case, truth=truth_map)
+    return replace(case, truth=truth_map.in_frame(case.annotation.coordinates))
 
 
 def reading_of(

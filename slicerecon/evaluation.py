@@ -20,9 +20,8 @@ from .errors import InputError
 from .io import detect_kind, load_ground_truth
 from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB
-from .labels import LPS_TO_RAS, LabelMap, StructureMasks
+from .labels import LabelMap, StructureMasks
 from .metrics import evaluate
-from .sections import Volume
 
 if TYPE_CHECKING:
     from .case import CaseReconstruction
@@ -126,7 +125,8 @@ def evaluate_structures(
             "label map or a meshes/ directory"
         )
     else:
-        pred_map = read_label_map(pred_path, memory_budget_gb=budget)
+        read = read_label_map(pred_path, memory_budget_gb=budget)
+        pred_map = None if read is None else read.in_frame(truth.coordinates)  # RAS or LPS
     scored: dict[str, dict[str, Any]] = {}
     missing: list[str] = []
     for structure in truth.structures:
@@ -135,8 +135,6 @@ def evaluate_structures(
         if pred_map is not None:
             if any(s.value == structure.value for s in pred_map.structures):
                 pred = pred_map.mask(structure.value)
-                if pred_map.coordinates != truth.coordinates:  # RAS against LPS
-                    pred = Volume(pred.mask, LPS_TO_RAS @ pred.affine)
         elif structure.value in meshes:
             pred = load_ground_truth(meshes[structure.value], frame=truth.coordinates)
         if pred is None:

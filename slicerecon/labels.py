@@ -247,6 +247,16 @@ class LabelMap:
         """The voxels of one structure."""
         return Volume(self.labels == value, self.affine)
 
+    def in_frame(self, coordinates: str) -> LabelMap:
+        """The same label map in world frame ``coordinates`` ("RAS" or "LPS": x and y
+        change sign where it is in the other)."""
+        if coordinates == self.coordinates:
+            return self
+        if coordinates not in ("RAS", "LPS"):
+            raise LabelError(f'coordinates must be "RAS" or "LPS" (got {coordinates!r})')
+        # LPS_TO_RAS is its own inverse
+        return LabelMap(self.labels, LPS_TO_RAS @ self.affine, self.structures, coordinates)
+
     def union(self) -> Volume:
         """Every structure together (``--union``)."""
         return Volume(self.labels != 0, self.affine)
