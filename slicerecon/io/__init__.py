@@ -497,21 +497,25 @@ def world_frame(path: str | os.PathLike[str]) -> str | None:
         What :func:`detect_kind` raises.
     """
     with reading(path):
-        kind = detect_kind(path)
-        if kind.kind == "mesh":
-            from .mesh import mesh_frame
+        return _frame_of(detect_kind(path))
 
-            return mesh_frame(kind.path)
-        if kind.kind in DICOM_KINDS:
-            return "LPS"
-        if kind.kind == "nrrd":
-            from .nrrd_header import nrrd_info
 
-            return nrrd_info(kind.path).coordinates
-        if kind.kind == "contours":
-            from .contours import contour_file_frame
+def _frame_of(kind: InputKind) -> str | None:
+    """:func:`world_frame` of an input whose kind is known."""
+    if kind.kind == "mesh":
+        from .mesh import mesh_frame
 
-            return contour_file_frame(kind.path) or "RAS"
+        return mesh_frame(kind.path)
+    if kind.kind in DICOM_KINDS:
+        return "LPS"
+    if kind.kind == "nrrd":
+        from .nrrd_header import nrrd_info
+
+        return nrrd_info(kind.path).coordinates
+    if kind.kind == "contours":
+        from .contours import contour_file_frame
+
+        return contour_file_frame(kind.path) or "RAS"
     return "RAS"
 
 
@@ -556,10 +560,11 @@ def load_ground_truth(
     """
     if frame not in (None, "RAS", "LPS"):
         raise OptionError(f'frame must be "RAS" or "LPS" (got {frame!r})')
-    own = world_frame(path) if frame is not None else None
-    flip = own is not None and own != frame
     with reading(path):
-        if detect_kind(path).kind == "mesh":
+        kind = detect_kind(path)
+        own = _frame_of(kind) if frame is not None else None
+        flip = own is not None and own != frame
+        if kind.kind == "mesh":
             from .mesh import read_mesh
 
             _single_structure(Path(path), parse_selector(label))
