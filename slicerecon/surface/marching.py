@@ -299,6 +299,11 @@ def signed_volume(vertices: NDArray[np.float64], faces: NDArray[np.integer]) -> 
     return float((a[:, 0] * cross_x + a[:, 1] * cross_y + a[:, 2] * cross_z).sum() / 6.0)
 
 
+AT_SAMPLE = 1e-3
+"""Vertices nearer a field sample than this many voxels (along each axis) are that
+sample's (:func:`_merge_at_samples`)."""
+
+
 def march_field(
     field: NDArray[np.float32], affine: NDArray[np.float64], *, repair: bool = True
 ) -> trimesh.Trimesh:
@@ -307,7 +312,8 @@ def march_field(
     ``field`` (negative inside) must be finite, positive on every border sample
     and never exactly 0, as :func:`slicerecon.surface.sdf.sdf_mesh` makes it;
     then no padding, flipping or copying is needed. :func:`field_to_mesh` is
-    the checked, general entry point.
+    the checked, general entry point. Vertices that fall on one sample (a
+    sample on the surface, to a hair) are one vertex (:func:`_merge_at_samples`).
 
     In rare sample configurations scikit-image's marching cubes emits edges
     shared by four faces. With ``repair`` (the default) the mesh is checked and,
@@ -324,7 +330,9 @@ def march_field(
     """
     values = np.asarray(field, dtype=np.float32)
     aff = check_affine(affine)
-    mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
+    mesh = _merge_at_samples(
+        _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False), aff
+    )
     if not repair:
         return mesh
 
@@ -344,12 +352,49 @@ def march_field(
         for corner in _block_corners(values).values():  # views of ``values``
             added += int(np.count_nonzero(blocks & (corner >= 0)))
             np.minimum(corner, inside_value, out=corner, where=blocks)
-        mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
+        mesh = _merge_at_samples(
+            _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False),
+            aff,
+        )
         edges, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
         if np.all(counts == 2):
             break
     logger.debug("marching cubes: %d samples made inside to resolve non-manifold edges", added)
     return mesh
+
+
+def _merge_at_samples(mesh: trimesh.Trimesh, affine: NDArray[np.float64]) -> trimesh.Trimesh:
+    """The mesh with the vertices that lie on one field sample merged into one.
+
+    Each marching-cubes vertex lies on its own cell edge, but a sample within a hair
+    of the surface (1e-7 mm against a far neighbour) puts the vertices of several of
+    its edges on one point. They stay distinct vertices in memory, and a file's
+    float32 coordinates merge them: an edge of four faces in the written STL (a
+    tilted contour stack with sagittal and coronal contours). Merged here, such a
+    pinch is seen and mended by :func:`march_field`; faces left with two equal
+    corners are dropped.
+    """
+    vertices = np.asarray(mesh.vertices)
+    to_index = np.linalg.inv(affine)
+    voxels = vertices @ to_index[:3, :3].T + to_index[:3, 3]
+    nearest = np.rint(voxels)
+    at = np.flatnonzero(np.all(np.abs(voxels - nearest) < AT_SAMPLE, axis=1))
+    if at.size < 2:
+        return mesh
+    _, first, group = np.unique(
+        nearest[at].astype(np.int64), axis=0, return_index=True, return_inverse=True
+    )
+    if first.size == at.size:
+        return mesh
+    target = np.arange(len(vertices))
+    target[at] = at[first][group.ravel()]
+    faces = target[np.asarray(mesh.faces)]
+    whole = (
+        (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    )
+    merged = trimesh.Trimesh(vertices=vertices, faces=faces[whole], process=False)
+    merged.remove_unreferenced_vertices()
+    return merged
 
 
 def _check_step(step_size: int) -> int:
