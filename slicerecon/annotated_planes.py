@@ -19,12 +19,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .annotation import AnnotatedPlane, Annotation, PlanePose, plane_pose, smallest_gap
+from .crossings import crossing_points, drawn_at
 from .errors import OptionError
 from .sections import AXIS_NAMES
 
 __all__ = [
     "COMBINED_PAD",
-    "MAX_VIEW_DISAGREEMENT",
     "NESTED_SHARE",
     "check_drawings_meet",
     "covering_grid",
@@ -32,7 +32,6 @@ __all__ = [
     "merge_repeated_planes",
     "nested_apart",
     "planes_of_each_structure",
-    "views_disagreement",
     "warn_coinciding",
 ]
 
@@ -42,9 +41,6 @@ _EPS_MM = 1e-3
 """Planes closer than this (mm) are one plane."""
 COMBINED_PAD = 3
 """Voxels kept around every input's drawn pixels on the grid of several inputs."""
-MAX_VIEW_DISAGREEMENT = 0.2
-"""Share of the voxels where two views' planes meet on which they may disagree before a
-warning says so (hand-drawn views differ by a voxel or two at their edges)."""
 
 
 def planes_of_each_structure(annotation: Annotation, source: Any) -> Annotation:
@@ -524,46 +520,6 @@ def merge_repeated_planes(
     return replace(annotation, planes=tuple(p for p, _ in kept.values()))
 
 
-def views_disagreement(annotation: Annotation, value: int) -> tuple[int, int]:
-    """Where planes of two orientations meet, how often their drawings of a structure differ.
-
-    Two planes that are not parallel meet on a line; both say there whether the
-    structure is present. The line is sampled at the finer plane's pixel size
-    where it crosses both planes' pixels, and each plane is read at its nearest
-    pixel: planes of any grid, spacing or orientation are compared.
-
-    Parameters
-    ----------
-    annotation : Annotation
-    value : int
-        The structure.
-
-    Returns
-    -------
-    (differ, drawn) : tuple of int
-        Samples on those lines where the two drawings differ, and where either
-        holds the structure.
-    """
-    planes = [p for p in annotation.planes if p.annotates(value)]
-    normals = np.array([p.pose.normal for p in planes]).reshape(-1, 3)
-    to_pixels = [np.linalg.inv(p.pose.affine) for p in planes]
-    limit = np.sin(np.radians(0.5))
-    differ = drawn = 0
-    for n, a in enumerate(planes):
-        crossing = np.linalg.norm(np.cross(normals[n], normals[n + 1 :]), axis=1) >= limit
-        for m in np.flatnonzero(crossing):  # parallel planes do not meet
-            k = n + 1 + int(m)
-            b = planes[k]
-            world = _crossing(a, b, to_pixels[n], to_pixels[k])
-            if world is None:
-                continue
-            one = _drawn_at(a, value, to_pixels[n], world)
-            two = _drawn_at(b, value, to_pixels[k], world)
-            differ += int(np.count_nonzero(one != two))
-            drawn += int(np.count_nonzero(one | two))
-    return differ, drawn
-
-
 COINCIDING_DICE = 0.5
 """Two structures of different inputs coincide when, where their planes cross, their
 drawings have at least this Dice: perhaps one structure given two values."""
@@ -624,12 +580,12 @@ def warn_coinciding(
                     counts[1] += int(np.count_nonzero(a.masks[x]))
                     counts[2] += int(np.count_nonzero(b.masks[y]))
                 continue
-            world = _crossing(a, b, to_pixels[n], to_pixels[k])
+            world = crossing_points(a, b, to_pixels[n], to_pixels[k])
             if world is None:
                 continue
             # each structure sampled once per line; a pair's overlap only where both are
-            ones = {x: _drawn_at(a, x, to_pixels[n], world) for x, _ in pairs}
-            twos = {y: _drawn_at(b, y, to_pixels[k], world) for _, y in pairs}
+            ones = {x: drawn_at(a, x, to_pixels[n], world) for x, _ in pairs}
+            twos = {y: drawn_at(b, y, to_pixels[k], world) for _, y in pairs}
             nx = {x: int(np.count_nonzero(v)) for x, v in ones.items()}
             ny = {y: int(np.count_nonzero(v)) for y, v in twos.items()}
             for x, y in pairs:
@@ -663,58 +619,3 @@ def warn_coinciding(
 def _same_pixels(a: PlanePose, b: PlanePose) -> bool:
     """Whether two plane poses are one plane of the same pixels (within 0.01 mm)."""
     return a.shape == b.shape and bool(np.allclose(a.affine, b.affine, atol=0.01))
-
-
-def _crossing(
-    a: AnnotatedPlane,
-    b: AnnotatedPlane,
-    a_inverse: NDArray[np.float64],
-    b_inverse: NDArray[np.float64],
-) -> NDArray[np.float64] | None:
-    """World points (mm) along the line where two non-parallel planes meet, where it
-    crosses both planes' pixels, at the finer pixel size; None where it crosses none."""
-    direction = np.cross(a.pose.normal, b.pose.normal)
-    direction /= np.linalg.norm(direction)
-    point = np.linalg.solve(
-        np.stack([a.pose.normal, b.pose.normal, direction]),
-        [a.pose.offset_mm, b.pose.offset_mm, 0.0],
-    )
-    span = _line_span(a.pose.shape, a_inverse, point, direction)
-    other = _line_span(b.pose.shape, b_inverse, point, direction)
-    lo, hi = max(span[0], other[0]), min(span[1], other[1])
-    if hi <= lo:
-        return None
-    step = float(min(a.pose.pixel_spacing.min(), b.pose.pixel_spacing.min()))
-    return point + np.arange(lo + step / 2, hi, step)[:, None] * direction
-
-
-def _line_span(
-    shape: tuple[int, int],
-    inverse: NDArray[np.float64],
-    point: NDArray[np.float64],
-    direction: NDArray[np.float64],
-) -> tuple[float, float]:
-    """The range of ``t`` where ``point + t direction`` (a line in a plane of ``shape``
-    pixels, ``inverse`` its world → pixel affine) crosses its pixels (edges included)."""
-    start = inverse[:2, :3] @ point + inverse[:2, 3]
-    slope = inverse[:2, :3] @ direction
-    lo, hi = -np.inf, np.inf
-    for axis in range(2):
-        edges = np.array([-0.5, shape[axis] - 0.5]) - start[axis]
-        if abs(slope[axis]) < 1e-12:
-            if not edges[0] <= 0 <= edges[1]:
-                return 0.0, 0.0
-            continue
-        ends = np.sort(edges / slope[axis])
-        lo, hi = max(lo, float(ends[0])), min(hi, float(ends[1]))
-    return lo, hi
-
-
-def _drawn_at(
-    plane: AnnotatedPlane, value: int, inverse: NDArray[np.float64], world: NDArray[np.float64]
-) -> NDArray[np.bool_]:
-    """Whether structure ``value`` is drawn at the plane's pixel nearest each world point
-    (``inverse``: the plane's world → pixel affine)."""
-    pixels = np.rint(world @ inverse[:2, :3].T + inverse[:2, 3]).astype(np.int64)
-    pixels = np.clip(pixels, 0, np.asarray(plane.pose.shape) - 1)
-    return plane.mask(value)[pixels[:, 0], pixels[:, 1]]

@@ -42,10 +42,11 @@ import trimesh
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .annotated_planes import MAX_VIEW_DISAGREEMENT, nested_apart, views_disagreement
+from .annotated_planes import nested_apart
 from .annotation import Annotation
 from .case_inputs import CaseInput, case_from_label_map, load_case
 from .case_outputs import check_outdir, write_case
+from .crossings import warn_views_disagree
 from .errors import InputError, OptionError
 from .evaluation import score_case
 from .inputs import GT_NEEDS_DENSE, axis_upsample
@@ -464,17 +465,9 @@ def _from_views(
     voxels on the written grid are then its mesh rasterized."""
     annotation = case.annotation.of_structure(structure.value)
     own_grid = annotation is not case.annotation
-    differ, drawn = views_disagreement(annotation, structure.value)
-    if drawn and differ > MAX_VIEW_DISAGREEMENT * drawn:
-        logger.warning(
-            "%s: structure %s is drawn differently by its views where their planes meet "
-            "(%d of %d points on those lines differ): the result blends the drawings "
-            "between the planes; check that the views belong to one study and frame",
-            case.source_of(structure.value),
-            structure.label,
-            differ,
-            drawn,
-        )
+    warn_views_disagree(
+        annotation, structure.value, case.source_of(structure.value), structure.label
+    )
     made = views_surface(
         annotation,
         structure.value,

@@ -938,7 +938,9 @@ def test_views_that_disagree_where_they_meet_are_warned_about(
     truth = _ellipsoid()
     from scipy import ndimage
 
-    smaller = ndimage.binary_erosion(truth, iterations=4)  # another, smaller drawing
+    # another drawing, 6 voxels smaller all round (4 were said before the rule looked
+    # at how far from the outlines the views differ, and exact sections were said too)
+    smaller = ndimage.binary_erosion(truth, iterations=6)
     axial = _keep(truth, {2: [5, 9, 13, 17, 21, 25]}).astype(np.uint8)
     nib.save(nib.Nifti1Image(axial, AFFINE), tmp_path / "axial.nii.gz")
     for name, mask in (("agree", truth), ("disagree", smaller)):
@@ -1608,17 +1610,23 @@ def test_other_views_drawn_beyond_the_main_views_ends_carry_its_end_there(
     reaches them: beyond the axial planes only the sagittal plane showed the structure,
     and it came out as a thin fin on it, without a word (IoU 0.80; the axial planes
     alone 0.77). The axial end is now carried on to where the sagittal plane shows it
-    (0.89), and said. Axial planes reaching the ends say nothing."""
+    (0.89). It is said where the sagittal plane shows the structure more than a gap of
+    the axial planes beyond them (no axial plane drew its ends); within a gap, where
+    the structure's end lies between planes as in any sparse drawing, and with axial
+    planes reaching the ends, nothing is said."""
     _axial_and_sagittal_files(tmp_path)
-    truth = _ellipsoid()
-    short = _keep(truth, {2: [9, 13, 17, 21]}).astype(np.uint8)
-    nib.save(nib.Nifti1Image(short, AFFINE), tmp_path / "short.nii.gz")
+    truth = _ellipsoid()  # z slices 5 to 25
+    for name, planes in (("short", [11, 15, 19]), ("within", [9, 13, 17, 21])):
+        drawn = _keep(truth, {2: planes}).astype(np.uint8)
+        nib.save(nib.Nifti1Image(drawn, AFFINE), tmp_path / f"{name}.nii.gz")
     sagittal = str(tmp_path / "sagittal.json")
     ious = {}
     for files, said in (
         (["axial", sagittal], False),
         (["short", sagittal], True),
         (["short"], False),
+        (["within", sagittal], False),
+        (["within"], False),
     ):
         files = [f if f == sagittal else str(tmp_path / f"{f}.nii.gz") for f in files]
         out = tmp_path / str(len(ious))
@@ -1626,7 +1634,8 @@ def test_other_views_drawn_beyond_the_main_views_ends_carry_its_end_there(
         err = capsys.readouterr().err
         assert ("is drawn on other views up to" in err) is said, err
         ious[len(ious)] = _iou(np.asanyarray(nib.load(out / "labels.nii.gz").dataobj) > 0, truth)
-    assert ious[1] > 0.85 and ious[1] > ious[2] + 0.08, ious
+    assert ious[1] > 0.8 and ious[1] > ious[2] + 0.08, ious
+    assert ious[3] > 0.85 and ious[3] > ious[4] + 0.05, ious
 
 
 def test_an_input_given_twice_is_read_once_and_said(
@@ -1784,3 +1793,67 @@ def test_a_structure_drawn_only_on_other_views_beside_axial_organs_is_reconstruc
     labels = np.asanyarray(nib.load(tmp_path / "out" / "labels.nii.gz").dataobj)
     for value in (1, 2):
         assert _iou(labels == value, truth == value) > 0.6, value
+
+
+def test_a_plane_marked_absent_across_another_views_drawing_is_said(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A version 1 contour plane with no polygon says the structure is absent there. Put
+    inside the structure, where a sagittal contour draws it 16 mm across, the result was
+    cut at that plane with a separate cap above it, and nothing was said (the share of
+    disagreeing points over all the lines where planes meet stayed small)."""
+    _axial_and_sagittal_files(tmp_path)
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+
+    def axial(empty: float) -> Path:
+        planes = []
+        for z in (20.0, 30.0, 38.0):
+            s = np.sqrt(1 - ((z - 30) / 22) ** 2)
+            ring = np.stack([24 + 17 * s * np.cos(t), 22 + 13 * s * np.sin(t), np.full_like(t, z)])
+            planes.append({"position": z, "polygons": [ring.T.tolist()]})
+        planes.append({"position": empty, "polygons": []})
+        doc = {"format": "slicerecon-contours", "version": 1, "units": "mm", "planes": planes}
+        path = tmp_path / f"axial_{empty:g}.json"
+        path.write_text(json.dumps({**doc, "normal": [0, 0, 1]}))
+        return path
+
+    for empty, said in ((44.0, True), (54.0, False)):
+        files = [str(axial(empty)), str(tmp_path / "sagittal.json")]
+        assert main(["run", *files, "-o", str(tmp_path / f"o{empty:g}")]) == 0
+        err = capsys.readouterr().err.splitlines()
+        assert not [line for line in err if "drawn differently" in line]
+        err = [line for line in err if "contradict" in line]
+        assert len(err) == int(said), err
+        if said:
+            assert "z = 44.0 mm and x = 16.0 mm" in err[0] and "check both" in err[0]
+
+
+def test_only_the_regions_another_view_continues_are_carried_past_the_main_views_end(
+    tmp_path: Path,
+) -> None:
+    """An arch: two legs drawn on axial slices, its top on one coronal plane between
+    them. The legs' sections were carried straight up past the top as two pillars
+    that no drawing showed (volume +29 %). Only the sections a plane crosses and draws
+    going on are carried now: a sagittal plane through both legs carries them."""
+    shape, radius, bend = (24, 40, 56), 4.0, 12.0
+    x, y, z = np.indices(shape).astype(float)
+    x, y, z = x - 12, y - 20, z - 2  # mm, 1 mm voxels
+    ring = (np.hypot(y, z - 30) - bend) ** 2 + x**2 <= radius**2
+    arch = (ring & (z >= 30)) | (
+        (np.minimum(np.abs(y - bend), np.abs(y + bend)) ** 2 + x**2 <= radius**2)
+        & (z >= 0)
+        & (z < 30)
+    )
+    axial = {2: [4, 10, 16, 22, 28]}  # z = 2 ... 26 mm: the legs only
+    results = {}
+    for name, extra in (("coronal", {1: [20]}), ("sagittal", {0: [12]})):
+        drawn = _keep(arch, {**axial, **extra}).astype(np.uint8)
+        affine = np.eye(4)
+        affine[:3, 3] = [-12, -20, -2]
+        nib.save(nib.Nifti1Image(drawn, affine), tmp_path / f"{name}.nii.gz")
+        out = tmp_path / f"o_{name}"
+        assert main(["run", str(tmp_path / f"{name}.nii.gz"), "-o", str(out), "-q"]) == 0
+        results[name] = np.asanyarray(nib.load(out / "labels.nii.gz").dataobj) > 0
+    coronal, sagittal = (results[k].sum() / arch.sum() for k in ("coronal", "sagittal"))
+    assert coronal < 1.0 and _iou(results["coronal"], arch) > 0.6  # pillars: 1.57 and 0.59
+    assert abs(sagittal - 1) < 0.15 and _iou(results["sagittal"], arch) > 0.8

@@ -28,7 +28,7 @@ got wrong:
   sagittal correction does, and where the complete view ends, a sagittal plane
   that shows the structure going on moves the end;
 * where other views draw the structure well beyond the complete view's first or
-  last plane (:func:`~slicerecon.surface.view_planes.drawn_beyond`), that end is
+  last plane (:func:`~slicerecon.surface.view_planes.carried_ends`), that end is
   carried on to their drawings, weighing :data:`BEYOND_PENALTY` times less
   there, so that their corrections shape it between their planes (it ended half
   a voxel past its plane, and only their planes showed the rest: thin slabs).
@@ -59,7 +59,14 @@ from .across_planes import fill_between
 from .drift import join_drifting_regions
 from .marching import march_field
 from .sdf import SdfField, plane_signed_distance
-from .view_planes import END_REACH, ObliqueView, drawn_beyond, end_reach, views_of
+from .view_planes import (
+    END_REACH,
+    Carry,
+    ObliqueView,
+    carried_ends,
+    end_reach,
+    views_of,
+)
 
 __all__ = ["VIEW_WEIGHT_EXPONENT", "ViewsSurface", "views_field", "views_surface"]
 
@@ -199,22 +206,19 @@ def views_field(
         for n, view in enumerate(oblique)
     ]
     # sides where the main view's end is carried on to where other views show the structure
-    ends_carried = (False, False)
+    ends_carried: tuple[Carry | None, Carry | None] = (None, None)
     if complete(main) and len(counts) > 1:
         ends = reach[main] if main >= 0 else oblique_reach[-1 - main]
-        beyond = drawn_beyond(annotation, views, oblique, main, ends, float(spacing.min()), value)
-        if ends is not None and beyond is not None:
-            extended = (ends[0] + beyond[0], ends[1] + beyond[1])
-            ends_carried = (beyond[0] > 0, beyond[1] > 0)
-            if main >= 0:
-                reach[main] = extended
-            else:
-                oblique_reach[-1 - main] = extended
+        ends_carried = carried_ends(
+            annotation, views, oblique, main, ends, float(spacing.min()), value
+        )
     pad = np.full(3, CROP_PAD, dtype=np.int64)
+    carried = max([carry.reach for carry in ends_carried if carry is not None], default=0.0)
     for axis, extent in reach.items():
         if extent is not None:
-            pad[axis] += int(np.ceil(max(extent)))
+            pad[axis] += int(np.ceil(max(*extent, carried if axis == main else 0.0)))
     extra_mm = max([max(r) for r in oblique_reach if r is not None], default=0.0)
+    extra_mm = max(extra_mm, carried if main < 0 else 0.0)
     pad += np.ceil(extra_mm / spacing).astype(np.int64)
     # not clipped to the grid: a structure may reach beyond a grid that holds only
     # its drawn slices (a SEG of one frame); what lies outside is not written
@@ -248,7 +252,7 @@ def views_field(
                 positions,
                 base,
                 upsample,
-                ends_carried if key == main else (False, False),
+                ends_carried if key == main else (None, None),
             )
         else:
             own, distance = _oblique_view(
@@ -262,7 +266,7 @@ def views_field(
                 oblique_reach[-1 - key],
                 base,
                 upsample,
-                ends_carried if key == main else (False, False),
+                ends_carried if key == main else (None, None),
             )
         if key == main and complete(main):
             base = own
@@ -301,7 +305,7 @@ def _view(
     positions: NDArray[np.float64],
     base: NDArray[np.float32] | None = None,
     upsample: int = 1,
-    ends_carried: tuple[bool, bool] = (False, False),
+    ends_carried: tuple[Carry | None, Carry | None] = (None, None),
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """One view's field and each sample's distance (mm) to its nearest plane.
 
@@ -309,8 +313,9 @@ def _view(
     units) along axis ``along`` and at the voxels along the others. ``reach``:
     how far (index units) a complete view's structure goes on beyond its first
     and last planes; None: an incomplete view, extruded beyond them. ``ends_carried``:
-    the sides where that end was carried on to other views' drawings, and the
-    view weighs less beyond its outer plane (:data:`BEYOND_PENALTY`). Without ``base`` the
+    on each side, the regions of the outer section carried on to other views'
+    drawings, and how far (:func:`~slicerecon.surface.view_planes.carried_ends`); the
+    view weighs less beyond its outer plane there (:data:`BEYOND_PENALTY`). Without ``base`` the
     field is the view's interpolation across its planes; with ``base`` (the
     complete view's field, on the same samples) it is ``base`` corrected by the
     nearest plane's residual (:func:`_corrected`).
@@ -352,10 +357,26 @@ def _view(
             # at and beyond the outer plane the structure ends ``reach`` beyond it:
             # max(d, distance past the end), which keeps the plane's own section
             beyond = samples <= indices[n] + 1e-9 if side == 0 else samples >= indices[n] - 1e-9
-            gap = (np.abs(samples[beyond] - indices[n]) - reach[side]).astype(
-                np.float32
-            ) * np.float32(spacing[axis])
-            field[beyond] = np.maximum(base_n[None], gap[:, None, None])
+            past = np.abs(samples[beyond] - indices[n]).astype(np.float32)
+            step = np.float32(spacing[axis])
+            ended = np.maximum(base_n[None], ((past - reach[side]) * step)[:, None, None])
+            carry = ends_carried[side]
+            if carry is not None and planes[n][1].any():  # its continued regions go further
+                regions = window(planes[n][1] & carry.regions, lo[[a, b]], hi[[a, b]])
+                rest = window(planes[n][1] & ~carry.regions, lo[[a, b]], hi[[a, b]])
+                further = np.maximum(
+                    np.minimum(plane_signed_distance(regions, pixel), far)[None],
+                    ((past - carry.reach) * step)[:, None, None],
+                )
+                if rest.any():
+                    ended = np.maximum(
+                        np.minimum(plane_signed_distance(rest, pixel), far)[None],
+                        ((past - reach[side]) * step)[:, None, None],
+                    )
+                else:
+                    ended = np.full_like(further, far)
+                ended = np.minimum(ended, further)
+            field[beyond] = ended
         else:
             beyond = samples < indices[n] if side == 0 else samples > indices[n]
             field[beyond] = base_n[None]
@@ -372,7 +393,7 @@ def _nearest_mm(
     step: float,
     *,
     penalised: bool,
-    sides: tuple[bool, bool] = (False, False),
+    sides: tuple[object, object] = (None, None),
 ) -> NDArray[np.float32]:
     """Each sample's distance (mm) to a view's nearest plane, :data:`BEYOND_PENALTY` times
     beyond its outer planes where the view is extruded (``penalised``: an incomplete
@@ -380,8 +401,8 @@ def _nearest_mm(
     first plane, after its last)."""
     nearest = np.min(np.abs(samples[:, None] - indices[None, :]), axis=1) * step
     # an extruded or carried-on view weighs less beyond its outer planes
-    nearest[(samples < indices.min()) & (penalised or sides[0])] *= BEYOND_PENALTY
-    nearest[(samples > indices.max()) & (penalised or sides[1])] *= BEYOND_PENALTY
+    nearest[(samples < indices.min()) & (penalised or sides[0] is not None)] *= BEYOND_PENALTY
+    nearest[(samples > indices.max()) & (penalised or sides[1] is not None)] *= BEYOND_PENALTY
     return nearest.astype(np.float32)
 
 
@@ -454,7 +475,7 @@ def _oblique_view(
     reach_mm: tuple[float, float] | None,
     base: NDArray[np.float32] | None = None,
     upsample: int = 1,
-    ends_carried: tuple[bool, bool] = (False, False),
+    ends_carried: tuple[Carry | None, Carry | None] = (None, None),
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """One oblique view's field and distances (mm) on the crop's samples, slab by slab.
 
@@ -475,6 +496,18 @@ def _oblique_view(
         for _, pose, mask in view.planes
     ]
     to_pixels = [np.linalg.inv(pose.affine) for _, pose, _ in view.planes]
+    # an outer plane's continued regions and the rest of its section, where its end is
+    # carried on (:func:`_view`)
+    split: dict[int, tuple[NDArray[np.float32] | None, NDArray[np.float32] | None]] = {}
+    for side, n in ((0, 0), (1, len(view.planes) - 1)):
+        carry, (_, pose, mask) = ends_carried[side], view.planes[n]
+        if carry is not None and mask.any():
+            split[side] = (
+                plane_signed_distance(mask & carry.regions, pose.pixel_spacing),
+                plane_signed_distance(mask & ~carry.regions, pose.pixel_spacing)
+                if (mask & ~carry.regions).any()
+                else None,
+            )
     field = np.empty(size, dtype=np.float32)
     distance = np.empty(size, dtype=np.float32)
     grids = [np.arange(lo[d], lo[d] + size[d], dtype=np.float64) for d in range(3)]
@@ -488,14 +521,19 @@ def _oblique_view(
         else _oblique_residuals(view, images, base, affine, lo, along, upsample, far)
     )
 
-    def sample(n: int, world: NDArray[np.float64]) -> NDArray[np.float32]:
-        if images[n] is None:
+    def sample_image(
+        image: NDArray[np.float32] | None, n: int, world: NDArray[np.float64]
+    ) -> NDArray[np.float32]:
+        if image is None:
             return np.full(world.shape[0], far, dtype=np.float32)
         pix = world @ to_pixels[n][:3, :3].T + to_pixels[n][:3, 3]
         values = ndimage.map_coordinates(
-            images[n], [pix[:, 0], pix[:, 1]], order=1, mode="constant", cval=float(far)
+            image, [pix[:, 0], pix[:, 1]], order=1, mode="constant", cval=float(far)
         )
         return np.minimum(values, far).astype(np.float32)
+
+    def sample(n: int, world: NDArray[np.float64]) -> NDArray[np.float32]:
+        return sample_image(images[n], n, world)
 
     def interpolated(world: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float32]:
         values = np.empty(u.size, dtype=np.float32)
@@ -504,12 +542,29 @@ def _oblique_view(
             sel = np.flatnonzero(slot == j)
             if j == 0 or j == len(offsets):
                 n = 0 if j == 0 else len(offsets) - 1
+                side = int(j > 0)
                 outer = sample(n, world[sel])
                 if reach_mm is None:
                     values[sel] = outer
-                else:
-                    past = (np.abs(u[sel] - offsets[n]) - reach_mm[int(j > 0)]).astype(np.float32)
-                    values[sel] = np.maximum(outer, past)
+                    continue
+                past = np.abs(u[sel] - offsets[n]).astype(np.float32)
+                values[sel] = np.maximum(outer, past - np.float32(reach_mm[side]))
+                if side in split:  # the continued regions go on further
+                    further, rest = split[side]
+                    carry = ends_carried[side]
+                    assert carry is not None
+                    ended = np.maximum(
+                        sample_image(further, n, world[sel]), past - np.float32(carry.reach)
+                    )
+                    if rest is None:
+                        values[sel] = ended
+                    else:
+                        values[sel] = np.minimum(
+                            ended,
+                            np.maximum(
+                                sample_image(rest, n, world[sel]), past - np.float32(reach_mm[side])
+                            ),
+                        )
                 continue
             t = ((u[sel] - offsets[j - 1]) / (offsets[j] - offsets[j - 1])).astype(np.float32)
             values[sel] = (1 - t) * sample(j - 1, world[sel]) + t * sample(j, world[sel])
