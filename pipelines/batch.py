@@ -87,7 +87,7 @@ from slicerecon.results import (
     write_summary,
 )
 
-from .cluster import dask_setup, run_on_dask
+from .cluster import dask_setup, reach_scheduler, run_on_dask
 from .discover import Case, SkippedInput, discover, safe_case_name
 from .publish import clear_stale, sigint_deferred
 from .runner import (
@@ -304,6 +304,8 @@ def run_cases(
         raise OptionError(f"retries must be 0 or more (got {retries})")
     configs = _named_configs(config)
     start = time.perf_counter()
+    if scheduler is not None:
+        reach_scheduler(scheduler)
     out = Path(outdir).resolve()
     out.mkdir(parents=True, exist_ok=True)
     layout = ResultsLayout(out)

@@ -34,7 +34,7 @@ from slicerecon.results import CaseResult
 from .publish import sigint_deferred
 from .runner import Job, failure_result, process_case, record_failed_job
 
-__all__ = ["dask_setup", "run_on_dask"]
+__all__ = ["dask_setup", "reach_scheduler", "run_on_dask"]
 
 logger = logging.getLogger(__name__)
 
@@ -121,6 +121,20 @@ def _import_distributed() -> None:
 
     if chosen != logging.NOTSET:
         log.setLevel(chosen)
+
+
+def reach_scheduler(scheduler: str) -> None:
+    """Connect to the Dask scheduler at ``scheduler`` and leave, before anything is
+    written: an unreachable one is refused in one line (a broken link among the inputs
+    was already recorded as a failed case when the connection failed).
+
+    Raises
+    ------
+    OptionError
+        The scheduler cannot be reached (20 s).
+    """
+    with _dask_client(0, scheduler, 0):
+        pass
 
 
 @contextlib.contextmanager

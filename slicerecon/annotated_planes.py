@@ -437,7 +437,8 @@ def check_drawings_meet(
                 if gap > size / 2:
                     raise OptionError(
                         f"structure {labels.get(value, value)} is drawn {gap:.0f} mm apart in "
-                        f"{a} and {b}, further than half its size ({size:.0f} mm): they are not "
+                        f"{a} and {b}, further than half its size ({size:.0f} mm across, "
+                        f"half {size / 2:.0f} mm): they are not "
                         "views of one structure in one frame; check that the files belong "
                         "to one study, or give them another structure name"
                     )

@@ -48,6 +48,7 @@ from .plane_detection import (
     empty_runs_inside,
     mixed_reading,
     parse_annotation,
+    refuse_sparse_truth,
     structures_reading,
 )
 from .reconstruct import ReconstructConfig
@@ -739,6 +740,7 @@ def _with_ground_truth(
             allow_irregular=config.allow_irregular,
             memory_budget_gb=config.max_memory_gb,
             frame=case.annotation.coordinates,  # a NIfTI truth of a DICOM input: LPS
+            truth=True,
         )
         return replace(case, truth=truth)
     if detect_kind(ground_truth).kind not in LABEL_MAP_KINDS:
@@ -752,6 +754,7 @@ def _with_ground_truth(
         memory_budget_gb=config.max_memory_gb,
     )
     assert truth_map is not None
+    refuse_sparse_truth(truth_map.labels, truth_map.affine, str(ground_truth))
     return replace(case, truth=truth_map.in_frame(case.annotation.coordinates))
 
 

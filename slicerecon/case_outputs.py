@@ -316,6 +316,7 @@ def _write_case_files(
         "planes": plan["sections"]["n_planes"],
         "watertight": bool(written) and all([mesh_file_closed(p) for p in written]),
         "metrics": mean,
+        "missing": [] if metrics is None else metrics.get("missing", []),
         "structures": records,
         "annotation": case.annotation.source,
         "overlap": overlap,

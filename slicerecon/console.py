@@ -159,6 +159,8 @@ def print_run_summary(summary: dict[str, Any], outdir: Path) -> None:
         table = Table("metric", "value", title="quality vs ground truth")
         for key, value in metrics.items():
             table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
+        if summary.get("missing"):  # the mean is over the scored structures only
+            table.add_row("not scored", ", ".join(summary["missing"]))
         console.print(table)
     times = ", ".join(f"{k} {v:.2f}s" for k, v in summary["timings_s"].items())
     console.print(f"time: {times}")

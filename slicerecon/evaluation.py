@@ -22,6 +22,7 @@ from .io.labelmap import LABEL_MAP_KINDS, read_label_map
 from .io.limits import DEFAULT_MEMORY_BUDGET_GB
 from .labels import LabelMap, StructureMasks
 from .metrics import evaluate
+from .plane_detection import refuse_sparse_truth
 
 if TYPE_CHECKING:
     from .case import CaseReconstruction
@@ -104,6 +105,7 @@ def evaluate_structures(
     truth = read_label_map(ground_truth, memory_budget_gb=budget)
     if truth is None or len(truth.structures) < 2:
         return None
+    refuse_sparse_truth(truth.labels, truth.affine, str(ground_truth))
     pred_path = Path(prediction)
     meshes: dict[int, Path] = {}
     pred_map: LabelMap | None = None
@@ -167,8 +169,10 @@ def score_case(
     -------
     dict or None
         None without a ground truth. Otherwise ``{"structures": {label:
-        metrics}, "mean": {...}}`` (:func:`slicerecon.metrics.evaluate`);
-        each structure's metrics are also kept on its
+        metrics}, "mean": {...}, "missing": [label, ...]}``
+        (:func:`slicerecon.metrics.evaluate`): ``missing`` lists the ground
+        truth's structures that were not scored (not reconstructed), left out of
+        the mean. Each structure's metrics are also kept on its
         :class:`~slicerecon.case.StructureResult`.
     """
     truths: Any = case.truth if case.truth is not None else case.labels  # --gt first
@@ -196,4 +200,9 @@ def score_case(
         scored[item.structure.label] = item.metrics
     if not scored:
         return None
-    return {"structures": scored, "mean": mean_metrics(scored)}
+    # the ground truth's structures left unscored (not reconstructed: no planes between
+    # the kept ones) are listed, as evaluate lists them, and left out of the mean
+    missing = (
+        [] if truths is None else [s.label for s in truths.structures if s.label not in scored]
+    )
+    return {"structures": scored, "mean": mean_metrics(scored), "missing": missing}

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import OptionError
+from .errors import InputError, OptionError
 from .sections import AXIS_NAMES, in_plane_axes
 
 __all__ = [
@@ -59,6 +59,7 @@ __all__ = [
     "mixed_reading",
     "structures_reading",
     "parse_annotation",
+    "refuse_sparse_truth",
 ]
 
 MAX_SHEET_RUN = 3
@@ -468,3 +469,33 @@ def _boxed(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
     lo = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[0]) for a in range(3)]
     hi = [int(np.flatnonzero(mask.any(axis=in_plane_axes(a)))[-1]) + 1 for a in range(3)]
     return np.pad(mask[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]], 1)
+
+
+def refuse_sparse_truth(mask: ArrayLike, affine: ArrayLike, what: str) -> None:
+    """Refuse a ground truth that reads as a sparse annotation (:func:`detect_planes`).
+
+    Scored against its few drawn planes, a good reconstruction looked bad (volume
+    IoU 0.33 where it was 0.985) and a sparse input scored against itself looked
+    perfect, without a word.
+
+    Parameters
+    ----------
+    mask : array_like of shape (I, J, K)
+        The ground truth's foreground (every structure).
+    affine : array_like of shape (4, 4)
+        Its voxel index → world mm, for the message.
+    what : str
+        The ground truth, for the message.
+
+    Raises
+    ------
+    InputError
+        When the mask reads as a sparse annotation.
+    """
+    reading = detect_planes(np.asarray(mask) != 0)
+    if not reading.dense:
+        spacing = np.linalg.norm(np.asarray(affine, dtype=np.float64)[:3, :3], axis=0)
+        raise InputError(
+            f"{what} is a {reading.describe(spacing, affine)}, not a dense mask: it is no "
+            "ground truth to score against; pass the dense mask or a closed mesh"
+        )

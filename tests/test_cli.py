@@ -221,7 +221,9 @@ def test_console_script_exit_code_and_debug_traceback(tmp_path: Path) -> None:
         capture_output=True,
         text=True,
     )
-    assert debug.returncode != 0 and "Traceback" in debug.stderr
+    # the traceback, and the exit code of bad input all the same (it was 1; docs/cli.md)
+    assert debug.returncode == 2 and "Traceback" in debug.stderr
+    assert debug.stderr.strip().splitlines()[-1].startswith("error: ")
 
 
 def test_policy_planner_with_shipped_weights(chair_nii: Path, tmp_path: Path) -> None:
@@ -313,3 +315,43 @@ def test_overlapping_structures_are_said_with_the_summary_not_warned(
     assert [line for line in warned if "seg.dcm not written" not in line] == []
     (line,) = [x for x in said.out.splitlines() if x.startswith("overlaps: ")]
     assert words in line and "the smallest on top" in line
+
+
+def test_a_run_that_keeps_every_plane_says_its_scores_test_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A dense mask spanning fewer planes than the default 16 kept them all and printed
+    volume IoU 1 without a word (a 48-voxel torus of ``dataset make``)."""
+    x, y, z = np.indices((30, 30, 14)) - np.array([14.5, 14.5, 6.5])[:, None, None, None]
+    ball = (x / 12) ** 2 + (y / 10) ** 2 + (z / 5.5) ** 2 < 1  # 10 planes along z
+    write_nifti(Volume(ball, np.eye(4)), tmp_path / "ball.nii.gz")
+    assert main(["run", str(tmp_path / "ball.nii.gz"), "-o", str(tmp_path / "all")]) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "is kept" in line]
+    assert len(said) == 1 and "every one of the 10 planes" in said[0] and "--slices" in said[0]
+    run = ["run", str(tmp_path / "ball.nii.gz"), "--slices", "5", "-o", str(tmp_path / "five")]
+    assert main(run) == 0
+    assert "is kept" not in capsys.readouterr().err
+
+
+def test_a_sparse_annotation_is_refused_as_a_ground_truth(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``evaluate`` scored a reconstruction against an annotation on every 3rd slice:
+    volume IoU 0.33 where the true one was 0.985, exit 0. A ground truth that reads as a
+    sparse annotation is refused in one line, by ``evaluate`` and by ``run --gt``."""
+    x, y, z = np.indices((30, 30, 30)) - 14.5
+    ball = x**2 + (y / 0.8) ** 2 + (z / 1.1) ** 2 < 12**2
+    sparse = ball & (np.arange(30) % 3 == 0)[None, None, :]
+    write_nifti(Volume(ball, np.eye(4)), tmp_path / "dense.nii.gz")
+    write_nifti(Volume(sparse, np.eye(4)), tmp_path / "sparse.nii.gz")
+    dense, drawn = str(tmp_path / "dense.nii.gz"), str(tmp_path / "sparse.nii.gz")
+    assert main(["evaluate", dense, dense]) == 0
+    capsys.readouterr()
+    for argv in (
+        ["evaluate", dense, drawn],
+        ["run", drawn, "--gt", drawn, "-o", str(tmp_path / "o")],
+    ):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "sparse annotation" in err[0] and "no ground truth" in err[0]
+    assert not (tmp_path / "o").exists()

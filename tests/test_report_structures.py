@@ -212,3 +212,29 @@ def test_metrics_csv_lists_a_sparse_cases_structures_in_value_order(tmp_path: Pa
         case: [r["structure"] for r in rows if r["case"] == case] for case in ("dense", "sparse")
     }
     assert listed == {"dense": ["2", "7", "40", "mean"], "sparse": ["2", "7", "40"]}
+
+
+def test_a_structure_left_between_the_kept_planes_is_listed_as_not_scored(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Structure 4 lies between the 6 kept planes: ``metrics.json`` left it out of its
+    mean without a word (0.867 over three, 0.650 over four), and the report's
+    ``metrics.csv`` gave its row the status ``ok``. It is now listed under
+    ``missing`` (as ``evaluate`` lists it), printed as not scored, and its row says why."""
+    from slicerecon.cli import main
+
+    x, y, z = np.indices((40, 40, 30))
+    labels = np.zeros((40, 40, 30), np.uint8)
+    for value, (cx, cy) in enumerate([(12, 12), (28, 12), (20, 28)], start=1):
+        labels[((x - cx) ** 2 + (y - cy) ** 2 < 64) & (z >= 2) & (z < 28)] = value
+    labels[((x - 20) ** 2 + (y - 20) ** 2 < 9) & (z >= 8) & (z < 10)] = 4
+    write_label_map(labels, np.eye(4), tmp_path / "four.nii.gz")
+    out = tmp_path / "r" / "four"
+    assert main(["run", str(tmp_path / "four.nii.gz"), "--slices", "6", "-o", str(out)]) == 0
+    assert "not scored" in capsys.readouterr().out
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["missing"] == ["4"] and sorted(metrics["structures"]) == ["1", "2", "3"]
+    write_report(tmp_path / "r")
+    rows = {r["structure"]: r for r in csv.DictReader((tmp_path / "r" / "metrics.csv").open())}
+    assert rows["1"]["status"] == "ok" and rows["4"]["status"] not in ("ok", "")
+    assert rows["4"]["volume_iou"] == ""

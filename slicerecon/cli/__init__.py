@@ -3,7 +3,7 @@
 A thin Typer layer: each command fills a config, calls the library and prints.
 Heavy modules are imported inside the commands so ``slicerecon --help`` is fast.
 Errors the user can fix are printed as one line on stderr with a non-zero exit
-code; ``--debug`` shows the full traceback instead. The commands live in
+code; ``--debug`` shows the full traceback before it (same exit code). The commands live in
 :mod:`~slicerecon.cli.cases` (info, run, batch, evaluate, report,
 evaluate-dataset) and :mod:`~slicerecon.cli.training` (train, dataset); the
 application and the shared options in :mod:`~slicerecon.cli.app`.
@@ -12,6 +12,7 @@ application and the shared options in :mod:`~slicerecon.cli.app`.
 from __future__ import annotations
 
 import sys
+import traceback
 
 import typer
 
@@ -78,8 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         result = app(args=argv, prog_name="slicerecon", standalone_mode=False)
     except SlicereconError as exc:
-        if debug:
-            raise
+        if debug:  # the traceback, then the exit code of bad input all the same
+            traceback.print_exc()
         typer.echo(f"error: {' '.join(str(exc).split())}", err=True)
         return EXIT_INPUT
     except KeyboardInterrupt:
@@ -95,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         if not isinstance(exc, usage_errors):
             raise
         if debug:
-            raise
+            traceback.print_exc()
         typer.echo(_usage_line(exc), err=True)
         return EXIT_INPUT
     if result == 130:  # typer turns a KeyboardInterrupt inside a command into Exit(130)

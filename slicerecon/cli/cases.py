@@ -280,7 +280,10 @@ def batch(
         TimeElapsedColumn(),
         TextColumn("{task.fields[last]}"),
     )
-    with Progress(*columns, console=console, transient=True) as bar:
+    # piped: no bar (its live display left a blank line before an error or "interrupted")
+    with Progress(
+        *columns, console=console, transient=True, disable=not console.is_terminal
+    ) as bar:
         task = bar.add_task("cases", total=None, last="finding cases")
 
         def advance(result: Any, done: int, total: int) -> None:
@@ -403,7 +406,9 @@ def evaluate(
     frame = world_frame(ground_truth) or world_frame(prediction)
     metrics = evaluate_metrics(
         load_ground_truth(prediction, memory_budget_gb=max_memory, frame=frame),
-        load_ground_truth(ground_truth, label=label, memory_budget_gb=max_memory, frame=frame),
+        load_ground_truth(
+            ground_truth, label=label, memory_budget_gb=max_memory, frame=frame, truth=True
+        ),
         n_points=n_points,
         seed=seed,
         memory_budget_gb=max_memory,

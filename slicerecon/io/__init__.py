@@ -527,6 +527,7 @@ def load_ground_truth(
     memory_budget_gb: float = DEFAULT_MEMORY_BUDGET_GB,
     union: bool = False,
     frame: str | None = None,
+    truth: bool = False,
 ) -> Volume | Any:
     """Read a ground truth (or a prediction) to score against: the one loader for both.
 
@@ -546,6 +547,9 @@ def load_ground_truth(
         The world frame to return it in: from its own (:func:`world_frame`), x
         and y change sign where the two differ (a mesh that states no frame is
         taken as it is). Default: its own frame.
+    truth : bool
+        It is the ground truth: a mask that reads as a sparse annotation is
+        refused (:func:`slicerecon.plane_detection.refuse_sparse_truth`).
 
     Returns
     -------
@@ -554,7 +558,8 @@ def load_ground_truth(
     Raises
     ------
     InputError
-        What :func:`load_input` raises; a contour input (sparse planes).
+        What :func:`load_input` raises; a contour input (sparse planes); with
+        ``truth``, a mask that reads as a sparse annotation.
     OptionError
         ``frame`` is neither "RAS" nor "LPS".
     """
@@ -584,6 +589,10 @@ def load_ground_truth(
             f"{path} holds contours on some planes; a ground truth must be a dense mask "
             "or a closed mesh"
         )
+    if truth:
+        from ..plane_detection import refuse_sparse_truth
+
+        refuse_sparse_truth(data.mask, data.affine, str(path))
     if flip:
         return Volume(data.mask, LPS_TO_RAS @ data.affine)
     return data

@@ -176,7 +176,8 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
     -------
     str
         Columns ``case, structure, method, planner, planes, status`` (``ok`` /
-        ``failed``), every metric (full precision, empty when absent),
+        ``failed``; a structure's row: why it was not reconstructed, when it was
+        not), every metric (full precision, empty when absent),
         ``seconds`` (the sum of the stage timings), ``error``. A case with
         several structures has one row per structure (``structure`` is its
         ``<value>_<name>``, ``planes`` the planes holding it) and a row of
@@ -193,6 +194,7 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
         seconds = c.stage_seconds
         rows = [("", c.metrics or {})]
         own_planes = {s.label: s.planes for s in c.structures}
+        own_status = {s.label: s.status for s in c.structures}
         scored = dict(c.structure_metrics or {})
         if scored or len(c.structures) > 1:  # one row per structure (by value), their mean
             labels = [s.label for s in sorted(c.structures, key=lambda s: s.value)]
@@ -208,10 +210,18 @@ def metrics_csv_text(cases: Sequence[CaseResult]) -> str:
                     c.method or "",
                     c.planner or "",
                     "" if planes is None else planes,
-                    "ok" if c.ok else "failed",
+                    _row_status(c.ok, own_status.get(structure, "")),
                     *(repr(metrics[n]) if n in metrics else "" for n in names),
                     "" if seconds is None else repr(round(seconds, 4)),
                     c.error_text,
                 ]
             )
     return buffer.getvalue()
+
+
+def _row_status(ok: bool, structure: str) -> str:
+    """A row's status: the case's (``ok`` / ``failed``), or, in a finished case, why its
+    structure was not reconstructed (``structures.json``'s status)."""
+    if not ok:
+        return "failed"
+    return structure if structure and structure != "reconstructed" else "ok"

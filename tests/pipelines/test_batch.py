@@ -1166,3 +1166,26 @@ def test_a_nrrd_header_with_detached_voxels_is_said_to_be_one_in_run_and_batch(t
     assert len(err) == 1 and "save it as one .nrrd file with attached data" in err[0]
     left = {s.relpath: s.reason for s in discover(tmp_path / "in").skipped}
     assert "separate file (.nhdr)" in left["liver.seg.nhdr"]
+
+
+def test_a_bad_batch_invocation_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Piped, the progress bar's live display printed a blank line before the error."""
+    (tmp_path / "empty").mkdir()
+    assert main(["batch", str(tmp_path / "empty"), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: no cases found") and err.count("\n") == 1
+
+
+@pytest.mark.slow
+def test_an_unreachable_scheduler_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    """A broken link among the inputs was recorded as a failed case (``error.json``)
+    before the connection to the scheduler failed (20 s)."""
+    indir = tmp_path / "in"
+    indir.mkdir()
+    write_nifti(make_shape("sphere", radius=6.0), indir / "ball.nii.gz")
+    (indir / "stolen.nii.gz").symlink_to(tmp_path / "absent.nii.gz")
+    with pytest.raises(OptionError, match="cannot reach the Dask scheduler"):
+        run_batch(indir, tmp_path / "out", CONFIG, scheduler="tcp://127.0.0.1:1", report=False)
+    assert not (tmp_path / "out").exists()
