@@ -175,15 +175,6 @@ def prepare_inputs(
                 slices, every = None, 1
             sections = sample_sections(volume, n=slices, every=every, axis=ax)
             truth = volume
-            if spanned > 1 and len(sections.indices) >= spanned:
-                # nothing is held out: the result is the mask itself, and scores 1
-                logger.warning(
-                    "every one of the %d planes the structure spans along %s is kept: "
-                    "nothing lies between them to reconstruct, so its scores only check "
-                    "that the mesh reproduces the mask; keep fewer with --slices or --every",
-                    spanned,
-                    AXIS_NAMES[ax],
-                )
     elif isinstance(data, CrossSections):
         sections = data
         refuse_plane_options(slices, every, "this input is already sparse")

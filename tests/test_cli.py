@@ -326,11 +326,11 @@ def test_a_run_that_keeps_every_plane_says_its_scores_test_nothing(
     ball = (x / 12) ** 2 + (y / 10) ** 2 + (z / 5.5) ** 2 < 1  # 10 planes along z
     write_nifti(Volume(ball, np.eye(4)), tmp_path / "ball.nii.gz")
     assert main(["run", str(tmp_path / "ball.nii.gz"), "-o", str(tmp_path / "all")]) == 0
-    said = [line for line in capsys.readouterr().err.splitlines() if "is kept" in line]
+    said = [line for line in capsys.readouterr().err.splitlines() if "was kept" in line]
     assert len(said) == 1 and "every one of the 10 planes" in said[0] and "--slices" in said[0]
     run = ["run", str(tmp_path / "ball.nii.gz"), "--slices", "5", "-o", str(tmp_path / "five")]
     assert main(run) == 0
-    assert "is kept" not in capsys.readouterr().err
+    assert "was kept" not in capsys.readouterr().err
 
 
 def test_a_sparse_annotation_is_refused_as_a_ground_truth(
@@ -355,3 +355,22 @@ def test_a_sparse_annotation_is_refused_as_a_ground_truth(
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "sparse annotation" in err[0] and "no ground truth" in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_info_describes_a_sparse_structure_as_an_annotation(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``info --label`` called a structure drawn on 5 axial and 1 sagittal slice a "voxel
+    mask" with 19 occupied planes along z, and its drawn voxels its volume (3,743 mm³
+    against 12,554)."""
+    x, y, z = np.indices((40, 40, 30))
+    ball = (x - 20) ** 2 + (y - 20) ** 2 + ((z - 15) * 1.2) ** 2 < 144
+    drawn = np.zeros(ball.shape, bool)
+    drawn[:, :, ::4], drawn[20] = True, True
+    write_nifti(Volume(ball & drawn, np.eye(4)), tmp_path / "drawn.nii.gz")
+    assert main(["info", str(tmp_path / "drawn.nii.gz"), "--label", "1", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    selected, (row,) = info["selected"], info["structures"]
+    assert selected["kind"] == "sparse annotation" and "volume_mm3" not in selected
+    assert "5 planes along z" in selected["read_as"] and "1 plane along x" in selected["read_as"]
+    assert selected["drawn_volume_mm3"] == row["drawn_volume_mm3"] == (ball & drawn).sum()

@@ -76,7 +76,8 @@ def describe_label_map(
     Returns
     -------
     list of dict
-        ``value``, ``name``, ``voxels``, ``volume_mm3``, ``planes`` (the number
+        ``value``, ``name``, ``voxels``, ``volume_mm3`` (``drawn_volume_mm3`` for
+        a sparse annotation: its drawn voxels), ``planes`` (the number
         of planes along ``axis`` holding the label, and the first and last; for
         a label map read as a sparse annotation, ``{"drawn": {axis name: the
         number of annotated planes holding the label}}``),
@@ -124,7 +125,10 @@ def describe_label_map(
                 "value": int(value),
                 "name": (names or {}).get(int(value), ""),
                 "voxels": int(count),
-                "volume_mm3": round(count * voxel, 3),
+                # a sparse annotation's voxels are its drawn planes, not its volume
+                ("volume_mm3" if reading is None or reading.dense else "drawn_volume_mm3"): round(
+                    count * voxel, 3
+                ),
                 "planes": planes,
                 "extent_mm": _bounds(world_bounds(mask[box], affine, lo)),
             }
@@ -157,15 +161,30 @@ def _not_a_label_map(details: dict[str, Any], exc: LabelError) -> dict[str, Any]
 
 
 def describe_volume(volume: Volume) -> dict[str, Any]:
-    """Grid and foreground of a voxel mask (shape, spacing, voxels, planes per axis)."""
+    """Grid and foreground of a voxel mask (shape, spacing, voxels, planes per axis).
+
+    A mask that reads as a sparse annotation
+    (:func:`slicerecon.plane_detection.detect_planes`) is described as one:
+    ``kind`` "sparse annotation", ``read_as`` its planes, and ``drawn_volume_mm3``
+    (its drawn voxels, not the structure's volume) in place of ``volume_mm3``.
+    """
+    from ..plane_detection import detect_planes
+
+    reading = detect_planes(volume.mask) if not volume.is_empty else None
+    sparse = reading is not None and not reading.dense
     info: dict[str, Any] = {
-        "kind": "voxel mask",  # what it holds; how run reads it is "read as"
+        "kind": "sparse annotation" if sparse else "voxel mask",
         "shape": list(volume.shape),
         "spacing_mm": _round(volume.spacing, 6),
         "oblique": volume.is_oblique,
         "foreground_voxels": int(np.count_nonzero(volume.mask)),
-        "volume_mm3": round(volume.volume_mm3, 3),
     }
+    if sparse:
+        assert reading is not None
+        info["read_as"] = reading.describe(volume.spacing, volume.affine)
+        info["drawn_volume_mm3"] = round(volume.volume_mm3, 3)
+    else:
+        info["volume_mm3"] = round(volume.volume_mm3, 3)
     if not volume.is_empty:
         lo, hi = volume.bounding_box_mm()
         info["bounding_box_mm"] = {"min": _round(lo, 3), "max": _round(hi, 3)}
