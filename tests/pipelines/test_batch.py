@@ -1095,7 +1095,7 @@ def test_a_cases_warnings_reach_the_user_with_its_name_and_stay_in_done_json(
     lines = [line for line in err.splitlines() if "runs of empty slices" in line]
     assert len(lines) == 1 and lines[0].startswith("warning: gapped: ")
     done = json.loads((out / "gapped" / "done.json").read_text())
-    assert len(done["result"]["warnings"]) == 1
+    assert len([w for w in done["result"]["warnings"] if "runs of empty slices" in w]) == 1
 
 
 def test_a_case_missing_any_of_its_files_is_computed_again(tmp_path):
