@@ -34,8 +34,10 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 MAX_VIEW_DISAGREEMENT = 0.2
-"""Share of the voxels where two views' planes meet on which they may disagree before a
-warning says so (hand-drawn views differ by a voxel or two at their edges)."""
+"""Share of the points where two views' planes meet (of those either draws) on which they
+may disagree, farther than :data:`OUTLINE_TOLERANCE` from the nearer outline, before a
+warning says they were drawn differently (hand-drawn views differ by a voxel or two at
+their edges)."""
 
 
 @dataclass
