@@ -18,6 +18,7 @@ import logging
 import os
 import warnings
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -184,6 +185,14 @@ def _peek(path: Path, tags: list[str] | None = None) -> Any:
         return None
 
 
+@contextmanager
+def _hushed() -> Iterator[None]:
+    """Python warnings ignored: a peek's values are read again, and said, by the real read."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
+
+
 def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
     """Those of ``folders`` whose images an RTSTRUCT or SEG names (by SeriesInstanceUID,
     else by SOPInstanceUID): :func:`slicerecon.io.dicom.series.referenced_series`."""
@@ -192,20 +201,21 @@ def _named_by(drawing: Path, folders: list[Path]) -> list[Path]:
     ds = _peek(drawing)
     if ds is None:
         return []
-    series, instances = referenced_series(ds)
     named = []
-    for folder in folders:
-        images = _images_in(folder)
-        for f in images if instances and not series else [next(images, None)]:
-            if f is None:
-                break
-            image = _peek(f, ["SeriesInstanceUID", "SOPInstanceUID"])
-            if image is not None and (
-                str(image.get("SeriesInstanceUID", "")) in series
-                or str(image.get("SOPInstanceUID", "")) in instances
-            ):
-                named.append(folder)
-                break
+    with _hushed():  # pydicom converts values when they are asked for, and warns then
+        series, instances = referenced_series(ds)
+        for folder in folders:
+            images = _images_in(folder)
+            for f in images if instances and not series else [next(images, None)]:
+                if f is None:
+                    break
+                image = _peek(f, ["SeriesInstanceUID", "SOPInstanceUID"])
+                if image is not None and (
+                    str(image.get("SeriesInstanceUID", "")) in series
+                    or str(image.get("SOPInstanceUID", "")) in instances
+                ):
+                    named.append(folder)
+                    break
     return named
 
 
@@ -221,15 +231,16 @@ def frame_of_reference(path: Path, *, rois: bool = False) -> str:
     ds = _peek(path)
     if ds is None:
         return ""
-    uid = str(ds.get("FrameOfReferenceUID", "") or "")
-    # an RTSTRUCT names it in its references (optional), and in each ROI (``rois``)
-    for sequence, keyword in (
-        ("ReferencedFrameOfReferenceSequence", "FrameOfReferenceUID"),
-        ("StructureSetROISequence", "ReferencedFrameOfReferenceUID"),
-    )[: 2 if rois else 1]:
-        if not uid and sequence in ds:
-            items = ds[sequence].value
-            uid = str(items[0].get(keyword, "") or "") if len(items) else ""
+    with _hushed():  # a malformed UID warned on stderr when its value was asked for
+        uid = str(ds.get("FrameOfReferenceUID", "") or "")
+        # an RTSTRUCT names it in its references (optional), and in each ROI (``rois``)
+        for sequence, keyword in (
+            ("ReferencedFrameOfReferenceSequence", "FrameOfReferenceUID"),
+            ("StructureSetROISequence", "ReferencedFrameOfReferenceUID"),
+        )[: 2 if rois else 1]:
+            if not uid and sequence in ds:
+                items = ds[sequence].value
+                uid = str(items[0].get(keyword, "") or "") if len(items) else ""
     return uid
 
 

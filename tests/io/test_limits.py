@@ -67,6 +67,28 @@ def test_what_nibabel_prints_itself_does_not_reach_stderr(tmp_path: Path, capfd,
     assert nib.imageglobals.logger.handlers  # nibabel's own handler is given back
 
 
+def test_a_malformed_frame_of_reference_uid_warns_nothing_while_pairing_files(
+    tmp_path: Path,
+) -> None:
+    """Pairing an RTSTRUCT with its series peeks at FrameOfReferenceUIDs: pydicom checked
+    a malformed one when its value was asked for, after the quiet header read, and its
+    UserWarning reached stderr (the fuzzer, an RTSTRUCT folder with a mutated UID)."""
+    study = tmp_path / "study"
+    paths = factory.write_series(study, np.zeros((32, 32, 8), np.uint16), np.eye(4))
+    items = [factory.contour_item(factory.circle(6, (15, 15), z)) for z in (2.0, 4.0, 6.0)]
+    factory.write_rtstruct(study / "rs.dcm", {(1, "GTV"): items}, on_series=study)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # pydicom warns of the value this test means to write
+        for path in [paths[0], study / "rs.dcm"]:
+            ds = pydicom.dcmread(path)
+            ds.FrameOfReferenceUID = "1.2.826.0.1\xa4\x9a.3"
+            ds.save_as(path)
+    with warnings.catch_warnings(record=True) as escaped:
+        warnings.simplefilter("always")
+        main(["run", str(study), "-o", str(tmp_path / "out")])
+    assert not [w for w in escaped if "Invalid value" in str(w.message)]
+
+
 def test_images_with_invalid_uids_are_refused_for_a_seg(tmp_path: Path) -> None:
     """pydicom warned (a stray stderr line) on copying 'ÿÿ' UIDs into seg.dcm."""
     affine = factory.affine_from_geometry([1, 0, 0], [0, 1, 0], [1.0, 1.0], [0, 0, 2.0], [0, 0, 0])
