@@ -107,9 +107,10 @@ def carried_ends(
     the top, grew thin fins there: Dice 0.92 against 0.97 from either file alone).
     There the main view's end is carried on to where the other views show it
     (:func:`slicerecon.surface.views.views_field`). One warning says so where they
-    show it more than a whole gap of the main view beyond (a plane of the main view
-    there would have shown it: the end was drawn on the other views alone); within a
-    gap the structure's end lies where its planes leave it, and nothing is said.
+    show it more than a whole gap of the main view beyond, and a voxel (a plane of the
+    main view there would have shown it: the end was drawn on the other views alone);
+    within a gap the structure's end lies where its planes leave it, and nothing is
+    said.
     """
     affine = annotation.affine
     if main >= 0:
@@ -162,7 +163,8 @@ def carried_ends(
         else None
         for side in (0, 1)
     ]
-    said = max(voxel, gap) + 1e-6
+    # a voxel's margin: views drawn or registered a pixel apart reached a gap and 0.2 mm
+    said = max(voxel, gap) + voxel + 1e-6
     sides = [name for name, e in (("first", below), ("last", above)) if e > said]
     where = f"{' and '.join(sides)} plane{'s' * (len(sides) > 1)} of its main view"
     if sides and any(carry is not None for carry in carried):
