@@ -179,6 +179,7 @@ def score_case(
     truths: Any = case.truth if case.truth is not None else case.labels  # --gt first
     truths = truths if isinstance(truths, LabelMap | StructureMasks) else None
     scored: dict[str, dict[str, Any]] = {}
+    every_plane: list[tuple[str, int, int]] = []  # self-scored, with nothing held out
     for item in result.reconstructed:
         truth: Any = case.truth
         if truths is not None:
@@ -199,10 +200,13 @@ def score_case(
             memory_budget_gb=config.max_memory_gb,
         ).to_dict()
         scored[item.structure.label] = item.metrics
+        spanned = _planes_if_all_kept(item.sections, truth) if case.truth is None else 0
+        if spanned:
+            every_plane.append((item.structure.label, spanned, item.sections.axis))
     if not scored:
         return None
-    if case.truth is None:
-        _say_when_nothing_was_held_out(result, truths)
+    if every_plane:
+        _say_nothing_was_held_out(every_plane)
     # the ground truth's structures left unscored (not reconstructed: no planes between
     # the kept ones) are listed, as evaluate lists them, and left out of the mean
     missing = (
@@ -211,32 +215,29 @@ def score_case(
     return {"structures": scored, "mean": mean_metrics(scored), "missing": missing}
 
 
-def _say_when_nothing_was_held_out(result: CaseReconstruction, truths: Any) -> None:
-    """Warn when a dense input scored against itself kept every plane a structure spans:
-    nothing lay between the planes, so its scores only check that the mesh reproduces
-    the mask (a 48-voxel torus of ``dataset make`` kept its 10 planes under the default
-    16 and printed volume IoU 1 without a word)."""
-    every = []
-    for item in result.reconstructed:
-        sections = item.sections
-        if sections is None or item.metrics is None:
-            continue
-        mask = truths.mask(item.structure.value) if truths is not None else None
-        if mask is None:
-            continue
-        voxels = np.asarray(getattr(mask, "mask", mask))  # a Volume, or its array
-        spanned = int(np.count_nonzero(voxels.any(axis=in_plane_axes(sections.axis))))
-        if spanned > 1 and len(sections.indices) >= spanned:
-            every.append((item.structure.label, spanned, AXIS_NAMES[sections.axis]))
-    if every:
-        label, spanned, axis = every[0]
-        more = f" (and {len(every) - 1} more structure(s))" if len(every) > 1 else ""
-        logger.warning(
-            "structure %s: every one of the %d planes it spans along %s was kept%s: nothing "
-            "lay between them to reconstruct, so its scores only check that the mesh "
-            "reproduces the mask; keep fewer with --slices or --every",
-            label,
-            spanned,
-            axis,
-            more,
-        )
+def _planes_if_all_kept(sections: Any, truth: Any) -> int:
+    """The planes a structure spans along its sections' axis when its sections kept every
+    one of them (more than one), else 0."""
+    if sections is None:
+        return 0
+    voxels = np.asarray(getattr(truth, "mask", truth))  # a Volume, or its array
+    spanned = int(np.count_nonzero(voxels.any(axis=in_plane_axes(sections.axis))))
+    return spanned if spanned > 1 and len(sections.indices) >= spanned else 0
+
+
+def _say_nothing_was_held_out(every_plane: list[tuple[str, int, int]]) -> None:
+    """Warn once when a dense input scored against itself kept every plane of some
+    structure: nothing lay between the planes, so its scores only check that the mesh
+    reproduces the mask (a 48-voxel torus of ``dataset make`` kept its 10 planes under
+    the default 16 and printed volume IoU 1 without a word)."""
+    label, spanned, axis = every_plane[0]
+    more = f" (and {len(every_plane) - 1} more structure(s))" if len(every_plane) > 1 else ""
+    logger.warning(
+        "structure %s: every one of the %d planes it spans along %s was kept%s: nothing "
+        "lay between them to reconstruct, so its scores only check that the mesh "
+        "reproduces the mask; keep fewer with --slices or --every",
+        label,
+        spanned,
+        AXIS_NAMES[axis],
+        more,
+    )
