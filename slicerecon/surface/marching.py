@@ -301,7 +301,7 @@ def signed_volume(vertices: NDArray[np.float64], faces: NDArray[np.integer]) -> 
 
 AT_SAMPLE = 1e-3
 """Vertices nearer a field sample than this many voxels (along each axis) are that
-sample's (:func:`_merge_at_samples`)."""
+sample's (:func:`_merged_at_samples`)."""
 
 
 def march_field(
@@ -313,7 +313,7 @@ def march_field(
     and never exactly 0, as :func:`slicerecon.surface.sdf.sdf_mesh` makes it;
     then no padding, flipping or copying is needed. :func:`field_to_mesh` is
     the checked, general entry point. Vertices that fall on one sample (a
-    sample on the surface, to a hair) are one vertex (:func:`_merge_at_samples`).
+    sample on the surface, to a hair) are one vertex (:func:`_merged_at_samples`).
 
     In rare sample configurations scikit-image's marching cubes emits edges
     shared by four faces. With ``repair`` (the default) the mesh is checked and,
@@ -330,9 +330,7 @@ def march_field(
     """
     values = np.asarray(field, dtype=np.float32)
     aff = check_affine(affine)
-    mesh = _merge_at_samples(
-        _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False), aff
-    )
+    mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
     if not repair:
         return mesh
 
@@ -352,10 +350,7 @@ def march_field(
         for corner in _block_corners(values).values():  # views of ``values``
             added += int(np.count_nonzero(blocks & (corner >= 0)))
             np.minimum(corner, inside_value, out=corner, where=blocks)
-        mesh = _merge_at_samples(
-            _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False),
-            aff,
-        )
+        mesh = _march(values, aff, level=0.0, inside_high=False, pad_value=0.0, step=1, pad=False)
         edges, counts = edge_face_counts(mesh.faces, len(mesh.vertices))
         if np.all(counts == 2):
             break
@@ -363,38 +358,40 @@ def march_field(
     return mesh
 
 
-def _merge_at_samples(mesh: trimesh.Trimesh, affine: NDArray[np.float64]) -> trimesh.Trimesh:
-    """The mesh with the vertices that lie on one field sample merged into one.
+def _merged_at_samples(
+    vertices: NDArray[np.float64], faces: NDArray[np.integer]
+) -> tuple[NDArray[np.float64], NDArray[np.integer]]:
+    """The vertices (voxel indices, shape (V, 3)) that lie on one field sample merged into
+    one, and the faces renumbered; faces left with two equal corners are dropped, and
+    vertices no face uses.
 
     Each marching-cubes vertex lies on its own cell edge, but a sample within a hair
     of the surface (1e-7 mm against a far neighbour) puts the vertices of several of
-    its edges on one point. They stay distinct vertices in memory, and a file's
-    float32 coordinates merge them: an edge of four faces in the written STL (a
+    its edges on one point. They stayed distinct vertices in memory, and a file's
+    float32 coordinates merged them: an edge of four faces in the written STL (a
     tilted contour stack with sagittal and coronal contours). Merged here, such a
-    pinch is seen and mended by :func:`march_field`; faces left with two equal
-    corners are dropped.
+    pinch is seen and mended by :func:`march_field`.
     """
-    vertices = np.asarray(mesh.vertices)
-    to_index = np.linalg.inv(affine)
-    voxels = vertices @ to_index[:3, :3].T + to_index[:3, 3]
-    nearest = np.rint(voxels)
-    at = np.flatnonzero(np.all(np.abs(voxels - nearest) < AT_SAMPLE, axis=1))
+    nearest = np.rint(vertices)
+    at = np.flatnonzero(np.all(np.abs(vertices - nearest) < AT_SAMPLE, axis=1))
     if at.size < 2:
-        return mesh
+        return vertices, faces
     _, first, group = np.unique(
         nearest[at].astype(np.int64), axis=0, return_index=True, return_inverse=True
     )
     if first.size == at.size:
-        return mesh
+        return vertices, faces
     target = np.arange(len(vertices))
     target[at] = at[first][group.ravel()]
-    faces = target[np.asarray(mesh.faces)]
+    faces = target[faces]
     whole = (
         (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
     )
-    merged = trimesh.Trimesh(vertices=vertices, faces=faces[whole], process=False)
-    merged.remove_unreferenced_vertices()
-    return merged
+    faces = faces[whole]
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    renumber = np.cumsum(used) - 1
+    return vertices[used], renumber[faces]
 
 
 def _check_step(step_size: int) -> int:
@@ -441,6 +438,7 @@ def _march(
     verts_vox, faces, _, _ = marching_cubes(padded, level, method="lewiner", step_size=step)
     if pad:
         verts_vox -= 1.0  # undo the leading pad: back to the field's voxel indices
+    verts_vox, faces = _merged_at_samples(verts_vox, faces)
     verts = verts_vox @ affine[:3, :3].T + affine[:3, 3]
     # skimage winds faces around the high side with gradient_direction="descent":
     # normals point towards higher values. Flip when "high" is inside, and once
