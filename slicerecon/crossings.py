@@ -266,6 +266,5 @@ def drawn_at(
 ) -> NDArray[np.bool_]:
     """Whether structure ``value`` is drawn at the plane's pixel nearest each world point
     (``inverse``: the plane's world → pixel affine)."""
-    pixels = np.rint(world @ inverse[:2, :3].T + inverse[:2, 3]).astype(np.int64)
-    pixels = np.clip(pixels, 0, np.asarray(plane.pose.shape) - 1)
+    pixels = _pixel_at(plane, inverse, world)
     return plane.mask(value)[pixels[:, 0], pixels[:, 1]]

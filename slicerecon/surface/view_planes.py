@@ -130,8 +130,7 @@ def carried_ends(
     upright: set[int] = set()  # views whose pixel rows or columns run along the normal
     for key, origin, steps, mask in _drawn_planes(affine, views, oblique):
         spans.setdefault(key, []).append(_extent(mask, origin, steps, normal))
-        along = [abs(float(s @ normal)) / float(np.linalg.norm(s)) for s in steps]
-        if max(along) > 1 - 1e-6:
+        if _upright(steps, normal):
             upright.add(key)
     if main not in spans:
         return None, None
@@ -257,9 +256,8 @@ def continued_regions(
     continued = np.zeros(count + 1, dtype=bool)
     for plane in annotation.planes_of(value):
         drawing = plane.mask(value)
-        steps = plane.pose.affine[:3, :2]
-        along = np.abs(outward @ steps) / np.linalg.norm(steps, axis=0)
-        if not drawing.any() or along.max() < 1 - 1e-6:
+        steps = (plane.pose.affine[:3, 0], plane.pose.affine[:3, 1])
+        if not drawing.any() or not _upright(steps, outward):
             continue  # draws nothing, or not upright (parallel planes included)
         near = np.abs((world - plane.pose.affine[:3, 3]) @ plane.pose.normal) <= tolerance
         if not near.any():
@@ -327,6 +325,14 @@ def end_reach(positions: list[float], voxel: float, own_gap: bool) -> tuple[floa
     gap = smallest_gap(positions) if own_gap else None
     reach = gap / 2 if gap is not None else voxel
     return reach, reach
+
+
+def _upright(
+    steps: tuple[NDArray[np.float64], NDArray[np.float64]], normal: NDArray[np.float64]
+) -> bool:
+    """Whether a plane's pixel rows or columns (``steps``, mm) run along ``normal`` (a
+    unit vector, either way)."""
+    return max(abs(float(s @ normal)) / float(np.linalg.norm(s)) for s in steps) > 1 - 1e-6
 
 
 def _extent(
