@@ -359,22 +359,18 @@ def _view(
             beyond = samples <= indices[n] + 1e-9 if side == 0 else samples >= indices[n] - 1e-9
             past = np.abs(samples[beyond] - indices[n]).astype(np.float32)
             step = np.float32(spacing[axis])
+            drawn = planes[n][1]
+            carry = ends_carried[side] if drawn.any() else None
+            if carry is not None:  # the rest of its section ends as the view
+                rest = window(drawn & ~carry.regions, lo[[a, b]], hi[[a, b]])
+                base_n = np.minimum(plane_signed_distance(rest, pixel), far)
             ended = np.maximum(base_n[None], ((past - reach[side]) * step)[:, None, None])
-            carry = ends_carried[side]
-            if carry is not None and planes[n][1].any():  # its continued regions go further
-                regions = window(planes[n][1] & carry.regions, lo[[a, b]], hi[[a, b]])
-                rest = window(planes[n][1] & ~carry.regions, lo[[a, b]], hi[[a, b]])
+            if carry is not None:  # its continued regions go further
+                regions = window(drawn & carry.regions, lo[[a, b]], hi[[a, b]])
                 further = np.maximum(
                     np.minimum(plane_signed_distance(regions, pixel), far)[None],
                     ((past - carry.reach) * step)[:, None, None],
                 )
-                if rest.any():
-                    ended = np.maximum(
-                        np.minimum(plane_signed_distance(rest, pixel), far)[None],
-                        ((past - reach[side]) * step)[:, None, None],
-                    )
-                else:
-                    ended = np.full_like(further, far)
                 ended = np.minimum(ended, further)
             field[beyond] = ended
         else:
@@ -496,17 +492,16 @@ def _oblique_view(
         for _, pose, mask in view.planes
     ]
     to_pixels = [np.linalg.inv(pose.affine) for _, pose, _ in view.planes]
-    # an outer plane's continued regions and the rest of its section, where its end is
-    # carried on (:func:`_view`)
+    # where its end is carried on (:func:`_view`): an outer plane's section less its
+    # continued regions (None: nothing left), and those regions
     split: dict[int, tuple[NDArray[np.float32] | None, NDArray[np.float32] | None]] = {}
     for side, n in ((0, 0), (1, len(view.planes) - 1)):
         carry, (_, pose, mask) = ends_carried[side], view.planes[n]
         if carry is not None and mask.any():
+            rest = mask & ~carry.regions
             split[side] = (
+                plane_signed_distance(rest, pose.pixel_spacing) if rest.any() else None,
                 plane_signed_distance(mask & carry.regions, pose.pixel_spacing),
-                plane_signed_distance(mask & ~carry.regions, pose.pixel_spacing)
-                if (mask & ~carry.regions).any()
-                else None,
             )
     field = np.empty(size, dtype=np.float32)
     distance = np.empty(size, dtype=np.float32)
@@ -543,28 +538,23 @@ def _oblique_view(
             if j == 0 or j == len(offsets):
                 n = 0 if j == 0 else len(offsets) - 1
                 side = int(j > 0)
-                outer = sample(n, world[sel])
                 if reach_mm is None:
-                    values[sel] = outer
+                    values[sel] = sample(n, world[sel])
                     continue
                 past = np.abs(u[sel] - offsets[n]).astype(np.float32)
-                values[sel] = np.maximum(outer, past - np.float32(reach_mm[side]))
-                if side in split:  # the continued regions go on further
-                    further, rest = split[side]
+                # a carried end: the rest of the section ends as the view, its continued
+                # regions go further
+                rest, further = split.get(side, (images[n], None))
+                values[sel] = np.maximum(
+                    sample_image(rest, n, world[sel]), past - np.float32(reach_mm[side])
+                )
+                if further is not None:
                     carry = ends_carried[side]
                     assert carry is not None
                     ended = np.maximum(
                         sample_image(further, n, world[sel]), past - np.float32(carry.reach)
                     )
-                    if rest is None:
-                        values[sel] = ended
-                    else:
-                        values[sel] = np.minimum(
-                            ended,
-                            np.maximum(
-                                sample_image(rest, n, world[sel]), past - np.float32(reach_mm[side])
-                            ),
-                        )
+                    values[sel] = np.minimum(values[sel], ended)
                 continue
             t = ((u[sel] - offsets[j - 1]) / (offsets[j] - offsets[j - 1])).astype(np.float32)
             values[sel] = (1 - t) * sample(j - 1, world[sel]) + t * sample(j, world[sel])
